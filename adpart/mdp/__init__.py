@@ -1,0 +1,24 @@
+"""Finite MDP / SMDP models and their exact solvers."""
+
+from adpart.mdp.model import FiniteMDP, SMDPModel
+from adpart.mdp.solvers import (
+    Solution,
+    greedy_policy,
+    modified_policy_iteration,
+    policy_evaluation,
+    q_from_v,
+    solve,
+    value_iteration,
+)
+
+__all__ = [
+    "FiniteMDP",
+    "SMDPModel",
+    "Solution",
+    "greedy_policy",
+    "modified_policy_iteration",
+    "policy_evaluation",
+    "q_from_v",
+    "solve",
+    "value_iteration",
+]
