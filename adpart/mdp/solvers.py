@@ -20,6 +20,7 @@ only (instead of ``O*S``); it stops by the same rule and so carries the same gua
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -251,10 +252,15 @@ def policy_evaluation(model: HasSMDP, policy: np.ndarray) -> np.ndarray:
     smdp = model.as_smdp()
     F_pi, R_pi = _policy_matrix(smdp, policy)
     A = sp.csc_array(sp.eye_array(smdp.n_states) - F_pi)
-    try:
-        V = spla.spsolve(A, R_pi)
-    except RuntimeError as exc:  # SuperLU reports an exactly singular matrix this way
-        raise ModelError(f"policy evaluation failed: {exc}; does the policy never terminate?") from exc
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", spla.MatrixRankWarning)
+        try:
+            V = spla.spsolve(A, R_pi)
+        except (RuntimeError, spla.MatrixRankWarning) as exc:
+            raise ModelError(
+                "policy evaluation failed: I - F_pi is singular; with gamma = 1 the policy must "
+                "reach a terminal state from every state (does it never terminate?)"
+            ) from exc
     if not np.all(np.isfinite(V)):
         raise ModelError(
             "policy evaluation produced non-finite values: I - F_pi is singular (with gamma = 1 "

@@ -1,0 +1,177 @@
+"""Exact solvers against dense numpy oracles on random MDPs and SMDPs (hypothesis)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from hypothesis import given
+from hypothesis import strategies as st
+
+from adpart.errors import ModelError
+from adpart.mdp.model import FiniteMDP, SMDPModel
+from adpart.mdp.solvers import (
+    greedy_policy,
+    modified_policy_iteration,
+    policy_evaluation,
+    q_from_v,
+    solve,
+    value_iteration,
+)
+
+
+def random_dense(seed: int, S: int, A: int, density: float):
+    rng = np.random.default_rng(seed)
+    P = rng.random((S, A, S)) * (rng.random((S, A, S)) < density)
+    P[np.arange(S), :, rng.integers(0, S, S)] += 0.1  # every row non-empty
+    P /= P.sum(axis=2, keepdims=True)
+    R = rng.normal(size=(S, A))
+    return P, R
+
+
+def dense_optimal_values(P, R, gamma, terminal=None, admissible=None):
+    """Oracle: policy iteration with numpy.linalg.solve on dense matrices."""
+    S, A, _ = P.shape
+    keep = np.ones(S) if terminal is None else (~terminal).astype(float)
+    Pk = P * keep[:, None, None]
+    Rk = R * keep[:, None]
+    adm = np.ones((S, A), bool) if admissible is None else admissible
+    pi = np.argmax(adm, axis=1)
+    for _ in range(500):
+        Ppi = Pk[np.arange(S), pi]
+        V = np.linalg.solve(np.eye(S) - gamma * Ppi, Rk[np.arange(S), pi])
+        Q = np.where(adm, Rk + gamma * np.einsum("sat,t->sa", Pk, V), -np.inf)
+        new = np.argmax(Q, axis=1)
+        if np.all(Q[np.arange(S), new] <= Q[np.arange(S), pi] + 1e-12):
+            return V
+        pi = new
+    raise AssertionError("policy iteration oracle did not converge")
+
+
+mdp_params = st.tuples(
+    st.integers(0, 10_000),
+    st.integers(1, 25),
+    st.integers(1, 5),
+    st.sampled_from([0.1, 0.4, 1.0]),
+    st.sampled_from([0.5, 0.9, 0.99]),
+)
+
+
+@given(mdp_params, st.sampled_from(["vi", "mpi"]))
+def test_solution_is_epsilon_optimal_against_dense_oracle(params, method):
+    seed, S, A, density, gamma = params
+    P, R = random_dense(seed, S, A, density)
+    mdp = FiniteMDP.from_dense(P, R, gamma)
+    V_star = dense_optimal_values(P, R, gamma)
+    eps = 1e-6
+    sol = solve(mdp, eps, method=method)
+    assert sol.converged
+    V_pi = policy_evaluation(mdp, sol.policy)
+    assert np.max(V_star - V_pi) <= eps + 1e-9
+    assert np.max(np.abs(sol.V - V_star)) <= sol.value_error_bound + 1e-9
+    assert sol.loss_bound <= eps
+
+
+@given(mdp_params)
+def test_terminal_states_and_admissible_masks(params):
+    seed, S, A, density, gamma = params
+    P, R = random_dense(seed, S, A, density)
+    rng = np.random.default_rng(seed + 1)
+    terminal = rng.random(S) < 0.2
+    admissible = rng.random((S, A)) < 0.7
+    admissible[np.arange(S), rng.integers(0, A, S)] = True
+    mdp = FiniteMDP.from_dense(P, R, gamma, terminal=terminal, admissible=admissible)
+    V_star = dense_optimal_values(P, R, gamma, terminal, admissible)
+    sol = modified_policy_iteration(mdp, 1e-7)
+    assert sol.rule == "sup" or not terminal.any()
+    assert np.all(admissible[np.arange(S), sol.policy])
+    np.testing.assert_allclose(policy_evaluation(mdp, sol.policy), V_star, atol=2e-7)
+    assert np.all(sol.V[terminal] == 0.0)
+
+
+@given(st.integers(0, 10_000), st.integers(2, 20), st.integers(1, 4))
+def test_policy_evaluation_matches_dense_solve(seed, S, A):
+    P, R = random_dense(seed, S, A, 0.5)
+    mdp = FiniteMDP.from_dense(P, R, 0.9)
+    rng = np.random.default_rng(seed)
+    pi = rng.integers(0, A, S)
+    expected = np.linalg.solve(np.eye(S) - 0.9 * P[np.arange(S), pi], R[np.arange(S), pi])
+    np.testing.assert_allclose(policy_evaluation(mdp, pi), expected, atol=1e-10)
+    stochastic = rng.dirichlet(np.ones(A), size=S)
+    P_mix = np.einsum("sa,sat->st", stochastic, P)
+    expected = np.linalg.solve(np.eye(S) - 0.9 * P_mix, (stochastic * R).sum(axis=1))
+    np.testing.assert_allclose(policy_evaluation(mdp, stochastic), expected, atol=1e-10)
+
+
+@given(st.integers(0, 10_000), st.integers(2, 15), st.integers(1, 4))
+def test_smdp_option_models_solve_like_their_semi_markov_oracle(seed, S, O):
+    """Stacked SMDP models (R, discounted F with varying row mass) against a dense solve."""
+    rng = np.random.default_rng(seed)
+    F = rng.random((O, S, S)) * (rng.random((O, S, S)) < 0.5)
+    F[:, np.arange(S), rng.integers(0, S, S)] += 0.1
+    F *= rng.uniform(0.3, 0.95, size=(O, S, 1)) / F.sum(axis=2, keepdims=True)
+    R = rng.normal(size=(S, O))
+    model = SMDPModel(R=R, F=sp.csr_array(F.reshape(O * S, S)), admissible=np.ones((S, O), bool))
+    V = np.zeros(S)
+    for _ in range(3000):
+        V = (R + np.einsum("ost,t->so", F, V)).max(axis=1)
+    for method in ("vi", "mpi"):
+        sol = solve(model, 1e-8, method=method)
+        assert sol.rule == "sup"
+        np.testing.assert_allclose(sol.V, V, atol=1e-7)
+        np.testing.assert_allclose(policy_evaluation(model, sol.policy), V, atol=1e-7)
+
+
+def test_q_from_v_and_greedy():
+    P, R = random_dense(1, 6, 3, 0.5)
+    adm = np.ones((6, 3), bool)
+    adm[0, 0] = False
+    mdp = FiniteMDP.from_dense(P, R, 0.8, admissible=adm)
+    V = np.arange(6, dtype=float)
+    Q = q_from_v(mdp, V)
+    expected = R + 0.8 * np.einsum("sat,t->sa", P, V)
+    assert Q[0, 0] == -np.inf
+    np.testing.assert_allclose(Q[adm], expected[adm])
+    assert greedy_policy(np.array([[1.0, 1.0], [0.0, 2.0]])).tolist() == [0, 1]
+
+
+def test_span_rule_values_are_shifted_to_macqueen_midpoint():
+    P, R = random_dense(5, 30, 4, 0.3)
+    mdp = FiniteMDP.from_dense(P, R, 0.99)
+    sol = value_iteration(mdp, 1e-3)
+    assert sol.rule == "span"
+    V_star = dense_optimal_values(P, R, 0.99)
+    assert np.max(np.abs(sol.V - V_star)) <= sol.value_error_bound
+
+
+def test_max_sweeps_reports_not_converged():
+    P, R = random_dense(2, 10, 2, 0.5)
+    sol = value_iteration(FiniteMDP.from_dense(P, R, 0.99), 1e-12, max_sweeps=3)
+    assert not sol.converged and sol.sweeps == 3
+
+
+def test_solver_input_errors():
+    P, R = random_dense(3, 5, 2, 0.5)
+    mdp = FiniteMDP.from_dense(P, R, 0.9)
+    with pytest.raises(ModelError, match="epsilon"):
+        value_iteration(mdp, 0.0)
+    with pytest.raises(ModelError, match="initial values have shape"):
+        value_iteration(mdp, V0=np.zeros(3))
+    with pytest.raises(ModelError, match="unknown solver method 'pi'"):
+        solve(mdp, method="pi")
+    with pytest.raises(ModelError, match="outside 0..1"):
+        policy_evaluation(mdp, np.full(5, 4))
+    adm = np.ones((5, 2), bool)
+    adm[2, 1] = False
+    P[2, 1] = 0
+    masked = FiniteMDP.from_dense(P, R, 0.9, admissible=adm)
+    with pytest.raises(ModelError, match="inadmissible action 1 in state 2"):
+        policy_evaluation(masked, np.ones(5, dtype=int))
+
+
+def test_improper_policy_with_gamma_one_is_reported():
+    P = np.zeros((2, 1, 2))
+    P[0, 0, 0] = P[1, 0, 1] = 1.0
+    mdp = FiniteMDP.from_dense(P, -np.ones((2, 1)), 1.0)
+    with pytest.raises(ModelError, match="singular|never terminate"):
+        policy_evaluation(mdp, np.zeros(2, dtype=int))
