@@ -1,0 +1,179 @@
+"""Draw a grid domain as PNG, one panel per floor, with optional per-state overlays.
+
+:meth:`adpart.envs.base.Domain.render` calls :func:`render_domain`. Cells are placed by the
+``x``, ``y`` (and, if present, ``floor``) state features, with ``y`` growing downwards as in the
+map language (:mod:`adpart.envs.grid`). Factored states (arm, object ...) share a cell, so each
+overlay is reduced to one value per cell: ``values`` by the max, ``marked`` by any, ``labels``
+by the first state's label. This is how the dissertation's figures show value functions (Fig.
+4.2b), subgoals (the black cells of Fig. 5.1) and partitions.
+
+Walls come from ``domain.layout()`` (a ``(floors, H, W)`` bool array of free cells) when the
+domain defines it; otherwise every cell no state occupies is drawn as a wall. A domain may add
+drawing of its own through ``domain.draw_extras(ax, floor)`` (e.g. thin walls, stair arrows).
+The figure is built without pyplot (no global state, no GUI backend needed).
+"""
+
+from __future__ import annotations
+
+import colorsys
+from typing import TYPE_CHECKING
+
+import numpy as np
+from matplotlib.collections import LineCollection
+from matplotlib.figure import Figure
+
+from adpart.errors import ModelError
+
+if TYPE_CHECKING:
+    from adpart.envs.base import Domain
+
+WALL_RGB = (0.15, 0.15, 0.18)
+FREE_RGB = (0.96, 0.96, 0.94)
+MARK_COLOUR = "crimson"
+
+
+def _overlay(arr: np.ndarray | None, S: int, what: str) -> np.ndarray | None:
+    if arr is None:
+        return None
+    out = np.asarray(arr)
+    if out.shape != (S,):
+        raise ModelError(f"render: {what} has shape {out.shape}; give one entry per state, ({S},)")
+    return out
+
+
+def label_colours(n: int) -> np.ndarray:
+    """``(n, 3)`` distinct RGB colours: tab20 for up to 20 labels, golden-ratio hues beyond."""
+    if n <= 20:
+        from matplotlib import colormaps
+
+        return np.asarray(colormaps["tab20"](np.arange(n)))[:, :3]
+    hues = (np.arange(n) * 0.618033988749895) % 1.0
+    light = 0.45 + 0.25 * ((np.arange(n) * 7) % 3) / 2
+    return np.array([colorsys.hls_to_rgb(h, li, 0.75) for h, li in zip(hues, light, strict=True)])
+
+
+def _boundaries(lab: np.ndarray) -> np.ndarray:
+    """Line segments ``(n, 2, 2)`` between horizontally or vertically adjacent cells whose
+    labels differ (both labelled), so blocks that share a colour stay distinguishable."""
+    ys, xs = np.nonzero((lab[:, 1:] != lab[:, :-1]) & (lab[:, 1:] >= 0) & (lab[:, :-1] >= 0))
+    vertical = np.stack(
+        [np.stack([xs + 0.5, ys - 0.5], 1), np.stack([xs + 0.5, ys + 0.5], 1)], axis=1
+    )
+    ys, xs = np.nonzero((lab[1:, :] != lab[:-1, :]) & (lab[1:, :] >= 0) & (lab[:-1, :] >= 0))
+    horizontal = np.stack(
+        [np.stack([xs - 0.5, ys + 0.5], 1), np.stack([xs + 0.5, ys + 0.5], 1)], axis=1
+    )
+    return np.concatenate([vertical, horizontal]).astype(np.float64)
+
+
+def render_domain(
+    domain: Domain,
+    path: str | None = None,
+    *,
+    values: np.ndarray | None = None,
+    marked: np.ndarray | None = None,
+    labels: np.ndarray | None = None,
+    title: str | None = None,
+) -> Figure:
+    """Draw ``domain`` with optional overlays; save a PNG at ``path`` if given.
+
+    Args:
+        domain: a domain whose states have ``x`` and ``y`` features (``floor`` optional).
+        path: where to write the PNG (None: only return the figure).
+        values: ``(S,)`` numbers shown as a colour map with a colour bar (max per cell).
+        marked: ``(S,)`` bool, cells with any marked state get a marker (e.g. subgoals).
+        labels: ``(S,)`` int, one colour per label (e.g. partition blocks), with block borders.
+        title: the figure's title (default: the domain's name).
+
+    Returns:
+        The matplotlib Figure.
+    """
+    dyn = domain.dynamics()
+    S = dyn.n_states
+    feats = dyn.features
+    if "x" not in feats or "y" not in feats:
+        raise ModelError(
+            f"environment {domain.name!r} has no x and y state features, so it cannot be drawn "
+            "as a grid; give its states x and y features"
+        )
+    x = np.asarray(feats["x"], dtype=np.int64)
+    y = np.asarray(feats["y"], dtype=np.int64)
+    fl = np.asarray(feats.get("floor", np.zeros(S)), dtype=np.int64)
+    layout = getattr(domain, "layout", None)
+    if callable(layout):
+        free = np.asarray(layout(), dtype=bool)
+        if free.ndim == 2:
+            free = free[None]
+    else:
+        free = np.zeros((int(fl.max()) + 1, int(y.max()) + 1, int(x.max()) + 1), dtype=bool)
+        free[fl, y, x] = True
+    F, H, W = free.shape
+    cell = (fl * H + y) * W + x
+
+    vals = _overlay(values, S, "values")
+    mark = _overlay(marked, S, "marked")
+    labs = _overlay(labels, S, "labels")
+
+    panel = 4.5 * min(1.0, max(W, H) / 12.0) + 1.5
+    fig = Figure(figsize=(panel * W / max(W, H) * F + (1.2 if vals is not None else 0.4),
+                          panel * H / max(W, H) + 0.8), layout="constrained")
+    axes = fig.subplots(1, F, squeeze=False)[0]
+
+    base = np.where(free[..., None], np.array(FREE_RGB), np.array(WALL_RGB))
+    cell_lab = None
+    if labs is not None:
+        first = np.unique(cell, return_index=True)[1]
+        uniq, dense = np.unique(labs.astype(np.int64), return_inverse=True)
+        cell_lab = np.full(F * H * W, -1, dtype=np.int64)
+        cell_lab[cell[first]] = dense[first]
+        colours = label_colours(uniq.size)
+        coloured = cell_lab >= 0
+        flat = base.reshape(-1, 3)
+        flat[coloured] = colours[cell_lab[coloured]]
+        cell_lab = cell_lab.reshape(F, H, W)
+    cell_val = None
+    if vals is not None:
+        cell_val = np.full(F * H * W, -np.inf)
+        np.maximum.at(cell_val, cell, vals.astype(np.float64))
+        cell_val = np.where(np.isfinite(cell_val), cell_val, np.nan).reshape(F, H, W)
+    cell_mark = None
+    if mark is not None:
+        cell_mark = np.zeros(F * H * W, dtype=bool)
+        np.logical_or.at(cell_mark, cell, mark.astype(bool))
+        cell_mark = cell_mark.reshape(F, H, W)
+
+    image = None
+    small = max(W, H) <= 40
+    for f, ax in enumerate(axes):
+        ax.imshow(base[f], interpolation="nearest")
+        if cell_val is not None:
+            finite = cell_val[np.isfinite(cell_val)]
+            lo, hi = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
+            image = ax.imshow(
+                np.ma.masked_invalid(cell_val[f]), cmap="viridis", vmin=lo, vmax=hi,
+                interpolation="nearest",
+            )
+        if cell_lab is not None:
+            segs = _boundaries(cell_lab[f])
+            if segs.size:
+                ax.add_collection(LineCollection(segs, colors="black", linewidths=0.6))
+        if cell_mark is not None:
+            my, mx = np.nonzero(cell_mark[f])
+            ax.scatter(mx, my, s=(40 if small else 6), marker="o", c=MARK_COLOUR,
+                       edgecolors="black", linewidths=0.4, zorder=3)
+        extras = getattr(domain, "draw_extras", None)
+        if callable(extras):
+            extras(ax, f)
+        if F > 1:
+            ax.set_title(f"floor {f}", fontsize=9)
+        ax.set_xlim(-0.5, W - 0.5)
+        ax.set_ylim(H - 0.5, -0.5)
+        ax.set_xticks([])
+        ax.set_yticks([])
+    if image is not None:
+        fig.colorbar(image, ax=list(axes), shrink=0.8, label="value")
+    fig.suptitle(title if title is not None else domain.name, fontsize=11)
+    if path is not None:
+        fig.savefig(path, dpi=110, format="png")
+    return fig
+
