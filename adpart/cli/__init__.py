@@ -5,9 +5,13 @@ from __future__ import annotations
 import click
 
 from adpart import __version__
+from adpart.cli.common import AdpartGroup
+from adpart.cli.envs import env_group, envs_cmd
+from adpart.cli.learn import learn_cmd
+from adpart.cli.plugins_cmd import plugins_cmd
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(cls=AdpartGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="adpart")
 def cli() -> None:
     """adpart: hierarchical RL through subgoals and action-dependent state partitions.
@@ -15,6 +19,13 @@ def cli() -> None:
     \b
     Examples:
       adpart envs                       list the environments
-      adpart env show two-rooms --out two-rooms.png
+      adpart env show two-rooms --out two-rooms.png --task reach-goal
       adpart learn two-rooms --task reach-goal --runs 8 --episodes 300
+      adpart plugins --kind learner
     """
+
+
+cli.add_command(plugins_cmd)
+cli.add_command(envs_cmd)
+cli.add_command(env_group)
+cli.add_command(learn_cmd)

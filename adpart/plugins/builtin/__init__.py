@@ -1,0 +1,1 @@
+"""adpart's built-in plugins, registered through adpart's own entry points."""

@@ -1,0 +1,61 @@
+"""Built-in learners: flat Q-learning in lock-step and the value-iteration reference."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from adpart.mdp.model import FiniteMDP
+from adpart.plugins.hookspecs import hookimpl
+from adpart.plugins.registry import Param, Registrar
+
+
+class QLearner:
+    """Flat epsilon-greedy Q-learning, K runs advanced together (see docs/learning.md)."""
+
+    name = "q-learning"
+    description = "flat epsilon-greedy Q-learning, all runs advanced in lock-step"
+    params = (
+        Param("alpha", "str", "1/n^0.8", "step-size schedule: 0.1 | 1/n^0.8 | exp:0.5,0.99"),
+        Param("epsilon", "str", "0.1", "exploration schedule, same forms as --alpha"),
+        Param("max-steps", "int", 1000, "step limit of one episode", min=1),
+        Param("q-init", "float", 0.0, "initial value of every Q(s, a)"),
+        Param("kernel", "str", "auto", "step kernel", choices=("auto", "numba", "numpy", "python")),
+    )
+
+    def __init__(self, alpha: str = "1/n^0.8", epsilon: str = "0.1", max_steps: int = 1000,
+                 q_init: float = 0.0, kernel: str = "auto") -> None:
+        self.alpha, self.epsilon = alpha, epsilon
+        self.max_steps, self.q_init = max_steps, q_init
+        self.kernel = None if kernel == "auto" else kernel
+
+    def learn(self, mdp: FiniteMDP, *, runs: int, episodes: int, seed: int, eval_every: int,
+              progress: Callable[[int, int], object] | None = None) -> object:
+        from adpart.learning.qlearning import q_learning
+
+        return q_learning(mdp, runs=runs, episodes=episodes, seed=seed, alpha=self.alpha,
+                          epsilon=self.epsilon, max_steps_per_episode=self.max_steps,
+                          eval_every=eval_every, progress=progress, q_init=self.q_init,
+                          kernel=self.kernel)
+
+
+class ValueIterationLearner:
+    """The model-based reference: one curve row per value-iteration sweep."""
+
+    name = "value-iteration"
+    description = "exact value iteration on the model (reference; one run, a row per sweep)"
+    params = ()
+
+    def learn(self, mdp: FiniteMDP, *, runs: int, episodes: int, seed: int, eval_every: int,
+              progress: Callable[[int, int], object] | None = None) -> object:
+        from adpart.learning.reference import value_iteration_curve
+
+        result = value_iteration_curve(mdp, sweeps=episodes, seed=seed)
+        if progress is not None:
+            progress(episodes, episodes)
+        return result
+
+
+@hookimpl
+def register_learners(register: Registrar) -> None:
+    register(QLearner)
+    register(ValueIterationLearner)

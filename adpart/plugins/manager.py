@@ -1,0 +1,137 @@
+"""Build the plugin manager and the registry from entry points (pluggy, group ``adpart``).
+
+Each entry point is loaded on its own, so a package that fails to import, or whose hooks are
+misspelled, costs a :class:`~adpart.plugins.registry.PluginWarning` naming the package - never the
+whole program. ``ADPART_DISABLE_PLUGINS=name1,name2`` blocks entry points by name (tox's idea).
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.metadata
+import os
+import warnings
+
+import pluggy
+
+from adpart.plugins import hookspecs
+from adpart.plugins.registry import KINDS, PluginWarning, Registrar, Registry
+
+ENTRY_POINT_GROUP = "adpart"
+
+#: The built-in plugins: entry-point name -> module. They are registered through adpart's own
+#: entry points; this table is the fallback for a source tree that was never installed.
+BUILTIN_PLUGINS: dict[str, str] = {
+    "environments": "adpart.plugins.builtin.environments",
+    "learners": "adpart.plugins.builtin.learners",
+    "executors": "adpart.plugins.builtin.executors",
+}
+
+
+class PluginManager(pluggy.PluginManager):
+    """A pluggy manager that remembers which distribution provided each plugin."""
+
+    def __init__(self) -> None:
+        super().__init__(hookspecs.PROJECT)
+        self.add_hookspecs(hookspecs)
+        self.sources: dict[str, tuple[str, str]] = {}
+
+    def register_checked(self, plugin: object, name: str, package: str, version: str) -> bool:
+        """Register ``plugin``; on an invalid or misspelled hook warn and leave it out."""
+        try:
+            self.register(plugin, name=name)
+            self.check_pending()
+        except pluggy.PluginValidationError as exc:
+            if self.is_registered(plugin):
+                self.unregister(plugin)
+            warnings.warn(
+                f"plugin package {package!r} (entry point {name!r}) is invalid and was skipped: "
+                f"{exc}",
+                PluginWarning,
+                stacklevel=2,
+            )
+            return False
+        self.sources[name] = (package, version)
+        return True
+
+
+def _blocked() -> set[str]:
+    return {n.strip() for n in os.environ.get("ADPART_DISABLE_PLUGINS", "").split(",") if n.strip()}
+
+
+def make_plugin_manager(*, load_entrypoints: bool = True) -> PluginManager:
+    """A fresh manager with every installed ``adpart`` entry point (and the built-ins) registered."""
+    pm = PluginManager()
+    blocked = _blocked()
+    adpart_version = _version("adpart")
+    if load_entrypoints:
+        seen: set[tuple[str, str]] = set()
+        for dist in importlib.metadata.distributions():
+            package = dist.metadata["name"] or "unknown"
+            for ep in dist.entry_points:
+                if ep.group != ENTRY_POINT_GROUP or (package, ep.name) in seen:
+                    continue
+                seen.add((package, ep.name))
+                if ep.name in blocked or pm.has_plugin(ep.name):
+                    continue
+                try:
+                    plugin = ep.load()
+                except Exception as exc:  # a broken third-party package must not break adpart
+                    warnings.warn(
+                        f"plugin package {package!r} failed to import (entry point {ep.name} = "
+                        f"{ep.value}): {type(exc).__name__}: {exc}. It is skipped; everything "
+                        f"else works. Fix or uninstall {package!r}, or set "
+                        f"ADPART_DISABLE_PLUGINS={ep.name}.",
+                        PluginWarning,
+                        stacklevel=2,
+                    )
+                    continue
+                pm.register_checked(plugin, ep.name, package, dist.version or "")
+    for name, module in BUILTIN_PLUGINS.items():
+        if name not in blocked and not pm.has_plugin(name):
+            pm.register_checked(importlib.import_module(module), name, "adpart", adpart_version)
+    return pm
+
+
+def _version(dist: str) -> str:
+    try:
+        return importlib.metadata.version(dist)
+    except importlib.metadata.PackageNotFoundError:
+        return "0+unknown"
+
+
+def build_registry(pm: PluginManager) -> Registry:
+    """Call every registration hook, built-ins first, and collect what they register."""
+    registry = Registry()
+    for kind, hook_name in KINDS.items():
+        impls = getattr(pm.hook, hook_name).get_hookimpls()
+        impls.sort(key=lambda impl: pm.sources.get(impl.plugin_name, ("", ""))[0] != "adpart")
+        for impl in impls:
+            package, version = pm.sources.get(impl.plugin_name, (impl.plugin_name, ""))
+            try:
+                impl.function(register=Registrar(registry, kind, package, version))
+            except Exception as exc:  # one plugin's failing hook must not break the others
+                warnings.warn(
+                    f"plugin package {package!r} failed in {hook_name}: "
+                    f"{type(exc).__name__}: {exc}; its {kind} plugins are skipped",
+                    PluginWarning,
+                    stacklevel=2,
+                )
+    return registry
+
+
+_REGISTRY: Registry | None = None
+
+
+def get_registry() -> Registry:
+    """The process-wide registry, built on first use."""
+    global _REGISTRY
+    if _REGISTRY is None:
+        _REGISTRY = build_registry(make_plugin_manager())
+    return _REGISTRY
+
+
+def reset_registry() -> None:
+    """Forget the cached registry (tests; after installing a plugin at run time)."""
+    global _REGISTRY
+    _REGISTRY = None
