@@ -26,8 +26,9 @@ class LearnerOptionsCommand(click.Command):
 
     def get_params(self, ctx: click.Context) -> list[click.Parameter]:
         params = super().get_params(ctx)
-        if not hasattr(self, "_plugin_params"):
-            self._plugin_params = _learner_options()
+        reg = registry()
+        if getattr(self, "_options_for", None) is not reg:  # rebuilt when the registry is
+            self._options_for, self._plugin_params = reg, _learner_options()
         return params[:-1] + self._plugin_params + params[-1:]  # keep --help last
 
 
