@@ -1,0 +1,44 @@
+"""The knowledge base: SQLAlchemy 2 metadata plus content-addressed Parquet artifacts.
+
+``KnowledgeBase.open()`` opens the per-user default (``$ADPART_KB``, ``$ADPART_HOME/kb`` or
+``~/.local/share/adpart/kb``); see docs/knowledge-base.md for the records and the CLI.
+"""
+
+from __future__ import annotations
+
+from adpart.store.entities import (
+    Artifact,
+    Environment,
+    Option,
+    Partition,
+    Policy,
+    Provenance,
+    Record,
+    Run,
+    SubgoalSet,
+    Task,
+)
+from adpart.store.errors import StoreError
+from adpart.store.kb import CheckReport, GcReport, KnowledgeBase
+from adpart.store.location import KBLocation, default_location
+from adpart.store.schema import SCHEMA_VERSION
+
+__all__ = [
+    "SCHEMA_VERSION",
+    "Artifact",
+    "CheckReport",
+    "Environment",
+    "GcReport",
+    "KBLocation",
+    "KnowledgeBase",
+    "Option",
+    "Partition",
+    "Policy",
+    "Provenance",
+    "Record",
+    "Run",
+    "StoreError",
+    "SubgoalSet",
+    "Task",
+    "default_location",
+]

@@ -1,0 +1,336 @@
+"""Content-addressed Parquet artifacts on any pyarrow filesystem.
+
+An artifact is a numpy array or a table. Its name is the SHA-256 of a canonical encoding: a small
+JSON header (format, dtype in little-endian form, shape; or the column names and Arrow types) and
+the little-endian C-order bytes of the values. Identical content therefore gets one file whatever
+process wrote it, and a read recomputes the hash and refuses anything that does not match.
+
+Files live at ``<root>/<sha[:2]>/<sha>.parquet``, written zstd-compressed to a temporary name in
+the same directory and renamed into place, so a reader never sees half a file: a writer killed
+mid-way leaves at most a ``.tmp-*`` file, which ``adpart kb gc`` removes. Nothing is pickled: the
+values are a single Parquet column (``values``) and the dtype/shape sit in the schema metadata, so
+any Parquet reader can open an artifact.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import re
+import uuid
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.fs as pafs
+import pyarrow.parquet as pq
+
+from adpart.store.errors import StoreError
+
+ARRAY_FORMAT = "parquet-array/1"
+TABLE_FORMAT = "parquet-table/1"
+_META_KEY = b"adpart"
+_ROW_GROUP = 1 << 20  # row groups of 1M values let pyarrow decode in parallel on read
+_SUPPORTED_KINDS = "biuf"  # bool, signed/unsigned integers, floats
+_TMP_PREFIX = ".tmp-"
+_NAME = re.compile(r"^[0-9a-f]{2}/[0-9a-f]{64}\.parquet$")
+
+
+@dataclass(frozen=True)
+class StoredArtifact:
+    """What :meth:`ArtifactStore.put_array` / :meth:`ArtifactStore.put_table` wrote (or found)."""
+
+    sha256: str
+    uri: str  # path relative to the artifact root, ``ab/abcdef....parquet``
+    format: str  # ARRAY_FORMAT or TABLE_FORMAT
+    nbytes: int  # size of the Parquet file
+    file_sha256: str  # SHA-256 of the file's bytes: catches damage that leaves the values intact
+    dtype: str | None  # numpy dtype string of an array (None for tables)
+    shape: tuple[int, ...] | None  # array shape (None for tables)
+
+
+def _canonical_array(array: np.ndarray) -> np.ndarray:
+    """Little-endian C-order copy (or view) of ``array``; refuses dtypes Parquet cannot hold."""
+    if array.dtype.kind not in _SUPPORTED_KINDS:
+        raise StoreError(
+            f"cannot store an array of dtype {array.dtype}: artifacts hold bool, integer and float "
+            "arrays; convert it (e.g. np.asarray(x, dtype=np.float64)) first"
+        )
+    return np.asarray(array, dtype=array.dtype.newbyteorder("<"), order="C")
+
+
+def _header_digest(header: dict[str, Any]) -> hashlib._Hash:
+    encoded = json.dumps(header, sort_keys=True, separators=(",", ":")).encode()
+    digest = hashlib.sha256()
+    digest.update(len(encoded).to_bytes(8, "little"))
+    digest.update(encoded)
+    return digest
+
+
+def array_sha256(array: np.ndarray) -> str:
+    """SHA-256 of an array: JSON header (dtype, shape), then its little-endian C-order bytes."""
+    canon = _canonical_array(np.asarray(array))
+    digest = _header_digest({"format": ARRAY_FORMAT, "dtype": canon.dtype.str,
+                             "shape": canon.shape})
+    digest.update(canon.reshape(-1).view(np.uint8))
+    return digest.hexdigest()
+
+
+def as_table(table: pa.Table | dict[str, Any]) -> pa.Table:
+    """Convert a dict of 1-D columns to a pyarrow Table (a Table loses only its metadata)."""
+    if isinstance(table, dict):
+        try:
+            table = pa.table({str(k): np.asarray(v) if not isinstance(v, pa.Array | pa.ChunkedArray)
+                              else v for k, v in table.items()})
+        except (pa.ArrowException, ValueError, TypeError) as exc:
+            raise StoreError(f"cannot make a table of these columns ({exc}); pass 1-D columns "
+                             "of equal length") from exc
+    if not isinstance(table, pa.Table):
+        raise StoreError("expected a pyarrow Table or a dict of columns, got "
+                         f"{type(table).__name__}")
+    return table.replace_schema_metadata(None)
+
+
+def table_sha256(table: pa.Table) -> str:
+    """SHA-256 of a table's canonical encoding: column names/types, validity masks and values."""
+    table = as_table(table)
+    digest = _header_digest({
+        "format": TABLE_FORMAT,
+        "rows": table.num_rows,
+        "columns": [[f.name, str(f.type)] for f in table.schema],
+    })
+    for field, column in zip(table.schema, table.columns, strict=True):
+        col = column.combine_chunks() if isinstance(column, pa.ChunkedArray) else column
+        valid = col.is_valid().to_numpy(zero_copy_only=False)
+        digest.update(np.packbits(valid).tobytes())
+        kind = field.type
+        if pa.types.is_boolean(kind) or pa.types.is_integer(kind) or pa.types.is_floating(kind):
+            values = col.fill_null(False if pa.types.is_boolean(kind) else 0)
+            digest.update(_canonical_array(values.to_numpy(zero_copy_only=False)).view(np.uint8))
+        elif pa.types.is_string(kind) or pa.types.is_large_string(kind):
+            for text in col.fill_null("").to_pylist():
+                raw = text.encode()
+                digest.update(len(raw).to_bytes(8, "little"))
+                digest.update(raw)
+        else:
+            raise StoreError(
+                f"cannot store table column {field.name!r} of type {kind}: tables hold bool, "
+                "integer, float and string columns"
+            )
+    return digest.hexdigest()
+
+
+def check_relative_uri(uri: str) -> str:
+    """Refuse an artifact URI that is not a plain ``ab/<sha>.parquet`` path under the root."""
+    parts = uri.replace("\\", "/").split("/")
+    if (not uri or uri.startswith(("/", "\\")) or re.match(r"^[A-Za-z][A-Za-z0-9+.-]*:", uri)
+            or any(p in ("", ".", "..") for p in parts)):
+        raise StoreError(
+            f"artifact uri {uri!r} would escape the artifact root (absolute path, scheme or '..'); "
+            "the knowledge base was edited by hand or damaged: run `adpart kb check`"
+        )
+    if not _NAME.match(uri):
+        raise StoreError(f"artifact uri {uri!r} is not of the form 'ab/<sha256>.parquet'; "
+                         "run `adpart kb check`")
+    return uri
+
+
+class ArtifactStore:
+    """Parquet artifacts named by content hash under one root on a pyarrow filesystem.
+
+    Args:
+        root: a local directory or any URI ``pyarrow.fs.FileSystem.from_uri`` understands
+            (``file:///...``, ``s3://bucket/prefix``, ...). A local directory is created.
+    """
+
+    def __init__(self, root: str) -> None:
+        try:
+            if "://" in root:
+                self.fs, base = pafs.FileSystem.from_uri(root)
+            else:
+                self.fs, base = pafs.LocalFileSystem(), os.path.abspath(os.path.expanduser(root))
+            self.fs.create_dir(base, recursive=True)
+        except (pa.ArrowException, OSError, ValueError) as exc:
+            raise StoreError(f"cannot use artifact root {root!r}: {exc}; choose a writable "
+                             "directory or filesystem URI") from exc
+        self.root = root
+        self.base = base.rstrip("/")
+
+    # ------------------------------------------------------------------ paths
+    def path(self, uri: str) -> str:
+        """Filesystem path of a relative artifact URI, refusing anything that escapes the root."""
+        return f"{self.base}/{check_relative_uri(uri)}"
+
+    @staticmethod
+    def uri_for(sha256: str) -> str:
+        return f"{sha256[:2]}/{sha256}.parquet"
+
+    def exists(self, uri: str) -> bool:
+        return self.fs.get_file_info(self.path(uri)).type == pafs.FileType.File
+
+    # ------------------------------------------------------------------ writes
+    def put_array(self, array: np.ndarray) -> StoredArtifact:
+        """Store ``array`` (any shape, incl. 0-d and empty) bit-exactly; returns hash and URI."""
+        array = np.asarray(array)
+        canon = _canonical_array(array)
+        sha = array_sha256(canon)
+        meta = {"format": ARRAY_FORMAT, "dtype": canon.dtype.str, "shape": list(canon.shape),
+                "sha256": sha}
+        uri = self.uri_for(sha)
+        if not self.exists(uri):
+            table = pa.table({"values": pa.array(canon.reshape(-1))})
+            table = table.replace_schema_metadata({_META_KEY: json.dumps(meta)})
+            self._write(uri, table, dictionary=canon.dtype.kind != "f")
+        return StoredArtifact(sha, uri, ARRAY_FORMAT, self._size(uri), self.file_sha256(uri),
+                              canon.dtype.str, tuple(canon.shape))
+
+    def put_table(self, table: pa.Table | dict[str, Any]) -> StoredArtifact:
+        """Store a table (pyarrow Table or dict of 1-D columns); returns its hash and URI."""
+        table = as_table(table)
+        sha = table_sha256(table)
+        uri = self.uri_for(sha)
+        if not self.exists(uri):
+            meta = {"format": TABLE_FORMAT, "sha256": sha}
+            self._write(uri, table.replace_schema_metadata({_META_KEY: json.dumps(meta)}),
+                        dictionary=True)
+        return StoredArtifact(sha, uri, TABLE_FORMAT, self._size(uri), self.file_sha256(uri),
+                              None, None)
+
+    def _write(self, uri: str, table: pa.Table, *, dictionary: bool) -> None:
+        final = self.path(uri)
+        directory = final.rsplit("/", 1)[0]
+        tmp = f"{directory}/{_TMP_PREFIX}{uuid.uuid4().hex}.parquet"
+        try:
+            self.fs.create_dir(directory, recursive=True)
+            with self.fs.open_output_stream(tmp) as sink:
+                pq.write_table(table, sink, compression="zstd", use_dictionary=dictionary,
+                               row_group_size=_ROW_GROUP)
+            self.fs.move(tmp, final)
+        except (pa.ArrowException, OSError) as exc:
+            try:
+                self.fs.delete_file(tmp)
+            except (pa.ArrowException, OSError):
+                pass  # the temporary file never came into being
+            raise StoreError(f"cannot write artifact {uri} under {self.root!r}: {exc}; check the "
+                             "artifact root is writable and has space") from exc
+
+    def file_sha256(self, uri: str) -> str:
+        """SHA-256 of an artifact file's bytes, streamed in 16 MiB chunks."""
+        digest = hashlib.sha256()
+        try:
+            with self.fs.open_input_stream(self.path(uri)) as source:
+                while chunk := source.read(1 << 24):
+                    digest.update(chunk)
+        except (pa.ArrowException, OSError) as exc:
+            raise StoreError(f"cannot read artifact {uri} under {self.root!r}: {exc}") from exc
+        return digest.hexdigest()
+
+    def _size(self, uri: str) -> int:
+        return int(self.fs.get_file_info(self.path(uri)).size or 0)
+
+    # ------------------------------------------------------------------ reads
+    def _read(self, sha256: str, uri: str, context: str, file_sha256: str | None) -> pa.Table:
+        label = f"artifact {sha256[:12]}" + (f" (referenced by {context})" if context else "")
+        path = self.path(uri)
+        if self.fs.get_file_info(path).type != pafs.FileType.File:
+            raise StoreError(f"{label} is missing from {self.root!r}; run `adpart kb check` "
+                             "to list the damage")
+        try:
+            with self.fs.open_input_file(path) as source:
+                buffer = source.read_buffer()
+        except (pa.ArrowException, OSError) as exc:
+            raise StoreError(f"{label} cannot be read from {self.root!r} ({exc}); check the "
+                             "artifact root, then run `adpart kb check`") from exc
+        # hash the file's bytes on a second thread while pyarrow decodes (both release the GIL)
+        with ThreadPoolExecutor(max_workers=1) as pool:
+            file_digest = pool.submit(lambda: hashlib.sha256(buffer).hexdigest())
+            try:
+                table = pq.read_table(pa.BufferReader(buffer))
+                problem = None
+            except (pa.ArrowException, OSError, ValueError) as exc:
+                table, problem = None, exc
+            if file_sha256 is not None and file_digest.result() != file_sha256:
+                raise StoreError(f"{label} is damaged: the file's bytes changed since it was "
+                                 "written; run `adpart kb check` and re-create the record")
+        if table is None:
+            raise StoreError(f"{label} is damaged and cannot be decoded ({problem}); run "
+                             "`adpart kb check` and re-create the record") from problem
+        return table
+
+    @staticmethod
+    def _mismatch(sha256: str, actual: str, context: str) -> StoreError:
+        label = f"artifact {sha256[:12]}" + (f" (referenced by {context})" if context else "")
+        return StoreError(f"{label} is damaged: its content hashes to {actual[:12]}; run "
+                          "`adpart kb check` and re-create the record")
+
+    def get_array(self, sha256: str, uri: str, *, context: str = "",
+                  file_sha256: str | None = None) -> np.ndarray:
+        """Read an array artifact and verify it against ``sha256`` (and the file hash, if given).
+
+        ``context`` names the referencing record(s) for the error message.
+        """
+        table = self._read(sha256, uri, context, file_sha256)
+        try:
+            meta = json.loads((table.schema.metadata or {})[_META_KEY])
+            if meta.get("format") != ARRAY_FORMAT:
+                raise ValueError(f"format {meta.get('format')!r} is not an array")
+            dtype = np.dtype(meta["dtype"])
+            values = table.column("values").to_numpy(zero_copy_only=False)
+            array = np.asarray(values, dtype=dtype).reshape(tuple(meta["shape"]))
+        except (KeyError, ValueError, TypeError, pa.ArrowException) as exc:
+            raise self._mismatch(sha256, "<undecodable>", context) from exc
+        actual = array_sha256(array)
+        if actual != sha256:
+            raise self._mismatch(sha256, actual, context)
+        return array.astype(dtype.newbyteorder("="), copy=False)
+
+    def get_table(self, sha256: str, uri: str, *, context: str = "",
+                  file_sha256: str | None = None) -> pa.Table:
+        """Read a table artifact and verify it against ``sha256`` (and the file hash, if given)."""
+        table = self._read(sha256, uri, context, file_sha256).replace_schema_metadata(None)
+        try:
+            actual = table_sha256(table)
+        except StoreError as exc:
+            raise self._mismatch(sha256, "<undecodable>", context) from exc
+        if actual != sha256:
+            raise self._mismatch(sha256, actual, context)
+        return table
+
+    def verify(self, sha256: str, uri: str, fmt: str, *, context: str = "",
+               file_sha256: str | None = None) -> None:
+        """Read and hash-check one artifact; raises :class:`StoreError` on any damage."""
+        read = self.get_array if fmt == ARRAY_FORMAT else self.get_table
+        read(sha256, uri, context=context, file_sha256=file_sha256)
+
+    # ------------------------------------------------------------------ listing / deletion
+    def files(self) -> list[tuple[str, int, float]]:
+        """Every file under the root as (relative path, bytes, mtime seconds)."""
+        selector = pafs.FileSelector(self.base, recursive=True, allow_not_found=True)
+        out = []
+        for info in self.fs.get_file_info(selector):
+            if info.type == pafs.FileType.File:
+                rel = info.path.removeprefix(self.base + "/")
+                mtime = info.mtime.timestamp() if info.mtime is not None else 0.0
+                out.append((rel, int(info.size or 0), mtime))
+        return out
+
+    @staticmethod
+    def is_temporary(rel: str) -> bool:
+        return rel.rsplit("/", 1)[-1].startswith(_TMP_PREFIX)
+
+    def delete(self, rel: str) -> None:
+        """Delete one file under the root (a ``.tmp-*`` leftover or an artifact)."""
+        name = rel.rsplit("/", 1)[-1]
+        if self.is_temporary(rel) and ".." not in rel.split("/") and not rel.startswith("/"):
+            path = f"{self.base}/{rel}"
+        else:
+            path = self.path(rel)
+        try:
+            self.fs.delete_file(path)
+        except FileNotFoundError:
+            return
+        except (pa.ArrowException, OSError) as exc:
+            raise StoreError(f"cannot delete {name} under {self.root!r}: {exc}") from exc

@@ -1,0 +1,833 @@
+"""The knowledge base: SQL metadata (SQLAlchemy 2) plus content-addressed Parquet artifacts.
+
+:class:`KnowledgeBase` is the library API (DESIGN.md, "Knowledge base"; STYLE.md 8.6). Puts take
+plain values (numpy arrays, dicts, scipy.sparse matrices) and return frozen records from
+:mod:`adpart.store.entities`; the payloads are written first (temporary name, rename), then the
+row that references them, so no row ever points at a missing file. Environments are get-or-put by
+model hash and tasks by spec hash, so pipelines rerun without duplicating them.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from typing import Any, TypeVar
+
+import numpy as np
+import pyarrow as pa
+import scipy.sparse as sp
+from sqlalchemy import Engine, create_engine, event, func, select
+from sqlalchemy.exc import IntegrityError, SQLAlchemyError
+from sqlalchemy.orm import Session, selectinload, sessionmaker
+
+from adpart import __version__
+from adpart.store import entities as E
+from adpart.store.artifacts import ARRAY_FORMAT, ArtifactStore, StoredArtifact
+from adpart.store.errors import StoreError
+from adpart.store.location import KBLocation
+from adpart.store.models import (
+    ARTIFACT_COLUMNS,
+    PARTITION_KINDS,
+    Base,
+    SqlArtifact,
+    SqlEnvironment,
+    SqlOption,
+    SqlPartition,
+    SqlPartitionOption,
+    SqlPolicy,
+    SqlRun,
+    SqlSubgoal,
+    SqlSubgoalSet,
+    SqlTask,
+)
+from adpart.store.schema import SCHEMA_VERSION, read_version, upgrade_schema, verify_schema
+
+_BUSY_TIMEOUT_S = 60.0
+R = TypeVar("R", bound=E.Record)
+
+_SQL_OF: dict[str, type[Base]] = {
+    "environment": SqlEnvironment, "task": SqlTask, "policy": SqlPolicy,
+    "subgoal-set": SqlSubgoalSet, "option": SqlOption, "partition": SqlPartition, "run": SqlRun,
+    "artifact": SqlArtifact,
+}
+#: entity artifact field -> ORM column, per kind
+_FIELD_COLUMN = {
+    kind: {f: f"{f}_sha" for f in E.RECORD_TYPES[kind].ARTIFACTS} for kind in _SQL_OF
+}
+
+
+def canonical_json_hash(value: Any) -> str:
+    """SHA-256 of ``value`` as canonical JSON (sorted keys, no spaces): the task spec hash."""
+    import hashlib
+
+    return hashlib.sha256(_json(value, "spec").encode()).hexdigest()
+
+
+def _json(value: Any, what: str) -> str:
+    try:
+        return json.dumps(value, sort_keys=True, separators=(",", ":"), allow_nan=False)
+    except (TypeError, ValueError) as exc:
+        raise StoreError(f"the {what} must be JSON-serialisable (numbers, strings, lists, dicts; "
+                         f"no NaN): {exc}") from exc
+
+
+def _utc(moment: datetime) -> datetime:
+    return moment if moment.tzinfo is not None else moment.replace(tzinfo=timezone.utc)
+
+
+def _id(value: E.Record | int | None) -> int | None:
+    if value is None or isinstance(value, int | np.integer):
+        return None if value is None else int(value)
+    return value.id
+
+
+@dataclass(frozen=True)
+class CheckReport:
+    """What :meth:`KnowledgeBase.check` found. ``problems`` are damage; the rest is housekeeping."""
+
+    artifacts_checked: int
+    problems: list[str] = field(default_factory=list)
+    orphan_files: list[str] = field(default_factory=list)
+    temporary_files: list[str] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return not self.problems
+
+
+@dataclass(frozen=True)
+class GcReport:
+    """Unreferenced artifacts (sha256, bytes) and stray files (path, bytes) found or removed."""
+
+    artifacts: list[tuple[str, int]]
+    files: list[tuple[str, int]]
+    deleted: bool
+
+    @property
+    def bytes(self) -> int:
+        return sum(b for _, b in self.artifacts) + sum(b for _, b in self.files)
+
+
+@dataclass
+class _Pending:
+    stored: StoredArtifact
+    kind: str
+
+
+class KnowledgeBase:
+    """Records of everything adpart learned: metadata in SQL, arrays and tables as Parquet.
+
+    Open one with :meth:`open` (a directory, ``$ADPART_KB`` or the per-user default) or construct
+    it from a SQLAlchemy URL and an artifact URI. The main API methods are:
+
+    - ``put_environment`` / ``environment_for_mdp`` (get-or-put by model hash), ``put_task``
+      (get-or-put by spec hash), ``put_policy``, ``put_subgoal_set``, ``put_option``,
+      ``put_partition``, ``put_run``: write a record, return its frozen dataclass;
+    - ``get(kind, id)``, ``get_ref("policy:3")``, ``records(kind, environment=...)``;
+    - ``load(record, field)``: an artifact's payload, verified against its hash;
+    - queries: ``options_for``, ``partitions_using``, ``runs_for``, ``learned_tasks``, ``lineage``;
+    - maintenance: ``info``, ``check``, ``gc``, ``upgrade``.
+
+    Every database error surfaces as :class:`StoreError`.
+    """
+
+    def __init__(self, db_url: str, artifact_uri: str, *, label: str | None = None,
+                 verify: bool = True) -> None:
+        self.label = label or db_url
+        self.db_url = db_url
+        try:
+            self.engine = self._make_engine(db_url)
+        except (SQLAlchemyError, ImportError) as exc:
+            raise StoreError(f"cannot open the knowledge base database {self.label}: {exc}; "
+                             "check the URL and that its driver is installed") from exc
+        self._read = sessionmaker(self.engine, expire_on_commit=False)
+        self._write = sessionmaker(self.engine.execution_options(adpart_write=True),
+                                   expire_on_commit=False)
+        self.artifacts = ArtifactStore(artifact_uri)
+        self.artifact_uri = artifact_uri
+        self.schema_version = self._init_schema(verify)
+
+    @classmethod
+    def open(cls, location: str | os.PathLike[str] | KBLocation | None = None, *,
+             artifacts: str | None = None, verify: bool = True) -> KnowledgeBase:
+        """Open (creating on first use) the knowledge base at ``location``.
+
+        Args:
+            location: a directory (``kb.sqlite`` + ``artifacts/`` inside), a SQLAlchemy URL, or a
+                :class:`KBLocation`; ``None`` means ``$ADPART_KB`` or the per-user default.
+            artifacts: artifact root URI (any pyarrow filesystem URI) for a URL location.
+            verify: refuse a schema this adpart cannot read (``False`` only for ``upgrade``).
+        """
+        where = location if isinstance(location, KBLocation) else KBLocation.resolve(location,
+                                                                                    artifacts)
+        return cls(where.db_url, where.artifact_uri, label=where.label, verify=verify)
+
+    # ------------------------------------------------------------------ engine and sessions
+    @staticmethod
+    def _make_engine(db_url: str) -> Engine:
+        if not db_url.startswith("sqlite"):
+            return create_engine(db_url, pool_pre_ping=True)
+        engine = create_engine(db_url, connect_args={"timeout": _BUSY_TIMEOUT_S})
+
+        @event.listens_for(engine, "connect")
+        def _pragmas(dbapi_connection: Any, _record: Any) -> None:
+            # transactions are begun by the "begin" listener below, not by pysqlite
+            dbapi_connection.isolation_level = None
+            cursor = dbapi_connection.cursor()
+            cursor.execute(f"PRAGMA busy_timeout = {int(_BUSY_TIMEOUT_S * 1000)}")
+            cursor.execute("PRAGMA journal_mode = WAL")
+            cursor.execute("PRAGMA synchronous = NORMAL")
+            cursor.execute("PRAGMA foreign_keys = ON")
+            cursor.close()
+
+        @event.listens_for(engine, "begin")
+        def _begin(conn: Any) -> None:
+            # writers take the write lock up front so WAL readers never have to upgrade a lock
+            # (which SQLite reports as SQLITE_BUSY without waiting)
+            write = conn.get_execution_options().get("adpart_write", False)
+            conn.exec_driver_sql("BEGIN IMMEDIATE" if write else "BEGIN")
+
+        return engine
+
+    @contextmanager
+    def _session(self, *, write: bool = False) -> Iterator[Session]:
+        """Managed session: commit (writes) or rollback; database errors become StoreError."""
+        session = (self._write if write else self._read)()
+        try:
+            yield session
+            if write:
+                session.commit()
+        except SQLAlchemyError as exc:
+            session.rollback()
+            orig = getattr(exc, "orig", None) or exc
+            raise StoreError(f"knowledge base {self.label}: database error "
+                             f"({type(orig).__name__}: {str(orig).splitlines()[0]}); check the "
+                             "location is writable, or run `adpart kb check`") from exc
+        except BaseException:
+            session.rollback()
+            raise
+        finally:
+            session.close()
+
+    def _init_schema(self, verify: bool) -> int:
+        try:
+            with self.engine.execution_options(adpart_write=True).begin() as conn:
+                found = read_version(conn, self.label)
+                if found is None:
+                    upgrade_schema(conn, self.label)
+                    return SCHEMA_VERSION
+        except SQLAlchemyError as exc:
+            orig = getattr(exc, "orig", None) or exc
+            raise StoreError(f"cannot open the knowledge base {self.label}: {orig}; check the "
+                             "location exists and is writable (--kb / ADPART_KB)") from exc
+        if verify:
+            verify_schema(found[0], found[1], self.label)
+        return found[0]
+
+    def upgrade(self) -> tuple[int, int]:
+        """Migrate the database to this adpart's schema version; returns (from, to)."""
+        try:
+            with self.engine.execution_options(adpart_write=True).begin() as conn:
+                result = upgrade_schema(conn, self.label)
+        except SQLAlchemyError as exc:
+            raise StoreError(f"upgrading {self.label} failed: {exc}; the database was left "
+                             "unchanged") from exc
+        self.schema_version = result[1]
+        return result
+
+    def close(self) -> None:
+        self.engine.dispose()
+
+    def __enter__(self) -> KnowledgeBase:  # noqa: PYI034
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ provenance and artifacts
+    @staticmethod
+    def _prov(plugin: str, plugin_version: str, parameters: Mapping[str, Any] | None) -> dict:
+        params = dict(parameters or {})
+        _json(params, "parameters")
+        return {"adpart_version": __version__, "plugin": plugin, "plugin_version": plugin_version,
+                "parameters": params, "created_at": datetime.now(timezone.utc),
+                "schema_version": SCHEMA_VERSION}
+
+    def _array(self, value: Any, kind: str, *, dtype: Any = None,
+               shape: tuple[int, ...] | None = None) -> _Pending | None:
+        if value is None:
+            return None
+        array = np.asarray(value) if dtype is None else np.asarray(value, dtype=dtype)
+        if shape is not None and array.shape != shape:
+            raise StoreError(f"the {kind} array has shape {array.shape}, expected {shape}; "
+                             "pass one value per state (and action) of the environment")
+        return _Pending(self.artifacts.put_array(array), kind)
+
+    def _table(self, value: Any, kind: str) -> _Pending | None:
+        return None if value is None else _Pending(self.artifacts.put_table(value), kind)
+
+    def _ensure_rows(self, session: Session, *pending: _Pending | None) -> None:
+        """Insert the artifact rows the new record will reference (deduplicated by hash)."""
+        for item in pending:
+            if item is None:
+                continue
+            art = item.stored
+            if session.scalar(select(SqlArtifact.id).where(SqlArtifact.sha256 == art.sha256)):
+                continue
+            if not self.artifacts.exists(art.uri):  # removed by a concurrent gc: write it again
+                raise StoreError(f"artifact {art.sha256[:12]} vanished while being stored (a "
+                                 "concurrent `adpart kb gc`?); retry the write")
+            try:
+                with session.begin_nested():
+                    session.add(SqlArtifact(
+                        sha256=art.sha256, uri=art.uri, format=art.format, bytes=art.nbytes,
+                        file_sha256=art.file_sha256,
+                        kind=item.kind, dtype=art.dtype,
+                        shape=list(art.shape) if art.shape is not None else None,
+                        adpart_version=__version__, created_at=datetime.now(timezone.utc),
+                        schema_version=SCHEMA_VERSION))
+            except IntegrityError:
+                continue  # another process inserted the same content first
+
+    @staticmethod
+    def _sha(item: _Pending | None) -> str | None:
+        return None if item is None else item.stored.sha256
+
+    def _get_or_add(self, session: Session, model: type[Base], where: Any, row: Base) -> Base:
+        found = session.scalars(select(model).where(where)).first()
+        if found is not None:
+            return found
+        try:
+            with session.begin_nested():
+                session.add(row)
+        except IntegrityError:
+            return session.scalars(select(model).where(where)).one()
+        return row
+
+    def _need(self, session: Session, model: type[Base], key: int | None, what: str) -> Any:
+        row = session.get(model, key) if key is not None else None
+        if row is None:
+            raise StoreError(f"no {what} with id {key} in {self.label}; list them with "
+                             f"`adpart kb ls {what}`")
+        return row
+
+    # ------------------------------------------------------------------ puts
+    def put_environment(self, name: str, *, model_hash: str, n_states: int, n_actions: int,
+                        spec: Mapping[str, Any] | None = None, plugin: str = "",
+                        plugin_version: str = "", parameters: Mapping[str, Any] | None = None,
+                        ) -> E.Environment:
+        """Get-or-put an environment keyed by its model hash (e.g. ``FiniteMDP.content_hash``)."""
+        spec = dict(spec or {})
+        _json(spec, "environment spec")
+        with self._session(write=True) as s:
+            row = self._get_or_add(s, SqlEnvironment, SqlEnvironment.model_hash == model_hash,
+                                   SqlEnvironment(name=name, spec=spec, model_hash=model_hash,
+                                                  n_states=int(n_states), n_actions=int(n_actions),
+                                                  **self._prov(plugin, plugin_version, parameters)))
+            s.flush()
+            return self._entity(row)
+
+    def environment_for_mdp(self, mdp: Any, name: str, *, spec: Mapping[str, Any] | None = None,
+                            **provenance: Any) -> E.Environment:
+        """Get-or-put the environment of a :class:`~adpart.mdp.model.FiniteMDP`."""
+        return self.put_environment(name, model_hash=mdp.content_hash, n_states=mdp.n_states,
+                                    n_actions=mdp.n_actions, spec=spec, **provenance)
+
+    def put_task(self, environment: E.Environment | int, name: str, *, spec: Mapping[str, Any],
+                 gamma: float, plugin: str = "", plugin_version: str = "",
+                 parameters: Mapping[str, Any] | None = None) -> E.Task:
+        """Get-or-put a task keyed by (environment, hash of canonical JSON of spec and gamma)."""
+        spec = dict(spec)
+        spec_hash = canonical_json_hash({"spec": spec, "gamma": float(gamma)})
+        env_id = _id(environment)
+        with self._session(write=True) as s:
+            self._need(s, SqlEnvironment, env_id, "environment")
+            row = self._get_or_add(
+                s, SqlTask, (SqlTask.environment_id == env_id) & (SqlTask.spec_hash == spec_hash),
+                SqlTask(environment_id=env_id, name=name, spec=spec, spec_hash=spec_hash,
+                        gamma=float(gamma), **self._prov(plugin, plugin_version, parameters)))
+            s.flush()
+            return self._entity(row)
+
+    def put_policy(self, task: E.Task | int, learner: str, *, q: Any = None, pi: Any = None,
+                   seed: int | None = None, episodes: int | None = None, steps: int | None = None,
+                   plugin: str = "", plugin_version: str = "",
+                   parameters: Mapping[str, Any] | None = None) -> E.Policy:
+        """Store a learned policy: ``q`` (S, A) float64 and/or ``pi`` (S,) int64."""
+        task_id = _id(task)
+        S, A = self._task_shape(task_id)
+        q_art = self._array(q, "q", dtype=np.float64, shape=(S, A))
+        pi_art = self._array(pi, "pi", dtype=np.int64, shape=(S,))
+        with self._session(write=True) as s:
+            self._ensure_rows(s, q_art, pi_art)
+            row = SqlPolicy(task_id=task_id, learner=learner, seed=seed, episodes=episodes,
+                            steps=steps, q_sha=self._sha(q_art), pi_sha=self._sha(pi_art),
+                            **self._prov(plugin or learner, plugin_version, parameters))
+            s.add(row)
+            s.flush()
+            return self._entity(row)
+
+    def put_subgoal_set(self, environment: E.Environment | int, detector: str, states: Any, *,
+                        scores: Any = None, policy: E.Policy | int | None = None,
+                        plugin: str = "", plugin_version: str = "",
+                        parameters: Mapping[str, Any] | None = None) -> E.SubgoalSet:
+        """Store the subgoal states a detector found (and its per-state scores (S,) float64)."""
+        env_id = _id(environment)
+        S, _ = self._env_shape(env_id)
+        ids = np.unique(np.asarray(states, dtype=np.int64).reshape(-1))
+        if ids.size and (ids[0] < 0 or ids[-1] >= S):
+            raise StoreError(f"subgoal state ids must lie in [0, {S}); got {ids[0]}..{ids[-1]}")
+        scores_art = self._array(scores, "scores", dtype=np.float64, shape=(S,))
+        with self._session(write=True) as s:
+            self._ensure_rows(s, scores_art)
+            row = SqlSubgoalSet(environment_id=env_id, policy_id=_id(policy), detector=detector,
+                                scores_sha=self._sha(scores_art),
+                                subgoals=[SqlSubgoal(state=int(x)) for x in ids],
+                                **self._prov(plugin or detector, plugin_version, parameters))
+            s.add(row)
+            s.flush()
+            return self._entity(row)
+
+    def put_option(self, environment: E.Environment | int, name: str, *, initiation: Any,
+                   policy: Any, termination: Any, reward: Any = None, transitions: Any = None,
+                   gamma: float | None = None, subgoal: int | None = None, plugin: str = "",
+                   plugin_version: str = "", parameters: Mapping[str, Any] | None = None,
+                   ) -> E.Option:
+        """Store an option (I (S,) bool, pi (S,) int64 or (S, A) float64, beta (S,) float64).
+
+        ``reward`` is the model's R_o (S,) and ``transitions`` its discounted F_o (S, S), a
+        scipy.sparse matrix stored as a COO table (row, col, value) sorted row-major.
+        ``subgoal`` is a subgoal id (``SubgoalSet.subgoal_ids``).
+        """
+        env_id = _id(environment)
+        S, A = self._env_shape(env_id)
+        pol = np.asarray(policy)
+        pol_art = self._array(pol, "option-policy", dtype=np.int64 if pol.ndim == 1 else np.float64,
+                              shape=(S,) if pol.ndim == 1 else (S, A))
+        init_art = self._array(initiation, "initiation", dtype=np.bool_, shape=(S,))
+        beta_art = self._array(termination, "termination", dtype=np.float64, shape=(S,))
+        r_art = self._array(reward, "option-reward", dtype=np.float64, shape=(S,))
+        f_art = None
+        if transitions is not None:
+            F = sp.coo_array(sp.csr_array(transitions))
+            if F.shape != (S, S):
+                raise StoreError(f"option transitions have shape {F.shape}, expected ({S}, {S})")
+            F.sum_duplicates()
+            f_art = self._table({"row": F.row.astype(np.int64), "col": F.col.astype(np.int64),
+                                 "value": F.data.astype(np.float64)}, "option-transitions")
+        with self._session(write=True) as s:
+            if subgoal is not None:
+                self._need(s, SqlSubgoal, subgoal, "subgoal")
+            self._ensure_rows(s, init_art, pol_art, beta_art, r_art, f_art)
+            row = SqlOption(environment_id=env_id, subgoal_id=subgoal, name=name,
+                            gamma=None if gamma is None else float(gamma),
+                            initiation_sha=self._sha(init_art), policy_sha=self._sha(pol_art),
+                            termination_sha=self._sha(beta_art), reward_sha=self._sha(r_art),
+                            transitions_sha=self._sha(f_art),
+                            **self._prov(plugin, plugin_version, parameters))
+            s.add(row)
+            s.flush()
+            return self._entity(row)
+
+    def put_partition(self, environment: E.Environment | int, kind: str, labels: Any, *,
+                      options: Sequence[E.Option | int] = (), includes_primitives: bool = True,
+                      epsilon: float = 0.0, delta: float = 0.0, block_actions: Any = None,
+                      parents: Iterable[E.Partition | int] = (), task: E.Task | int | None = None,
+                      plugin: str = "", plugin_version: str = "",
+                      parameters: Mapping[str, Any] | None = None) -> E.Partition:
+        """Store a partition: ``labels`` (S,) int64 with blocks 0..B-1 all used.
+
+        The partition's action set is the primitive actions (when ``includes_primitives``)
+        followed by ``options`` in order; ``block_actions`` is a (B, K) bool mask of the actions
+        admissible in each block over that set.
+        """
+        if kind not in PARTITION_KINDS:
+            raise StoreError(f"unknown partition kind {kind!r}; use one of "
+                             f"{', '.join(PARTITION_KINDS)}")
+        env_id = _id(environment)
+        S, A = self._env_shape(env_id)
+        labels = np.asarray(labels, dtype=np.int64)
+        if labels.shape != (S,):
+            raise StoreError(f"partition labels have shape {labels.shape}, expected ({S},)")
+        if labels.size and labels.min() < 0:
+            raise StoreError("partition labels must be >= 0; relabel with np.unique(labels, "
+                             "return_inverse=True)")
+        n_blocks = int(labels.max()) + 1 if labels.size else 0
+        if np.count_nonzero(np.bincount(labels, minlength=n_blocks)) != n_blocks:
+            raise StoreError("partition labels must use every block 0..B-1; relabel with "
+                             "np.unique(labels, return_inverse=True)")
+        option_ids = [_id(o) for o in options]
+        if len(set(option_ids)) != len(option_ids):
+            raise StoreError("a partition's option set lists an option twice")
+        K = (A if includes_primitives else 0) + len(option_ids)
+        labels_art = self._array(labels, "labels")
+        ba_art = self._array(block_actions, "block-actions", dtype=np.bool_, shape=(n_blocks, K))
+        parent_ids = sorted({_id(p) for p in parents})
+        with self._session(write=True) as s:
+            for oid in option_ids:
+                opt = self._need(s, SqlOption, oid, "option")
+                if opt.environment_id != env_id:
+                    raise StoreError(f"option:{oid} belongs to environment:{opt.environment_id}, "
+                                     f"not environment:{env_id}")
+            parent_rows = [self._need(s, SqlPartition, pid, "partition") for pid in parent_ids]
+            self._ensure_rows(s, labels_art, ba_art)
+            row = SqlPartition(
+                environment_id=env_id, task_id=_id(task), kind=kind,
+                includes_primitives=bool(includes_primitives), epsilon=float(epsilon),
+                delta=float(delta), n_blocks=n_blocks, labels_sha=self._sha(labels_art),
+                block_actions_sha=self._sha(ba_art),
+                options=[SqlPartitionOption(option_id=oid, position=i)
+                         for i, oid in enumerate(option_ids)],
+                parents=parent_rows, **self._prov(plugin, plugin_version, parameters))
+            s.add(row)
+            s.flush()
+            return self._entity(row)
+
+    def put_run(self, task: E.Task | int, learner: str, *, curve: Any = None,
+                metrics: Mapping[str, Any] | None = None,
+                partition: E.Partition | int | None = None,
+                seed: int | None = None, plugin: str = "", plugin_version: str = "",
+                parameters: Mapping[str, Any] | None = None) -> E.Run:
+        """Store a learning run: ``curve`` a table (episodes, steps, value gap, ...), metrics."""
+        metrics = dict(metrics or {})
+        _json(metrics, "metrics")
+        task_id = _id(task)
+        curve_art = self._table(curve, "curve")
+        with self._session(write=True) as s:
+            self._need(s, SqlTask, task_id, "task")
+            self._ensure_rows(s, curve_art)
+            row = SqlRun(task_id=task_id, partition_id=_id(partition), learner=learner, seed=seed,
+                         curve_sha=self._sha(curve_art), metrics=metrics,
+                         **self._prov(plugin or learner, plugin_version, parameters))
+            s.add(row)
+            s.flush()
+            return self._entity(row)
+
+    def _env_shape(self, env_id: int | None) -> tuple[int, int]:
+        with self._session() as s:
+            env = self._need(s, SqlEnvironment, env_id, "environment")
+            return int(env.n_states), int(env.n_actions)
+
+    def _task_shape(self, task_id: int | None) -> tuple[int, int]:
+        with self._session() as s:
+            return self._env_shape(self._need(s, SqlTask, task_id, "task").environment_id)
+
+    # ------------------------------------------------------------------ conversion
+    @staticmethod
+    def _provenance(row: Any) -> E.Provenance:
+        return E.Provenance(row.adpart_version, row.plugin, row.plugin_version,
+                            dict(row.parameters or {}), _utc(row.created_at), row.schema_version)
+
+    def _entity(self, row: Base) -> Any:
+        if isinstance(row, SqlArtifact):
+            return E.Artifact(row.id, row.sha256, row.uri, row.format, row.bytes,
+                              row.file_sha256, row.kind,
+                              row.dtype, tuple(row.shape) if row.shape is not None else None,
+                              _utc(row.created_at))
+        p = self._provenance(row)
+        if isinstance(row, SqlEnvironment):
+            return E.Environment(row.id, row.name, dict(row.spec), row.model_hash,
+                                 int(row.n_states), int(row.n_actions), p)
+        if isinstance(row, SqlTask):
+            return E.Task(row.id, row.environment_id, row.name, dict(row.spec), row.spec_hash,
+                          float(row.gamma), p)
+        if isinstance(row, SqlPolicy):
+            return E.Policy(row.id, row.task_id, row.learner, row.seed, row.episodes, row.steps,
+                            row.q_sha, row.pi_sha, p)
+        if isinstance(row, SqlSubgoalSet):
+            return E.SubgoalSet(row.id, row.environment_id, row.policy_id, row.detector,
+                                row.scores_sha, tuple(int(g.state) for g in row.subgoals),
+                                tuple(g.id for g in row.subgoals), p)
+        if isinstance(row, SqlOption):
+            return E.Option(row.id, row.environment_id, row.subgoal_id, row.name, row.gamma,
+                            row.initiation_sha, row.policy_sha, row.termination_sha,
+                            row.reward_sha, row.transitions_sha, p)
+        if isinstance(row, SqlPartition):
+            return E.Partition(row.id, row.environment_id, row.task_id, row.kind,
+                               tuple(o.option_id for o in row.options),
+                               bool(row.includes_primitives), float(row.epsilon),
+                               float(row.delta), int(row.n_blocks), row.labels_sha,
+                               row.block_actions_sha, tuple(r.id for r in row.parents), p)
+        if isinstance(row, SqlRun):
+            return E.Run(row.id, row.task_id, row.partition_id, row.learner, row.seed,
+                         row.curve_sha, dict(row.metrics or {}), p)
+        raise TypeError(type(row).__name__)
+
+    @staticmethod
+    def _loaders(model: type[Base]) -> list[Any]:
+        if model is SqlSubgoalSet:
+            return [selectinload(SqlSubgoalSet.subgoals)]
+        if model is SqlPartition:
+            return [selectinload(SqlPartition.options), selectinload(SqlPartition.parents)]
+        return []
+
+    # ------------------------------------------------------------------ gets and queries
+    def get(self, kind: str, record_id: int) -> Any:
+        """The record of ``kind`` (``"policy"``, ...) with id ``record_id``."""
+        model = self._model(kind)
+        with self._session() as s:
+            row = s.scalars(select(model).where(model.id == int(record_id))
+                            .options(*self._loaders(model))).first()
+            if row is None:
+                raise StoreError(f"no {kind}:{record_id} in {self.label}; list them with "
+                                 f"`adpart kb ls {kind}`")
+            return self._entity(row)
+
+    def artifact(self, sha_prefix: str) -> E.Artifact:
+        """The artifact whose hash starts with ``sha_prefix`` (unique prefix required)."""
+        if not sha_prefix or any(c not in "0123456789abcdef" for c in sha_prefix):
+            raise StoreError(f"{sha_prefix!r} is not a hexadecimal artifact hash prefix")
+        with self._session() as s:
+            rows = s.scalars(select(SqlArtifact).where(
+                SqlArtifact.sha256.startswith(sha_prefix, autoescape=True)).limit(2)).all()
+        if not rows:
+            raise StoreError(f"no artifact with hash {sha_prefix}...; list them with "
+                             "`adpart kb ls artifact`")
+        if len(rows) > 1:
+            raise StoreError(f"artifact hash prefix {sha_prefix} is ambiguous; give more digits")
+        return self._entity(rows[0])
+
+    @staticmethod
+    def _model(kind: str) -> type[Base]:
+        try:
+            return _SQL_OF[kind]
+        except KeyError:
+            raise StoreError(f"unknown record kind {kind!r}; use one of "
+                             f"{', '.join(_SQL_OF)}") from None
+
+    def records(self, kind: str, *, environment: E.Environment | int | None = None,
+                limit: int | None = None) -> list[Any]:
+        """All records of ``kind`` (oldest first), optionally only those of one environment."""
+        model = self._model(kind)
+        query = select(model).options(*self._loaders(model)).order_by(model.id)
+        env_id = _id(environment)
+        if env_id is not None:
+            if hasattr(model, "environment_id"):
+                query = query.where(model.environment_id == env_id)
+            elif hasattr(model, "task_id"):
+                query = query.join(SqlTask, SqlTask.id == model.task_id).where(
+                    SqlTask.environment_id == env_id)
+            elif kind == "environment":
+                query = query.where(model.id == env_id)
+        if limit is not None:
+            query = query.limit(limit)
+        with self._session() as s:
+            return [self._entity(r) for r in s.scalars(query).all()]
+
+    def find_environment(self, name_or_hash: str) -> E.Environment:
+        """The environment with this name (most recent) or model hash."""
+        with self._session() as s:
+            row = s.scalars(select(SqlEnvironment).where(
+                (SqlEnvironment.name == name_or_hash) | (SqlEnvironment.model_hash == name_or_hash)
+            ).order_by(SqlEnvironment.id.desc())).first()
+            if row is None:
+                raise StoreError(f"no environment named {name_or_hash!r} in {self.label}; list "
+                                 "them with `adpart kb ls environment`")
+            return self._entity(row)
+
+    def options_for(self, environment: E.Environment | int) -> list[E.Option]:
+        """Every option stored for an environment."""
+        return self.records("option", environment=environment)
+
+    def partitions_using(self, options: Iterable[E.Option | int], *, exact: bool = True,
+                         includes_primitives: bool | None = None) -> list[E.Partition]:
+        """Partitions built from exactly this option set (``exact``) or from a superset of it."""
+        wanted = {_id(o) for o in options}
+        with self._session() as s:
+            query = select(SqlPartition).options(*self._loaders(SqlPartition)).order_by(
+                SqlPartition.id)
+            if wanted:
+                query = query.where(SqlPartition.id.in_(
+                    select(SqlPartitionOption.partition_id).where(
+                        SqlPartitionOption.option_id.in_(wanted))))
+            if includes_primitives is not None:
+                query = query.where(SqlPartition.includes_primitives == includes_primitives)
+            rows = s.scalars(query).all()
+            out = []
+            for row in rows:
+                have = {o.option_id for o in row.options}
+                if (have == wanted) if exact else wanted <= have:
+                    out.append(self._entity(row))
+            return out
+
+    def runs_for(self, task: E.Task | int) -> list[E.Run]:
+        """Every run of a task, oldest first."""
+        with self._session() as s:
+            rows = s.scalars(select(SqlRun).where(SqlRun.task_id == _id(task))
+                             .order_by(SqlRun.id)).all()
+            return [self._entity(r) for r in rows]
+
+    def learned_tasks(self, environment: E.Environment | int | None = None,
+                      ) -> list[tuple[E.Task, list[E.Run]]]:
+        """Tasks that have runs, with their runs (a run's curve: ``load(run, "curve")``)."""
+        tasks = self.records("task", environment=environment)
+        runs = self.records("run", environment=environment)
+        by_task: dict[int, list[E.Run]] = {}
+        for run in runs:
+            by_task.setdefault(run.task_id, []).append(run)
+        return [(t, by_task[t.id]) for t in tasks if t.id in by_task]
+
+    def lineage(self, partition: E.Partition | int) -> list[E.Partition]:
+        """The ancestors of a partition, nearest first (breadth-first over parent links)."""
+        start = self.get("partition", _id(partition))
+        seen: set[int] = {start.id}
+        frontier = list(start.parent_ids)
+        out: list[E.Partition] = []
+        while frontier:
+            nxt: list[int] = []
+            for pid in frontier:
+                if pid in seen:
+                    continue
+                seen.add(pid)
+                parent = self.get("partition", pid)
+                out.append(parent)
+                nxt.extend(parent.parent_ids)
+            frontier = nxt
+        return out
+
+    # ------------------------------------------------------------------ payloads
+    def load(self, record: E.Record, field_name: str) -> Any:
+        """The payload of one artifact field of a record, verified against its hash.
+
+        Arrays come back as numpy arrays, tables as pyarrow Tables; ``None`` if the field is empty.
+        A damaged artifact raises :class:`StoreError` naming the artifact and ``record.ref``.
+        """
+        fmt = type(record).ARTIFACTS.get(field_name)
+        if fmt is None:
+            raise StoreError(f"{record.ref} has no artifact field {field_name!r}; it has "
+                             f"{', '.join(type(record).ARTIFACTS) or 'none'}")
+        sha = getattr(record, field_name)
+        if sha is None:
+            return None
+        art = self._artifact_row(sha)
+        context = f"{record.ref} ({field_name})"
+        read = self.artifacts.get_array if fmt == "array" else self.artifacts.get_table
+        return read(sha, art.uri, context=context, file_sha256=art.file_sha256)
+
+    def option_transitions(self, option: E.Option) -> sp.csr_array | None:
+        """An option's discounted transition model F_o as a CSR array of shape (S, S)."""
+        table = self.load(option, "transitions")
+        if table is None:
+            return None
+        S, _ = self._env_shape(option.environment_id)
+        cols = {name: table.column(name).to_numpy() for name in ("row", "col", "value")}
+        return sp.csr_array((cols["value"], (cols["row"], cols["col"])), shape=(S, S))
+
+    def put_array(self, array: Any, kind: str = "array") -> E.Artifact:
+        """Store a bare array artifact (kept until ``gc`` finds nothing referencing it)."""
+        pending = self._array(array, kind)
+        with self._session(write=True) as s:
+            self._ensure_rows(s, pending)
+        return self._artifact_row(pending.stored.sha256)
+
+    def put_table(self, table: pa.Table | dict[str, Any], kind: str = "table") -> E.Artifact:
+        """Store a bare table artifact."""
+        pending = self._table(table, kind)
+        with self._session(write=True) as s:
+            self._ensure_rows(s, pending)
+        return self._artifact_row(pending.stored.sha256)
+
+    def read_artifact(self, artifact: E.Artifact | str) -> Any:
+        """The payload of an artifact (by record or full hash), naming its referrers on damage."""
+        art = artifact if isinstance(artifact, E.Artifact) else self._artifact_row(artifact)
+        context = ", ".join(self.referrers().get(art.sha256, [])) or "no record"
+        read = self.artifacts.get_array if art.format == ARRAY_FORMAT else self.artifacts.get_table
+        return read(art.sha256, art.uri, context=context, file_sha256=art.file_sha256)
+
+    def _artifact_row(self, sha: str) -> E.Artifact:
+        with self._session() as s:
+            row = s.scalars(select(SqlArtifact).where(SqlArtifact.sha256 == sha)).first()
+            if row is None:
+                raise StoreError(f"artifact {sha[:12]} has no row in {self.label}; run "
+                                 "`adpart kb check`")
+            return self._entity(row)
+
+    # ------------------------------------------------------------------ maintenance
+    def referrers(self) -> dict[str, list[str]]:
+        """sha256 -> the records referencing it, as ``"policy:3 (q)"``."""
+        kinds = {model: kind for kind, model in _SQL_OF.items()}
+        out: dict[str, list[str]] = {}
+        with self._session() as s:
+            for model, columns in ARTIFACT_COLUMNS.items():
+                for column in columns:
+                    col = getattr(model, column)
+                    for rid, sha in s.execute(select(model.id, col).where(col.is_not(None))):
+                        out.setdefault(sha, []).append(
+                            f"{kinds[model]}:{rid} ({column.removesuffix('_sha')})")
+        return out
+
+    def counts(self) -> dict[str, int]:
+        """Number of records of each kind."""
+        with self._session() as s:
+            return {kind: int(s.scalar(select(func.count()).select_from(model)) or 0)
+                    for kind, model in _SQL_OF.items()}
+
+    def artifact_bytes(self) -> int:
+        with self._session() as s:
+            return int(s.scalar(select(func.coalesce(func.sum(SqlArtifact.bytes), 0))) or 0)
+
+    def info(self) -> dict[str, Any]:
+        """Location, schema version, record counts and artifact bytes (for ``adpart kb info``)."""
+        return {"location": self.label, "database": self.engine.url.render_as_string(True),
+                "artifacts": self.artifact_uri, "schema_version": self.schema_version,
+                "counts": self.counts(), "artifact_bytes": self.artifact_bytes()}
+
+    def check(self) -> CheckReport:
+        """Verify every artifact's hashes, every reference and every file under the root."""
+        refs = self.referrers()
+        with self._session() as s:
+            rows = [self._entity(r) for r in s.scalars(select(SqlArtifact)).all()]
+        known = {a.sha256 for a in rows}
+        problems: list[str] = []
+        for sha, who in sorted(refs.items()):
+            if sha not in known:
+                problems.append(f"{', '.join(who)} reference artifact {sha[:12]}, which has no row")
+        uris = set()
+        for art in rows:
+            context = ", ".join(refs.get(art.sha256, [])) or "no record"
+            try:
+                uris.add(self.artifacts.path(art.uri))
+                self.artifacts.verify(art.sha256, art.uri, art.format, context=context,
+                                      file_sha256=art.file_sha256)
+            except StoreError as exc:
+                problems.append(str(exc))
+        orphans, temps = [], []
+        for rel, _size, _mtime in self.artifacts.files():
+            if self.artifacts.is_temporary(rel):
+                temps.append(rel)
+            elif f"{self.artifacts.base}/{rel}" not in uris:
+                orphans.append(rel)
+        return CheckReport(len(rows), problems, orphans, temps)
+
+    def gc(self, *, delete: bool = False, temporary_age_s: float = 3600.0) -> GcReport:
+        """Find (and with ``delete=True`` remove) artifacts no record references.
+
+        Also finds files under the root that have no row, and ``.tmp-*`` files older than
+        ``temporary_age_s`` (younger ones may belong to a write in progress).
+        """
+        import time
+
+        refs = self.referrers()
+        now = time.time()
+        with self._session(write=delete) as s:
+            rows = s.scalars(select(SqlArtifact)).all()
+            dead = [(r.sha256, int(r.bytes), r.uri) for r in rows if r.sha256 not in refs]
+            live_uris = {r.uri for r in rows if r.sha256 in refs}
+            dead_uris = {uri for _, _, uri in dead}
+            files = [(rel, size) for rel, size, mtime in self.artifacts.files()
+                     if (self.artifacts.is_temporary(rel) and now - mtime > temporary_age_s)
+                     or (not self.artifacts.is_temporary(rel) and rel not in live_uris
+                         and rel not in dead_uris)]
+            if delete:
+                for sha, _, _ in dead:
+                    s.execute(SqlArtifact.__table__.delete().where(SqlArtifact.sha256 == sha))
+                s.flush()
+                for _, _, uri in dead:
+                    self.artifacts.delete(uri)
+                for rel, _ in files:
+                    self.artifacts.delete(rel)
+        return GcReport([(sha, b) for sha, b, _ in dead], files, delete)

@@ -1,0 +1,86 @@
+"""Where a knowledge base lives: a directory, or a SQLAlchemy URL plus an artifact root.
+
+Resolution order for the location: the explicit argument (``--kb``), then ``$ADPART_KB``, then
+``$ADPART_HOME/kb``, then ``$XDG_DATA_HOME/adpart/kb``, then ``~/.local/share/adpart/kb``. A
+directory holds ``kb.sqlite`` and ``artifacts/`` and is created on first use. A database URL
+(``sqlite:///...``, ``postgresql+psycopg://...``) takes its artifact root from the explicit
+argument (``--kb-artifacts``) or ``$ADPART_KB_ARTIFACTS``; a ``sqlite:///`` file defaults to an
+``artifacts/`` directory beside it.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+from sqlalchemy.engine import make_url
+from sqlalchemy.exc import ArgumentError
+
+from adpart.store.errors import StoreError
+
+DB_FILE = "kb.sqlite"
+ARTIFACT_DIR = "artifacts"
+_URL = re.compile(r"^[A-Za-z][A-Za-z0-9+_.-]*://")
+
+
+def default_location() -> str:
+    """The per-user default location (see the module docstring for the order)."""
+    if os.environ.get("ADPART_KB"):
+        return os.environ["ADPART_KB"]
+    if os.environ.get("ADPART_HOME"):
+        return str(Path(os.environ["ADPART_HOME"]) / "kb")
+    data = os.environ.get("XDG_DATA_HOME") or str(Path.home() / ".local" / "share")
+    return str(Path(data) / "adpart" / "kb")
+
+
+def _make_dir(path: Path, what: str) -> None:
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise StoreError(
+            f"cannot create the {what} {path}: {exc.strerror or exc}; choose a writable "
+            "directory with --kb or ADPART_KB"
+        ) from exc
+    if not os.access(path, os.W_OK | os.X_OK):
+        raise StoreError(f"the {what} {path} is not writable; choose a writable directory with "
+                         "--kb or ADPART_KB")
+
+
+@dataclass(frozen=True)
+class KBLocation:
+    """A resolved location: the database URL, the artifact root and a label for messages."""
+
+    db_url: str
+    artifact_uri: str
+    label: str
+
+    @classmethod
+    def resolve(cls, location: str | os.PathLike[str] | None = None,
+                artifacts: str | None = None) -> KBLocation:
+        """Resolve ``location`` (directory or URL) and ``artifacts`` (module docstring)."""
+        where = str(location) if location is not None else default_location()
+        artifacts = artifacts or os.environ.get("ADPART_KB_ARTIFACTS") or None
+        if _URL.match(where) and not where.startswith("file://"):
+            try:
+                url = make_url(where)
+            except ArgumentError as exc:
+                raise StoreError(f"{where!r} is not a database URL or a directory; pass a "
+                                 "directory or e.g. sqlite:////path/kb.sqlite") from exc
+            label = url.render_as_string(hide_password=True)
+            if artifacts is None:
+                on_disk = url.database not in (None, "", ":memory:")
+                if url.get_backend_name() == "sqlite" and on_disk:
+                    db_file = Path(url.database).expanduser().resolve()
+                    _make_dir(db_file.parent, "knowledge base directory")
+                    artifacts = str(db_file.parent / ARTIFACT_DIR)
+                else:
+                    raise StoreError(f"the database URL {label} needs an artifact root: pass "
+                                     "--kb-artifacts URI or set ADPART_KB_ARTIFACTS")
+            return cls(where, artifacts, label)
+        directory = Path(where.removeprefix("file://")).expanduser().resolve()
+        _make_dir(directory, "knowledge base directory")
+        if artifacts is None:
+            artifacts = str(directory / ARTIFACT_DIR)
+        return cls(f"sqlite:///{directory / DB_FILE}", artifacts, str(directory))

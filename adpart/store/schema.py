@@ -1,0 +1,90 @@
+"""Schema versioning: a one-row ``adpart_schema`` table, checked on every open.
+
+adpart keeps a linear schema history (version 1, 2, ...) with one Python migration step per
+version, in the manner of llm's migration list rather than Alembic (see docs/knowledge-base.md for
+why). :func:`verify_schema` refuses a knowledge base written by a newer adpart, one that is older
+than this adpart (``adpart kb upgrade`` migrates it), and a database that holds tables but no
+adpart schema row (not a knowledge base).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from sqlalchemy import Connection, inspect, select
+
+from adpart import __version__
+from adpart.store.errors import StoreError
+from adpart.store.models import Base, SqlSchema
+
+#: the schema version this adpart reads and writes
+SCHEMA_VERSION = 1
+
+#: MIGRATIONS[v] upgrades a version-v database to version v + 1 inside one transaction
+MIGRATIONS: dict[int, Callable[[Connection], None]] = {}
+
+
+def read_version(conn: Connection, location: str) -> tuple[int, str] | None:
+    """The (version, written_by) of the database, or None when it holds no tables at all."""
+    tables = set(inspect(conn).get_table_names())
+    if not tables:
+        return None
+    if SqlSchema.__tablename__ not in tables:
+        raise StoreError(
+            f"{location} holds tables ({', '.join(sorted(tables)[:5])}) but no adpart schema "
+            "record: it is not an adpart knowledge base (unknown schema); point --kb / ADPART_KB "
+            "at an empty or adpart location"
+        )
+    row = conn.execute(select(SqlSchema.version, SqlSchema.written_by)).first()
+    if row is None or not isinstance(row[0], int) or row[0] < 1:
+        raise StoreError(
+            f"{location} has an unknown adpart schema version ({row[0] if row else 'none'}); it "
+            "was not written by adpart or is damaged: point --kb / ADPART_KB elsewhere"
+        )
+    return int(row[0]), str(row[1])
+
+
+def verify_schema(version: int, written_by: str, location: str) -> None:
+    """Refuse a schema this adpart cannot read, naming the fix."""
+    if version > SCHEMA_VERSION:
+        raise StoreError(
+            f"knowledge base {location} has schema version {version} and was written by a newer "
+            f"adpart ({written_by}); this adpart ({__version__}) reads schema version "
+            f"{SCHEMA_VERSION}: upgrade adpart"
+        )
+    if version < SCHEMA_VERSION:
+        raise StoreError(
+            f"knowledge base {location} has schema version {version}, older than this adpart's "
+            f"{SCHEMA_VERSION}: back it up, then run `adpart kb upgrade`"
+        )
+
+
+def create_schema(conn: Connection) -> None:
+    """Create every table of the current schema in an empty database and record its version."""
+    Base.metadata.create_all(conn)
+    conn.execute(SqlSchema.__table__.insert().values(id=1, version=SCHEMA_VERSION,
+                                                     written_by=__version__))
+
+
+def upgrade_schema(conn: Connection, location: str) -> tuple[int, int]:
+    """Apply the migration steps from the stored version up to :data:`SCHEMA_VERSION`.
+
+    Returns (from_version, to_version). An empty database is created at the current version.
+    """
+    found = read_version(conn, location)
+    if found is None:
+        create_schema(conn)
+        return SCHEMA_VERSION, SCHEMA_VERSION
+    version, written_by = found
+    if version > SCHEMA_VERSION:
+        verify_schema(version, written_by, location)
+    start = version
+    while version < SCHEMA_VERSION:
+        step = MIGRATIONS.get(version)
+        if step is None:
+            raise StoreError(f"no migration from schema version {version} of {location}; "
+                             "upgrade adpart to a release that can migrate it")
+        step(conn)
+        version += 1
+        conn.execute(SqlSchema.__table__.update().values(version=version, written_by=__version__))
+    return start, version

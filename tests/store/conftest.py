@@ -1,0 +1,59 @@
+"""Store fixtures: a KB on a real SQLite file, and on PostgreSQL when ADPART_TEST_PG_URL is set."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from sqlalchemy import create_engine
+
+from adpart.store import KnowledgeBase
+from adpart.store.models import Base
+
+PG_URL = os.environ.get("ADPART_TEST_PG_URL")
+
+
+def _reset_pg(url: str) -> None:
+    engine = create_engine(url)
+    with engine.begin() as conn:
+        Base.metadata.drop_all(conn)
+    engine.dispose()
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def kb(request, tmp_path):
+    if request.param == "sqlite":
+        base = KnowledgeBase.open(tmp_path / "kb")
+    else:
+        if not PG_URL:
+            pytest.skip("set ADPART_TEST_PG_URL to run the store tests against PostgreSQL")
+        _reset_pg(PG_URL)
+        base = KnowledgeBase.open(PG_URL, artifacts=str(tmp_path / "pg-artifacts"))
+    yield base
+    base.close()
+
+
+@pytest.fixture
+def populated(kb):
+    """An environment with one of every record kind; returns (kb, dict of records)."""
+    env = kb.put_environment("five", model_hash="e" * 64, n_states=5, n_actions=2,
+                             spec={"layout": "five"}, plugin="builtin", plugin_version="1")
+    task = kb.put_task(env, "goal-4", spec={"goal": [4]}, gamma=0.9)
+    q = np.arange(10, dtype=np.float64).reshape(5, 2)
+    policy = kb.put_policy(task, "q-learning", q=q, pi=q.argmax(axis=1), seed=3, episodes=10,
+                           steps=100, parameters={"alpha": 0.1})
+    sgs = kb.put_subgoal_set(env, "count", [3, 1], scores=np.linspace(0, 1, 5), policy=policy)
+    option = kb.put_option(env, "to-3", initiation=np.ones(5, bool), policy=np.zeros(5, int),
+                           termination=np.array([0, 0, 0, 1, 1.0]), reward=np.ones(5),
+                           transitions=sp.csr_array(np.eye(5) * 0.9), gamma=0.9,
+                           subgoal=sgs.subgoal_ids[1])
+    p1 = kb.put_partition(env, "per-option", [0, 0, 1, 1, 2], options=[option],
+                          block_actions=np.ones((3, 3), bool), delta=0.1)
+    p2 = kb.put_partition(env, "reward-refined", [0, 1, 2, 2, 3], options=[option],
+                          parents=[p1], task=task, epsilon=0.5)
+    run = kb.put_run(task, "smdp-q", partition=p2, seed=0, metrics={"final_gap": 0.25},
+                     curve={"episode": np.arange(4), "gap": np.array([3.0, 1.0, 0.5, 0.25])})
+    return kb, {"environment": env, "task": task, "policy": policy, "subgoal-set": sgs,
+                "option": option, "p1": p1, "partition": p2, "run": run}
