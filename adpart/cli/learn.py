@@ -18,7 +18,9 @@ import numpy as np
 
 from adpart.cli.common import CLIError, dumps, echo_json, progress_callback, registry
 from adpart.cli.envs import resolve_domain
+from adpart.cli.kb import kb_option
 from adpart.errors import TaskError
+from adpart.store.location import KBLocation
 
 
 class LearnerOptionsCommand(click.Command):
@@ -96,9 +98,12 @@ def _batch_seeds(seed: int, n: int) -> list[int]:
               help="Output folder [default: adpart-learn/ENV_TASK_LEARNER_seedS].")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
+@click.option("--no-store", is_flag=True, help="Do not record the run in the knowledge base.")
+@kb_option
 def learn_cmd(env: str, task: str | None, learner: str, episodes: int, runs: int, seed: int,
               eval_every: int, executor: str, runs_per_batch: int, out: Path | None,
-              as_json: bool, quiet: bool, **plugin_options: str | None) -> None:
+              as_json: bool, quiet: bool, no_store: bool, kb_location: KBLocation,
+              **plugin_options: str | None) -> None:
     """Learn a task of ENV with a learner plugin; write curve, policies, plot and summary.
 
     \b
@@ -107,6 +112,10 @@ def learn_cmd(env: str, task: str | None, learner: str, episodes: int, runs: int
       policy.parquet  the greedy policy of every run: run, state, action, value
       curve.png       mean value gap over runs with a min-max band
       summary.json    what was run and how it ended
+
+    \b
+    and records in the knowledge base (--kb, unless --no-store): the environment and task, one
+    policy per run (Q and greedy policy) and one run with the curve; their ids are printed.
     """
     reg = registry()
     spec = reg.get("learner", learner)
@@ -169,6 +178,9 @@ def learn_cmd(env: str, task: str | None, learner: str, episodes: int, runs: int
         "total_steps": int(curve["steps"].sum()),
         "files": files,
     }
+    if not no_store:
+        summary["kb"] = _store(kb_location, env, domain, task_obj, mdp, spec, Q, curve, summary,
+                               [b["seed"] for b in batches], counts)
     files["summary"] = str(out / "summary.json")
     (out / "summary.json").write_text(dumps(summary))
     if as_json:
@@ -181,6 +193,47 @@ def learn_cmd(env: str, task: str | None, learner: str, episodes: int, runs: int
         f"({summary['optimal_runs']}/{summary['runs']} runs optimal)"
     )
     click.echo(f"wrote {out}/: curve.parquet policy.parquet curve.png summary.json")
+    if "kb" in summary:
+        stored = summary["kb"]
+        click.echo(f"stored in {stored['location']}: {stored['run']}, {stored['task']}, policies "
+                   f"{stored['policies'][0]} .. {stored['policies'][-1]}")
+
+
+def _store(location: KBLocation, env: str, domain: Any, task: Any, mdp: Any, spec: Any,
+           Q: np.ndarray, curve: Any, summary: dict[str, Any], batch_seeds: list[int],
+           counts: list[int]) -> dict[str, Any]:
+    """Record environment, task, one policy per run and the run itself; return their ids."""
+    from adpart.store import KnowledgeBase
+
+    dyn = domain.dynamics()
+    kb = KnowledgeBase.open(location)
+    try:
+        environment = kb.put_environment(
+            env, model_hash=dyn.content_hash, n_states=dyn.n_states, n_actions=dyn.n_actions,
+            spec={"name": env, "source": domain.source, "actions": list(dyn.action_names)})
+        task_rec = kb.put_task(environment, task.name,
+                               spec={**task.spec, "name": task.name, "model_hash": mdp.content_hash},
+                               gamma=task.gamma)
+        steps = curve.matrix("steps").sum(axis=1)
+        run_seeds = np.repeat(batch_seeds, counts)
+        policies = [
+            kb.put_policy(task_rec, spec.name, q=np.where(np.isfinite(Q[k]), Q[k], np.nan),
+                          pi=np.argmax(Q[k], axis=1).astype(np.int64), seed=int(run_seeds[k]),
+                          episodes=summary["episodes"], steps=int(steps[k]),
+                          plugin_version=spec.version, parameters=summary["params"])
+            for k in range(Q.shape[0])
+        ]
+        metrics = {k: summary[k] for k in ("final_value_gap", "optimal_runs", "total_steps",
+                                           "v_star_start", "runs", "episodes")}
+        run = kb.put_run(task_rec, spec.name, curve=curve.to_arrow(), metrics=metrics,
+                         seed=summary["seed"], plugin_version=spec.version,
+                         parameters={**summary["params"], "batch_seeds": batch_seeds,
+                                     "policies": [p.id for p in policies]})
+    finally:
+        kb.close()
+    return {"location": kb.label, "environment": f"environment:{environment.id}",
+            "task": f"task:{task_rec.id}", "run": f"run:{run.id}",
+            "policies": [f"policy:{p.id}" for p in policies]}
 
 
 def _merge_curves(parts: list[dict[str, np.ndarray]], metadata: dict[str, Any]) -> Any:

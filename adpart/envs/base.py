@@ -18,6 +18,8 @@ The main API of a domain is:
 from __future__ import annotations
 
 import difflib
+import hashlib
+import json
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -62,6 +64,24 @@ class Dynamics:
     @property
     def n_actions(self) -> int:
         return len(self.action_names)
+
+    @cached_property
+    def content_hash(self) -> str:
+        """SHA-256 of the reward-free model (transitions, admissible actions, action names).
+
+        The knowledge base keys environments on it, so every task on the same dynamics shares
+        one environment record (and the options and partitions built for it).
+        """
+        P = sp.csr_array(self.P)
+        P.sum_duplicates()
+        P.eliminate_zeros()
+        h = hashlib.sha256()
+        h.update(json.dumps({"shape": list(P.shape), "actions": list(self.action_names)}).encode())
+        adm = np.ones((self.n_states, self.n_actions), bool) if self.admissible is None else self.admissible
+        for arr in (P.indptr.astype(np.int64), P.indices.astype(np.int64), P.data.astype(np.float64),
+                    np.asarray(adm, dtype=bool)):
+            h.update(np.ascontiguousarray(arr).tobytes())
+        return h.hexdigest()
 
 
 @dataclass(frozen=True, eq=False)
