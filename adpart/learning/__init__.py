@@ -1,0 +1,30 @@
+"""Learners: flat Q-learning in lock-step, learning curves and step-size schedules.
+
+Public API: :func:`q_learning` and its :class:`QLearningResult`; :class:`LearningCurve` and
+:func:`plot_curves`; the schedules :func:`constant`, :func:`visit_count`, :func:`exponential`
+and :func:`parse_schedule`. See ``docs/learning.md``.
+"""
+
+from __future__ import annotations
+
+from adpart.learning.curves import LearningCurve, plot_curves
+from adpart.learning.qlearning import QLearningResult, q_learning
+from adpart.learning.schedules import (
+    Schedule,
+    constant,
+    exponential,
+    parse_schedule,
+    visit_count,
+)
+
+__all__ = [
+    "LearningCurve",
+    "QLearningResult",
+    "Schedule",
+    "constant",
+    "exponential",
+    "parse_schedule",
+    "plot_curves",
+    "q_learning",
+    "visit_count",
+]

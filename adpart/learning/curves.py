@@ -1,0 +1,377 @@
+"""Learning curves: per-run, per-episode records of a learner, as columns.
+
+DESIGN.md, "Learning curves".
+
+A :class:`LearningCurve` is a long table with one row per (run, episode), runs first:
+
+========================  =======  ===============================================================
+column                    dtype    meaning
+========================  =======  ===============================================================
+``run``                   int64    run index ``0..K-1``
+``episode``               int64    episode number ``1..N`` of that run (the seed's "iterations")
+``steps``                 int64    primitive steps taken in the episode
+``decisions``             int64    decisions taken in the episode (``= steps`` for flat Q; an SMDP
+                                   learner counts one decision per option choice)
+``return``                float64  undiscounted return ``sum_t r_t`` of the episode
+``discounted_return``     float64  discounted return ``sum_t gamma**t r_t`` from the episode's start
+``eval_value``            float64  exact value ``sum_s mu(s) V^pi(s)`` of the greedy policy at the
+                                   start distribution ``mu`` after this episode; NaN on episodes
+                                   that were not evaluated (every ``eval_every``-th and the
+                                   last are)
+``value_gap``             float64  ``sum_s mu(s) V*(s) - eval_value``; NaN where not evaluated
+========================  =======  ===============================================================
+
+The greedy policy is scored by exact policy evaluation on the true model against ``V*``
+(DESIGN.md: "a value gap, not only a noisy return"). ``metadata`` carries what is needed to read
+the numbers (learner, gamma, ``V*`` at the start distribution, seed) and travels with the Arrow
+table as schema metadata, so a curve stored as Parquet reads back whole.
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+
+from adpart.errors import ModelError, TaskError
+from adpart.mdp.model import SMDPModel
+from adpart.mdp.solvers import policy_evaluation, solve
+
+__all__ = [
+    "COLUMNS",
+    "LearningCurve",
+    "optimal_start_value",
+    "plot_curves",
+    "start_distribution",
+    "start_values",
+]
+
+#: Column names and dtypes, in table order.
+COLUMNS: dict[str, type] = {
+    "run": np.int64,
+    "episode": np.int64,
+    "steps": np.int64,
+    "decisions": np.int64,
+    "return": np.float64,
+    "discounted_return": np.float64,
+    "eval_value": np.float64,
+    "value_gap": np.float64,
+}
+
+_METADATA_KEY = b"adpart.learning_curve"
+
+
+@dataclass(frozen=True, eq=False)
+class LearningCurve:
+    """Per-episode records of ``K`` runs of ``N`` episodes each (see the module docstring).
+
+    Build it with :meth:`from_matrices`; read columns with ``curve["steps"]`` (long form) or
+    :meth:`matrix` (``(K, N)`` form).
+    """
+
+    columns: dict[str, np.ndarray]
+    metadata: dict[str, object] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        missing = [c for c in COLUMNS if c not in self.columns]
+        if missing:
+            raise TaskError(f"learning curve lacks columns {missing}; it needs {list(COLUMNS)}")
+        lengths = {len(self.columns[c]) for c in COLUMNS}
+        if len(lengths) != 1:
+            raise TaskError(f"learning curve columns have different lengths {sorted(lengths)}")
+        cols = {c: np.ascontiguousarray(self.columns[c], dtype=COLUMNS[c]) for c in COLUMNS}
+        for arr in cols.values():
+            arr.setflags(write=False)
+        object.__setattr__(self, "columns", cols)
+
+    @classmethod
+    def from_matrices(
+        cls,
+        *,
+        steps: np.ndarray,
+        decisions: np.ndarray,
+        returns: np.ndarray,
+        discounted_returns: np.ndarray,
+        eval_value: np.ndarray,
+        value_gap: np.ndarray,
+        metadata: Mapping[str, object] | None = None,
+    ) -> LearningCurve:
+        """A curve from ``(K, N)`` matrices indexed by (run, episode - 1)."""
+        K, N = np.shape(steps)
+        cols = {
+            "run": np.repeat(np.arange(K, dtype=np.int64), N),
+            "episode": np.tile(np.arange(1, N + 1, dtype=np.int64), K),
+            "steps": np.asarray(steps).reshape(-1),
+            "decisions": np.asarray(decisions).reshape(-1),
+            "return": np.asarray(returns).reshape(-1),
+            "discounted_return": np.asarray(discounted_returns).reshape(-1),
+            "eval_value": np.asarray(eval_value).reshape(-1),
+            "value_gap": np.asarray(value_gap).reshape(-1),
+        }
+        return cls(cols, dict(metadata or {}))
+
+    def __getitem__(self, column: str) -> np.ndarray:
+        try:
+            return self.columns[column]
+        except KeyError:
+            raise TaskError(
+                f"no learning-curve column {column!r}; columns are {list(COLUMNS)}"
+            ) from None
+
+    def __len__(self) -> int:
+        return len(self.columns["run"])
+
+    @property
+    def n_runs(self) -> int:
+        return int(self.columns["run"].max()) + 1 if len(self) else 0
+
+    @property
+    def n_episodes(self) -> int:
+        return len(self) // self.n_runs if len(self) else 0
+
+    def matrix(self, column: str) -> np.ndarray:
+        """Column ``column`` as a ``(K, N)`` array (rows are runs, columns episodes)."""
+        return self[column].reshape(self.n_runs, self.n_episodes)
+
+    def evaluated_episodes(self) -> np.ndarray:
+        """1-based episode numbers at which the greedy policy was evaluated."""
+        gap = self.matrix("eval_value")
+        done = ~np.all(np.isnan(gap), axis=0)
+        return np.flatnonzero(done) + 1
+
+    def episodes_to_gap(self, threshold: float) -> np.ndarray:
+        """Per run, the first evaluated episode from which ``value_gap <= threshold`` holds at
+        every later evaluation (``-1`` if the last evaluation is still above it).
+
+        The answer to the knowledge base's "how fast did each task learn" in episodes.
+        """
+        eps = self.evaluated_episodes()
+        gaps = self.matrix("value_gap")[:, eps - 1]
+        ok = gaps <= threshold  # NaN compares False
+        # suffix-all: ok from this evaluation on
+        stays = np.flip(np.logical_and.accumulate(np.flip(ok, axis=1), axis=1), axis=1)
+        first = np.argmax(stays, axis=1)
+        return np.where(stays.any(axis=1), eps[first], -1).astype(np.int64)
+
+    def to_dict(self) -> dict[str, np.ndarray]:
+        """The columns as a dict of (read-only) numpy arrays."""
+        return dict(self.columns)
+
+    @classmethod
+    def from_dict(
+        cls, columns: Mapping[str, np.ndarray], metadata: Mapping[str, object] | None = None
+    ) -> LearningCurve:
+        return cls(dict(columns), dict(metadata or {}))
+
+    def to_arrow(self):  # -> pyarrow.Table (pyarrow imported lazily)
+        """A ``pyarrow.Table``: the columns in :data:`COLUMNS` order, the metadata as JSON."""
+        import pyarrow as pa
+
+        table = pa.table({c: self.columns[c] for c in COLUMNS})
+        meta = json.dumps(self.metadata, sort_keys=True, default=_json_default).encode()
+        return table.replace_schema_metadata({_METADATA_KEY: meta})
+
+    @classmethod
+    def from_arrow(cls, table) -> LearningCurve:
+        """Inverse of :meth:`to_arrow`."""
+        raw = (table.schema.metadata or {}).get(_METADATA_KEY)
+        meta = json.loads(raw) if raw else {}
+        return cls({c: table.column(c).to_numpy() for c in COLUMNS}, meta)
+
+
+def _json_default(value: object) -> object:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(f"cannot store {type(value).__name__} in learning-curve metadata")
+
+
+_X_AXES = ("episode", "steps", "decisions")
+_BANDS = ("minmax", "sd")
+
+
+def plot_curves(
+    curve: LearningCurve | Mapping[str, LearningCurve],
+    path: str | Path,
+    metric: str = "value_gap",
+    *,
+    x: str = "episode",
+    band: str = "minmax",
+    logy: bool | None = None,
+    title: str | None = None,
+) -> Path:
+    """Plot the mean over runs of ``metric`` with a band, to a PNG (matplotlib, Agg backend).
+
+    Args:
+        curve: one curve, or ``{label: curve}`` to compare learners on one axes.
+        path: the PNG to write (parent directories are created).
+        metric: a column: ``value_gap`` (default), ``eval_value``, ``steps``, ``decisions``,
+            ``return`` or ``discounted_return``. Evaluation metrics are drawn at the evaluated
+            episodes only.
+        x: ``episode``, or ``steps`` / ``decisions``: the mean over runs of the cumulative count
+            at the end of each episode.
+        band: ``minmax`` (default) shades the range over runs; ``sd`` shades mean +- one
+            standard deviation over runs.
+        logy: logarithmic y axis; by default only for ``value_gap``, whose values are then
+            clipped below at ``1e-12`` (a gap of 0 is an optimal policy).
+        title: the axes title (default: the metric and the number of runs).
+
+    Returns:
+        The path written.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    curves = {"": curve} if isinstance(curve, LearningCurve) else dict(curve)
+    if not curves:
+        raise TaskError("plot_curves needs at least one learning curve")
+    if metric not in COLUMNS or metric in ("run", "episode"):
+        raise TaskError(
+            f"cannot plot metric {metric!r}; choose one of "
+            f"{[c for c in COLUMNS if c not in ('run', 'episode')]}"
+        )
+    if x not in _X_AXES:
+        raise TaskError(f"x axis {x!r} is not one of {list(_X_AXES)}")
+    if band not in _BANDS:
+        raise TaskError(f"band {band!r} is not one of {list(_BANDS)} (min-max or +-sd)")
+    logy = metric == "value_gap" if logy is None else logy
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig, ax = plt.subplots(figsize=(7, 4.2))
+    try:
+        for label, c in curves.items():
+            values = c.matrix(metric).astype(np.float64)
+            if x == "episode":
+                xs = np.arange(1, c.n_episodes + 1, dtype=np.float64)
+            else:
+                xs = np.cumsum(c.matrix(x), axis=1).mean(axis=0)
+            if metric in ("eval_value", "value_gap"):
+                keep = c.evaluated_episodes() - 1
+                xs, values = xs[keep], values[:, keep]
+            if logy:
+                values = np.maximum(values, 1e-12)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns stay NaN
+                mean = np.nanmean(values, axis=0)
+                if band == "minmax":
+                    lo, hi = np.nanmin(values, axis=0), np.nanmax(values, axis=0)
+                else:
+                    sd = np.nanstd(values, axis=0)
+                    lo, hi = mean - sd, mean + sd
+            if logy:
+                lo = np.maximum(lo, 1e-12)
+            name = label or f"mean of {c.n_runs} runs"
+            (line,) = ax.plot(xs, mean, label=name, lw=1.5)
+            ax.fill_between(xs, lo, hi, color=line.get_color(), alpha=0.2, lw=0)
+        if logy:
+            ax.set_yscale("log")
+        ax.set_xlabel({"episode": "episode", "steps": "primitive steps (mean over runs)",
+                       "decisions": "decisions (mean over runs)"}[x])
+        ax.set_ylabel(metric.replace("_", " "))
+        band_text = "min-max over runs" if band == "minmax" else "mean +- 1 sd over runs"
+        ax.set_title(title or f"{metric.replace('_', ' ')} (band: {band_text})")
+        ax.grid(True, alpha=0.3)
+        ax.legend(loc="best", fontsize="small")
+        fig.tight_layout()
+        fig.savefig(out, dpi=110)
+    finally:
+        plt.close(fig)
+    return out
+
+
+# --------------------------------------------------------------------------- exact scoring
+
+
+def start_distribution(mdp) -> np.ndarray:
+    """The distribution episodes start from: ``mdp.initial`` conditioned on non-terminal states.
+
+    An episode that started in a terminal state would be over before its first step, so learners
+    never start there; scoring uses the same distribution ``mu`` so that the value gap compares
+    like with like (terminal states have value 0 in any case).
+    """
+    mu = np.where(mdp.terminal, 0.0, mdp.initial)
+    total = float(mu.sum())
+    if total <= 0.0:
+        raise ModelError(
+            "the start distribution puts all its mass on terminal states, so no episode can "
+            "begin; give the MDP an initial distribution over non-terminal states"
+        )
+    return mu / total
+
+
+def optimal_start_value(mdp, mu: np.ndarray, reference_values: np.ndarray | None = None) -> float:
+    """``sum_s mu(s) V*(s)``: from ``reference_values`` if given, else solved exactly.
+
+    Without reference values the MDP is solved by modified policy iteration to a 1e-10-optimal
+    policy, whose value is then computed *exactly* by a sparse solve, so the reference carries no
+    iteration error of its own (a value gap below 1e-6 is meaningful).
+    """
+    if reference_values is not None:
+        V = np.asarray(reference_values, dtype=np.float64)
+        if V.shape != (mdp.n_states,) or not np.all(np.isfinite(V)):
+            raise ModelError(
+                f"reference_values must be {mdp.n_states} finite numbers (V* of every state); "
+                f"got shape {V.shape}"
+            )
+    else:
+        V = policy_evaluation(mdp, solve(mdp, 1e-10).policy)
+    return float(mu @ V)
+
+
+def start_values(mdp, policies: np.ndarray, mu: np.ndarray) -> np.ndarray:
+    """Exact ``sum_s mu(s) V^pi(s)`` of ``K`` deterministic policies, batched.
+
+    The distinct policies among the ``K`` rows are stacked into one block-diagonal one-option
+    model (state ``u*S + s`` of copy ``u`` follows policy ``u``) and evaluated with **one** call of
+    :func:`adpart.mdp.solvers.policy_evaluation`, i.e. one sparse LU of ``I - F_pi`` for all runs.
+    With ``gamma = 1`` a policy that never reaches a terminal state makes that system singular;
+    the policies are then evaluated one by one and such a policy scores NaN.
+
+    Args:
+        mdp: the true model (anything with ``as_smdp()``).
+        policies: ``(K, S)`` int actions (admissible ones).
+        mu: ``(S,)`` start distribution.
+
+    Returns:
+        ``(K,)`` float64.
+    """
+    smdp = mdp.as_smdp()
+    S = smdp.n_states
+    pols = np.asarray(policies, dtype=np.int64)
+    unique, inverse = np.unique(pols, axis=0, return_inverse=True)
+    inverse = np.asarray(inverse).reshape(-1)
+    n_unique = unique.shape[0]
+
+    def stacked(block: np.ndarray) -> tuple[SMDPModel, np.ndarray]:
+        n = block.shape[0]
+        states = np.tile(np.arange(S), n)
+        rows = block.reshape(-1) * S + states
+        F = smdp.F[rows]
+        counts = np.diff(F.indptr)
+        shift = np.repeat(np.repeat(np.arange(n, dtype=np.int64) * S, S), counts)
+        F_big = sp.csr_array((F.data, F.indices.astype(np.int64) + shift, F.indptr),
+                             shape=(n * S, n * S))
+        R_big = smdp.R[states, block.reshape(-1)][:, None]
+        model = SMDPModel(R=R_big, F=F_big, admissible=np.ones((n * S, 1), dtype=bool))
+        return model, np.zeros(n * S, dtype=np.int64)
+
+    if not np.all(smdp.admissible[np.arange(S), unique]):
+        raise ModelError("a policy to score chooses an inadmissible action")
+    try:
+        values = policy_evaluation(*stacked(unique)).reshape(n_unique, S) @ mu
+    except ModelError:
+        values = np.empty(n_unique)
+        for u in range(n_unique):
+            try:
+                values[u] = policy_evaluation(*stacked(unique[u:u + 1])) @ mu
+            except ModelError:
+                values[u] = np.nan
+    return values[inverse]

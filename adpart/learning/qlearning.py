@@ -1,0 +1,272 @@
+"""Flat Q-learning: K independent runs advanced in lock-step, with exact learning curves.
+
+The update is Watkins' Q-learning (dissertation section 2.x, eq. 2.4):
+
+    Q(s, a) <- Q(s, a) + alpha_n(s, a) * (r + gamma * max_{a'} Q(s', a') - Q(s, a)),
+
+with target ``r`` alone when ``s'`` is terminal (the episode ends on arrival and a terminal state
+is worth 0). The exact per-step rule, including how the random numbers are used, is in
+:mod:`adpart.learning._kernels`.
+
+Design choices (documented in ``docs/learning.md``):
+
+* **Lock-step by steps inside evaluation blocks.** Episodes are grouped in blocks that end at
+  every ``eval_every``-th episode (and at the last). Within a block, one kernel iteration advances
+  every agent that has not yet finished the block by one primitive step; an agent whose episode
+  ends resets from ``mdp.initial`` and continues while the others do; an agent that has finished
+  the block waits. At the block's end all K runs have completed the same number of episodes, so
+  their greedy policies are scored together by one batched exact policy evaluation.
+* **Randomness.** ``np.random.default_rng(seed).spawn(runs)`` gives each run its own stream; a run
+  draws one uniform for its first start state and then exactly four per step. A run's trajectory
+  therefore depends only on ``seed``, its index and the settings -- not on ``runs``, not on
+  ``eval_every``, not on the kernel -- and the same seed gives bit-identical curves and Q.
+* **Exploration** is epsilon-greedy over the *admissible* actions; greedy ties during learning
+  are broken uniformly at random (so an untrained agent does not always bump into the same
+  wall); the *evaluated* greedy policy breaks ties by the lowest action index
+  (:func:`adpart.mdp.solvers.greedy_policy`), so it is a deterministic function of Q.
+* **Step limit.** An episode also ends after ``max_steps_per_episode`` steps; the last update
+  still bootstraps from ``s'`` (the cut is a property of the experiment, not of the task).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from adpart.errors import ModelError, TaskError, UnknownNameError
+from adpart.learning import _kernels
+from adpart.learning.curves import (
+    LearningCurve,
+    optimal_start_value,
+    start_distribution,
+    start_values,
+)
+from adpart.learning.schedules import Schedule, constant, parse_schedule, visit_count
+from adpart.mdp.model import FiniteMDP
+from adpart.mdp.solvers import greedy_policy
+
+__all__ = ["QLearningResult", "default_kernel", "q_learning"]
+
+#: Rows of uniforms drawn per refill of one run's buffer (4 uniforms a row).
+BLOCK_ROWS = 2048
+
+
+def default_kernel() -> str:
+    """``"numba"`` when numba imports (measured ~20x faster at K = 50), else ``"numpy"``."""
+    return "numba" if _kernels.numba_available() else "numpy"
+
+
+@dataclass(frozen=True, eq=False)
+class QLearningResult:
+    """What :func:`q_learning` returns.
+
+    Attributes:
+        Q: ``(K, S, A)`` float64 action values of every run; ``-inf`` on inadmissible pairs.
+        visits: ``(K, S, A)`` int64 number of updates of each pair.
+        curve: the per-run, per-episode :class:`~adpart.learning.curves.LearningCurve`.
+        seed: the seed actually used (drawn from OS entropy and recorded when none was given).
+        v_star_start: ``sum_s mu(s) V*(s)``, the reference of the value gap.
+        parameters: JSON-ready settings (schedules, limits, kernel) for provenance records.
+    """
+
+    Q: np.ndarray
+    visits: np.ndarray
+    curve: LearningCurve
+    seed: int
+    v_star_start: float
+    parameters: dict[str, object] = field(default_factory=dict)
+
+    @property
+    def runs(self) -> int:
+        return self.Q.shape[0]
+
+    def greedy_policies(self) -> np.ndarray:
+        """``(K, S)`` int64 greedy policies (lowest action index on ties), as evaluated."""
+        K, S, A = self.Q.shape
+        return greedy_policy(self.Q.reshape(K * S, A)).reshape(K, S)
+
+
+def _count(value: object, what: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise TaskError(f"{what} = {value!r} must be an integer >= 1")
+    return int(value)
+
+
+def _seed(seed: object) -> int:
+    if seed is None:
+        return int(np.random.SeedSequence().entropy)  # type: ignore[arg-type]
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise TaskError(f"seed = {seed!r} must be a non-negative integer (or None for a fresh one)")
+    return int(seed)
+
+
+def _schedule(value: object, what: str) -> Schedule:
+    return parse_schedule(value).check_probability(what)  # type: ignore[arg-type]
+
+
+def _initial_state(
+    mdp: FiniteMDP, runs: int, episodes: int, horizon: int, alpha: Schedule, epsilon: Schedule,
+    q_init: float, mu: np.ndarray,
+) -> _kernels.LockStepState:
+    S, A = mdp.n_states, mdp.n_actions
+    keys, _ = mdp._sampler  # the same keys FiniteMDP.sample_next searches
+    adm = mdp.admissible
+    rows, cols = np.nonzero(adm)
+    adm_ptr = np.zeros(S + 1, dtype=np.int64)
+    np.cumsum(np.bincount(rows, minlength=S), out=adm_ptr[1:])
+    start_cdf = np.cumsum(mu)
+    Q = np.where(adm, float(q_init), -np.inf)
+    st = _kernels.LockStepState(
+        keys=np.ascontiguousarray(keys, dtype=np.float64),
+        indptr=mdp.P.indptr.astype(np.int64),
+        indices=mdp.P.indices.astype(np.int64),
+        R=np.ascontiguousarray(mdp.R, dtype=np.float64),
+        terminal=np.ascontiguousarray(mdp.terminal, dtype=bool),
+        adm_ptr=adm_ptr,
+        adm_idx=cols.astype(np.int64),
+        start_cdf=start_cdf,
+        last_start=int(np.flatnonzero(mu > 0)[-1]),
+        gamma=float(mdp.gamma),
+        horizon=horizon,
+        alpha=alpha.params(),
+        eps=epsilon.params(),
+        Q=np.broadcast_to(Q, (runs, S, A)).copy(),
+        n_sa=np.zeros((runs, S, A), dtype=np.int64),
+        n_s=np.zeros((runs, S), dtype=np.int64),
+        state=np.zeros(runs, dtype=np.int64),
+        episode=np.zeros(runs, dtype=np.int64),
+        target=np.zeros(runs, dtype=np.int64),
+        t_ep=np.zeros(runs, dtype=np.int64),
+        ret=np.zeros(runs),
+        dret=np.zeros(runs),
+        gpow=np.ones(runs),
+        alpha_ep=np.zeros(runs),
+        eps_ep=np.zeros(runs),
+        U=np.zeros((runs, BLOCK_ROWS, _kernels.UNIFORMS_PER_STEP)),
+        cursor=np.full(runs, BLOCK_ROWS, dtype=np.int64),
+        out_steps=np.zeros((runs, episodes), dtype=np.int64),
+        out_ret=np.zeros((runs, episodes)),
+        out_dret=np.zeros((runs, episodes)),
+    )
+    st.episode_factors(np.arange(runs))
+    return st
+
+
+def q_learning(
+    mdp: FiniteMDP,
+    *,
+    runs: int = 10,
+    episodes: int = 500,
+    seed: int | None = None,
+    alpha: Schedule | str | float = visit_count(0.8),  # noqa: B008 (immutable)
+    epsilon: Schedule | str | float = constant(0.1),  # noqa: B008 (immutable)
+    max_steps_per_episode: int = 1000,
+    eval_every: int = 10,
+    reference_values: np.ndarray | None = None,
+    progress: Callable[[int, int], object] | None = None,
+    q_init: float = 0.0,
+    kernel: str | None = None,
+) -> QLearningResult:
+    """Learn ``mdp`` with ``runs`` independent epsilon-greedy Q-learners in lock-step.
+
+    Args:
+        mdp: the task, a validated :class:`~adpart.mdp.model.FiniteMDP`.
+        runs: number K of independent runs (agents).
+        episodes: episodes N per run.
+        seed: root seed; run k uses ``np.random.default_rng(seed).spawn(runs)[k]``.
+        alpha: step-size schedule (a :class:`Schedule` or its spelling, e.g. ``"1/n^0.8"``);
+            its visit count is ``n(s, a)``. Default ``1/n(s,a)^0.8`` (meets the
+            stochastic-approximation conditions).
+        epsilon: exploration schedule; its visit count is ``n(s)``. Default 0.1.
+        max_steps_per_episode: step limit H; a cut episode bootstraps through the cut.
+        eval_every: score the greedy policies every this many episodes (and after the last).
+        reference_values: ``V*`` (S,) for the value gap; solved exactly when omitted.
+        progress: called as ``progress(episodes_done_by_every_run, episodes)`` after each block.
+        q_init: initial value of every admissible ``Q(s, a)``.
+        kernel: ``"numba"``, ``"numpy"`` or ``"python"`` (reference); default
+            :func:`default_kernel`. All give identical results.
+
+    Returns:
+        A :class:`QLearningResult`.
+
+    Raises:
+        TaskError: a setting is out of range.
+        ModelError: ``mdp`` is not a FiniteMDP, or no episode can start, or bad reference values.
+    """
+    if not isinstance(mdp, FiniteMDP):
+        raise ModelError(
+            f"q_learning needs a FiniteMDP, got {type(mdp).__name__}; build one with "
+            "adpart.envs.registry.get_domain(name).mdp()"
+        )
+    K = _count(runs, "runs")
+    N = _count(episodes, "episodes")
+    M = _count(eval_every, "eval_every")
+    H = _count(max_steps_per_episode, "max_steps_per_episode")
+    root_seed = _seed(seed)
+    alpha_s = _schedule(alpha, "alpha")
+    eps_s = _schedule(epsilon, "epsilon")
+    if not np.isfinite(q_init):
+        raise TaskError(f"q_init = {q_init!r} must be a finite number")
+    name = default_kernel() if kernel is None else kernel
+    if name not in _kernels.KERNELS:
+        raise UnknownNameError(
+            f"unknown Q-learning kernel {name!r}; choose one of {list(_kernels.KERNELS)}"
+        )
+    step_kernel = _kernels.KERNELS[name]
+
+    mu = start_distribution(mdp)
+    v_star = optimal_start_value(mdp, mu, reference_values)
+    st = _initial_state(mdp, K, N, H, alpha_s, eps_s, q_init, mu)
+    rngs = np.random.default_rng(root_seed).spawn(K)
+    st.state[:] = [st.start_state(rng.random()) for rng in rngs]
+
+    boundaries = sorted({*range(M, N + 1, M), N})
+    eval_value = np.full((K, N), np.nan)
+    for boundary in boundaries:
+        st.target[:] = boundary
+        while step_kernel(st):
+            for k in np.flatnonzero((st.cursor == BLOCK_ROWS) & (st.episode < st.target)):
+                rngs[k].random(out=st.U[k])
+                st.cursor[k] = 0
+        policies = greedy_policy(st.Q.reshape(-1, mdp.n_actions)).reshape(K, -1)
+        eval_value[:, boundary - 1] = start_values(mdp, policies, mu)
+        if progress is not None:
+            progress(boundary, N)
+
+    parameters: dict[str, object] = {
+        "runs": K,
+        "episodes": N,
+        "seed": root_seed,
+        "alpha": alpha_s.to_dict(),
+        "epsilon": eps_s.to_dict(),
+        "max_steps_per_episode": H,
+        "eval_every": M,
+        "q_init": float(q_init),
+        "kernel": name,
+        "reference": "given" if reference_values is not None else "solved",
+    }
+    metadata = {
+        "learner": "q-learning",
+        "mdp": mdp.name,
+        "mdp_hash": mdp.content_hash,
+        "gamma": mdp.gamma,
+        "v_star_start": v_star,
+        **parameters,
+    }
+    curve = LearningCurve.from_matrices(
+        steps=st.out_steps,
+        decisions=st.out_steps,
+        returns=st.out_ret,
+        discounted_returns=st.out_dret,
+        eval_value=eval_value,
+        value_gap=v_star - eval_value,
+        metadata=metadata,
+    )
+    for arr in (st.Q, st.n_sa):
+        arr.setflags(write=False)
+    return QLearningResult(
+        Q=st.Q, visits=st.n_sa, curve=curve, seed=root_seed, v_star_start=v_star,
+        parameters=parameters,
+    )

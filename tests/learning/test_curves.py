@@ -1,0 +1,89 @@
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from adpart.errors import TaskError
+from adpart.learning import LearningCurve, plot_curves, q_learning
+from adpart.learning.curves import COLUMNS, start_values
+from adpart.mdp.model import FiniteMDP
+from adpart.mdp.solvers import policy_evaluation
+
+from .conftest import slippery_grid
+
+
+@pytest.fixture(scope="module")
+def curve() -> LearningCurve:
+    return q_learning(slippery_grid(3), runs=3, episodes=12, seed=0, eval_every=4).curve
+
+
+def test_columns_and_shapes(curve):
+    assert list(curve.to_dict()) == list(COLUMNS)
+    assert len(curve) == 36 and curve.n_runs == 3 and curve.n_episodes == 12
+    assert np.array_equal(curve.matrix("run")[:, 0], [0, 1, 2])
+    assert np.array_equal(curve.matrix("episode")[0], np.arange(1, 13))
+    assert list(curve.evaluated_episodes()) == [4, 8, 12]
+    ev = curve.matrix("eval_value")
+    assert np.isnan(ev[:, [0, 1, 2, 4]]).all() and np.isfinite(ev[:, [3, 7, 11]]).all()
+
+
+def test_arrow_round_trip(curve):
+    table = curve.to_arrow()
+    assert table.column_names == list(COLUMNS)
+    back = LearningCurve.from_arrow(table)
+    for c in COLUMNS:
+        assert np.array_equal(back[c], curve[c], equal_nan=True)
+    assert back.metadata["learner"] == "q-learning"
+    assert back.metadata["seed"] == 0
+
+
+def test_unknown_column(curve):
+    with pytest.raises(TaskError, match="no learning-curve column"):
+        curve["reward"]
+
+
+def test_episodes_to_gap():
+    gap = np.full((2, 6), np.nan)
+    gap[:, [1, 3, 5]] = [[0.5, 0.0, 0.0], [0.0, 0.3, 0.2]]
+    z = np.zeros((2, 6))
+    c = LearningCurve.from_matrices(steps=z, decisions=z, returns=z, discounted_returns=z,
+                                    eval_value=-gap, value_gap=gap)
+    assert list(c.episodes_to_gap(1e-6)) == [4, -1]
+
+
+@pytest.mark.parametrize("band", ["minmax", "sd"])
+@pytest.mark.parametrize(("metric", "x"), [("value_gap", "episode"), ("steps", "steps"),
+                                           ("return", "decisions")])
+def test_plot_writes_png(curve, tmp_path, metric, x, band):
+    out = plot_curves({"flat": curve, "again": curve}, tmp_path / "sub" / "c.png", metric=metric,
+                      x=x, band=band)
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_plot_rejects_bad_metric(curve, tmp_path):
+    with pytest.raises(TaskError, match="metric"):
+        plot_curves(curve, tmp_path / "c.png", metric="run")
+    with pytest.raises(TaskError, match="band"):
+        plot_curves(curve, tmp_path / "c.png", band="iqr")
+
+
+def test_batched_start_values_match_one_by_one(rng):
+    mdp = slippery_grid(3, slip=0.3, gamma=0.9)
+    pols = rng.integers(0, 4, size=(6, mdp.n_states))
+    pols[3] = pols[1]  # duplicates are evaluated once
+    mu = rng.dirichlet(np.ones(mdp.n_states))
+    batched = start_values(mdp, pols, mu)
+    single = [policy_evaluation(mdp, p) @ mu for p in pols]
+    np.testing.assert_allclose(batched, single, rtol=1e-12, atol=1e-12)
+
+
+def test_non_terminating_policy_scores_nan_with_gamma_one():
+    # gamma = 1: policy 0 loops forever in state 0 (singular), policy 1 reaches the goal.
+    P = np.zeros((2, 2, 2))
+    P[0, 0, 0] = 1.0
+    P[0, 1, 1] = 1.0
+    P[1, :, 1] = 1.0
+    mdp = FiniteMDP.from_dense(P, -np.ones((2, 2)), 1.0, terminal=np.array([False, True]),
+                               initial=np.array([1.0, 0.0]))
+    values = start_values(mdp, np.array([[0, 0], [1, 0]]), np.array([1.0, 0.0]))
+    assert np.isnan(values[0]) and values[1] == -1.0

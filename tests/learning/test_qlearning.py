@@ -1,0 +1,291 @@
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from adpart.errors import ModelError, TaskError, UnknownNameError
+from adpart.learning import constant, exponential, q_learning, visit_count
+from adpart.mdp.generate import random_mdp
+from adpart.mdp.model import FiniteMDP
+from adpart.mdp.solvers import policy_evaluation, solve
+
+from .conftest import corridor, slippery_grid
+
+KERNELS = ("numba", "numpy", "python")
+
+
+def reference_q_learning(mdp: FiniteMDP, *, runs, episodes, seed, alpha, epsilon, horizon):
+    """An independent per-agent implementation of the documented rule (docs/learning.md).
+
+    Run k draws from ``default_rng(seed).spawn(runs)[k]``: one uniform for the first start, then
+    four per step (explore?, which action, successor by inverse CDF, next start).
+    """
+    S, A = mdp.n_states, mdp.n_actions
+    mu = np.where(mdp.terminal, 0.0, mdp.initial)
+    mu = mu / mu.sum()
+    Qs, steps = [], []
+    for rng in np.random.default_rng(seed).spawn(runs):
+        Q = np.where(mdp.admissible, 0.0, -np.inf)
+        n_sa = np.zeros((S, A), dtype=np.int64)
+        n_s = np.zeros(S, dtype=np.int64)
+        s = int(np.searchsorted(np.cumsum(mu), rng.random(), side="right"))
+        ep_steps = []
+        for e in range(episodes):
+            t = 0
+            while True:
+                u = rng.random(4)
+                n_s[s] += 1
+                eps = epsilon.scale * epsilon.rate ** float(e)
+                if epsilon.omega:
+                    eps *= float(n_s[s]) ** -epsilon.omega
+                eps = max(epsilon.floor, eps)
+                if u[0] < eps:
+                    allowed = np.flatnonzero(mdp.admissible[s])
+                else:
+                    allowed = np.flatnonzero(Q[s] == Q[s].max())
+                a = int(allowed[int(u[1] * len(allowed))])
+                succ, probs = mdp.transition_row(s, a)
+                s2 = int(succ[min(np.searchsorted(np.cumsum(probs), u[2], side="right"),
+                                  len(succ) - 1)])
+                r = mdp.R[s, a]
+                n_sa[s, a] += 1
+                lr = alpha.scale * alpha.rate ** float(e)
+                if alpha.omega:
+                    lr *= float(n_sa[s, a]) ** -alpha.omega
+                lr = max(alpha.floor, lr)
+                target = r if mdp.terminal[s2] else r + mdp.gamma * Q[s2].max()
+                Q[s, a] = Q[s, a] + lr * (target - Q[s, a])
+                t += 1
+                if mdp.terminal[s2] or t == horizon:
+                    s = int(np.searchsorted(np.cumsum(mu), u[3], side="right"))
+                    break
+                s = s2
+            ep_steps.append(t)
+        Qs.append(Q)
+        steps.append(ep_steps)
+    return np.array(Qs), np.array(steps)
+
+
+def _final_gaps(result) -> np.ndarray:
+    return result.curve.matrix("value_gap")[:, -1]
+
+
+# ----------------------------------------------------------------------------- convergence
+
+
+def test_corridor_all_runs_reach_optimal_policy(corridor_mdp):
+    # Budget: 60 episodes with epsilon = 0.2, alpha = 1/n^0.8 (docs/learning.md).
+    res = q_learning(corridor_mdp, runs=8, episodes=60, seed=1, epsilon=0.2, eval_every=10)
+    gaps = _final_gaps(res)
+    assert np.all(np.abs(gaps) < 1e-6), gaps
+    assert res.v_star_start == pytest.approx(0.9**4)
+    assert np.all(res.greedy_policies()[:, :-1] == 1)  # always right
+
+
+def test_slippery_grid_all_runs_reach_optimal_policy(grid_mdp):
+    # Budget: 3,000 episodes of uniform exploration (epsilon = 1, off-policy), alpha = 1/n^0.8,
+    # on the 4x4 grid with slip 0.2 (smallest non-zero optimal action gap 0.055).
+    res = q_learning(grid_mdp, runs=8, episodes=3000, seed=2, alpha="1/n^0.8", epsilon=1.0,
+                     eval_every=1000)
+    gaps = _final_gaps(res)
+    assert np.all(np.abs(gaps) < 1e-6), gaps
+    v_star = policy_evaluation(grid_mdp, solve(grid_mdp, 1e-10).policy)[0]
+    assert res.v_star_start == pytest.approx(v_star, abs=1e-9)
+
+
+# ----------------------------------------------------------------------------- determinism
+
+
+def test_same_seed_is_bit_identical_and_different_seeds_differ(grid_mdp):
+    kw = {"runs": 3, "episodes": 20, "alpha": "1/n^0.7", "epsilon": "exp:0.5,0.9,0.05",
+          "eval_every": 5}
+    a = q_learning(grid_mdp, seed=11, **kw)
+    b = q_learning(grid_mdp, seed=11, **kw)
+    c = q_learning(grid_mdp, seed=12, **kw)
+    assert np.array_equal(a.Q, b.Q)
+    for col in a.curve.columns:
+        assert np.array_equal(a.curve[col], b.curve[col], equal_nan=True), col
+    assert a.seed == b.seed == 11
+    assert not np.array_equal(a.Q, c.Q)
+    assert not np.array_equal(a.curve["steps"], c.curve["steps"])
+
+
+def test_runs_differ_from_each_other(grid_mdp):
+    res = q_learning(grid_mdp, runs=4, episodes=10, seed=0)
+    assert len({res.Q[k].tobytes() for k in range(4)}) == 4
+
+
+def test_seed_none_is_recorded_and_reproduces(corridor_mdp):
+    a = q_learning(corridor_mdp, runs=2, episodes=5, seed=None)
+    b = q_learning(corridor_mdp, runs=2, episodes=5, seed=a.seed)
+    assert np.array_equal(a.Q, b.Q)
+    assert a.parameters["seed"] == a.curve.metadata["seed"] == a.seed
+
+
+@pytest.mark.parametrize("kernel", KERNELS)
+def test_kernels_are_bit_identical(kernel):
+    mdp = random_mdp(12, 3, density=0.3, seed=5)
+    mdp = mdp.with_rewards(mdp.R, terminal=np.arange(12) == 11)
+    kw = {"runs": 4, "episodes": 25, "seed": 9, "alpha": "1/n^0.8", "epsilon": "0.3/n^0.5,0.05",
+              "max_steps_per_episode": 40, "eval_every": 7}
+    ref = q_learning(mdp, kernel="python", **kw)
+    res = q_learning(mdp, kernel=kernel, **kw)
+    assert np.array_equal(res.Q, ref.Q)
+    assert np.array_equal(res.visits, ref.visits)
+    for col in res.curve.columns:
+        assert np.array_equal(res.curve[col], ref.curve[col], equal_nan=True), col
+
+
+def test_run_does_not_depend_on_number_of_runs_or_eval_blocks(grid_mdp):
+    kw = {"episodes": 30, "seed": 4, "alpha": 0.3, "epsilon": 0.2}
+    many = q_learning(grid_mdp, runs=5, eval_every=3, **kw)
+    one = q_learning(grid_mdp, runs=1, eval_every=30, **kw)
+    assert np.array_equal(many.Q[0], one.Q[0])
+    assert np.array_equal(many.curve.matrix("steps")[0], one.curve.matrix("steps")[0])
+
+
+# ----------------------------------------------------------------------------- oracle
+
+
+@pytest.mark.parametrize(
+    ("alpha", "epsilon"),
+    [(constant(0.5), constant(0.2)), (visit_count(0.8), exponential(0.6, 0.9, floor=0.05)),
+     (visit_count(0.6, scale=0.9, floor=0.01), visit_count(0.5, scale=0.5))],
+)
+def test_lockstep_matches_independent_per_agent_reference(alpha, epsilon):
+    mdp = slippery_grid(side=3, slip=0.3, gamma=0.9)
+    res = q_learning(mdp, runs=3, episodes=15, seed=21, alpha=alpha, epsilon=epsilon,
+                     max_steps_per_episode=30, eval_every=15)
+    Q, steps = reference_q_learning(mdp, runs=3, episodes=15, seed=21, alpha=alpha,
+                                    epsilon=epsilon, horizon=30)
+    assert np.array_equal(res.curve.matrix("steps"), steps)
+    np.testing.assert_allclose(res.Q, Q, rtol=0, atol=1e-12)
+
+
+def test_successor_frequencies_match_the_model():
+    # epsilon = 1: actions uniform over admissible ones; the observed (s, a) -> s' frequencies
+    # must match P. With 4 runs x 2,000 steps the chi-square statistic stays small.
+    mdp = slippery_grid(side=3, slip=0.4, gamma=0.9)
+    res = q_learning(mdp, runs=4, episodes=100, seed=3, epsilon=1.0, max_steps_per_episode=20,
+                     eval_every=100)
+    counts = res.visits.sum(axis=0)  # (S, A)
+    visited = counts[~mdp.terminal]
+    assert visited.min() > 0
+    # Uniform exploration: within each state, action counts are near-equal.
+    frac = visited / visited.sum(axis=1, keepdims=True)
+    assert np.all(np.abs(frac - 0.25) < 0.12)
+
+
+def test_admissible_actions_only():
+    P = np.zeros((3, 3, 3))
+    P[:, :, 2] = 1.0
+    adm = np.array([[True, False, True], [False, True, False], [True, True, True]])
+    R = np.zeros((3, 3))
+    mdp = FiniteMDP.from_dense(P, R, 0.9, admissible=adm, terminal=np.array([False, False, True]),
+                               initial=np.array([0.5, 0.5, 0.0]))
+    res = q_learning(mdp, runs=3, episodes=200, seed=0, epsilon=1.0)
+    assert np.all(res.visits[:, ~adm] == 0)
+    assert np.all(np.isneginf(res.Q[:, ~adm]))
+    assert np.all(res.visits.sum(axis=0)[adm & ~mdp.terminal[:, None]] > 0)
+
+
+# ----------------------------------------------------------------------------- episode rules
+
+
+def test_terminal_target_does_not_bootstrap_and_cut_does():
+    # s0 --a0--> s1 (terminal, reward 2); s0 --a1--> s0 (reward 1). alpha = 1, epsilon = 1.
+    P = np.zeros((2, 2, 2))
+    P[0, 0, 1] = 1.0
+    P[0, 1, 0] = 1.0
+    P[1, :, 1] = 1.0
+    R = np.array([[2.0, 1.0], [0.0, 0.0]])
+    mdp = FiniteMDP.from_dense(P, R, 0.5, terminal=np.array([False, True]),
+                               initial=np.array([1.0, 0.0]))
+    res = q_learning(mdp, runs=2, episodes=50, seed=1, alpha=1.0, epsilon=1.0,
+                     max_steps_per_episode=3)
+    # Arrival in the terminal state: target r = 2 exactly (its own Q row stays 0).
+    assert np.all(res.Q[:, 0, 0] == 2.0)
+    assert np.all(res.Q[:, 1, :] == 0.0)
+    # The self-loop bootstraps (also through the 3-step cut): Q(s0, a1) = 1 + 0.5 * 2 = 2.
+    assert np.allclose(res.Q[:, 0, 1], 2.0)
+    steps = res.curve.matrix("steps")
+    assert steps.max() <= 3
+    assert (steps == 3).any()
+
+
+def test_episode_columns(corridor_mdp):
+    res = q_learning(corridor_mdp, runs=3, episodes=40, seed=5, epsilon=0.3,
+                     max_steps_per_episode=50)
+    c = res.curve
+    assert np.array_equal(c["decisions"], c["steps"])
+    ended = c.matrix("steps") < 50
+    # Corridor: the only reward is +1 on arrival at the goal, on the last step.
+    assert np.all(c.matrix("return")[ended] == 1.0)
+    expected = 0.9 ** (c.matrix("steps")[ended] - 1)
+    np.testing.assert_allclose(c.matrix("discounted_return")[ended], expected, rtol=1e-12)
+    assert np.all(c.matrix("return")[~ended] == 0.0)
+    assert list(c.evaluated_episodes()) == [10, 20, 30, 40]
+
+
+def test_progress_is_called_per_block(corridor_mdp):
+    calls = []
+    q_learning(corridor_mdp, runs=2, episodes=25, seed=0, eval_every=10,
+               progress=lambda done, total: calls.append((done, total)))
+    assert calls == [(10, 25), (20, 25), (25, 25)]
+
+
+def test_reference_values_are_used(corridor_mdp):
+    V = np.zeros(corridor_mdp.n_states)
+    V[0] = 5.0
+    res = q_learning(corridor_mdp, runs=2, episodes=10, seed=0, reference_values=V)
+    assert res.v_star_start == 5.0
+    gap = res.curve.matrix("value_gap")[:, -1]
+    np.testing.assert_allclose(gap, 5.0 - res.curve.matrix("eval_value")[:, -1])
+
+
+def test_start_mass_on_terminal_states_is_conditioned_away():
+    mdp = corridor()
+    initial = np.zeros(mdp.n_states)
+    initial[[0, -1]] = 0.5
+    mdp2 = mdp.with_rewards(mdp.R, initial=initial)
+    res = q_learning(mdp2, runs=2, episodes=30, seed=3, epsilon=0.2)
+    assert res.curve.matrix("steps").min() >= 1
+    assert res.v_star_start == pytest.approx(0.9**4)
+
+
+# ----------------------------------------------------------------------------- bad input
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "error", "needle"),
+    [
+        ({"runs": 0}, TaskError, "runs"),
+        ({"episodes": 2.5}, TaskError, "episodes"),
+        ({"eval_every": -1}, TaskError, "eval_every"),
+        ({"max_steps_per_episode": 0}, TaskError, "max_steps_per_episode"),
+        ({"seed": -3}, TaskError, "seed"),
+        ({"alpha": 1.5}, TaskError, "alpha"),
+        ({"epsilon": "sometimes"}, TaskError, "schedule"),
+        ({"kernel": "cuda"}, UnknownNameError, "kernel"),
+        ({"reference_values": np.zeros(3)}, ModelError, "reference_values"),
+        ({"q_init": math.inf}, TaskError, "q_init"),
+    ],
+)
+def test_bad_settings_raise_clear_errors(corridor_mdp, kwargs, error, needle):
+    with pytest.raises(error, match=needle):
+        q_learning(corridor_mdp, **{"episodes": 2, **kwargs})
+
+
+def test_needs_a_finite_mdp(corridor_mdp):
+    with pytest.raises(ModelError, match="FiniteMDP"):
+        q_learning(corridor_mdp.as_smdp())
+
+
+def test_all_start_mass_on_terminal_raises():
+    mdp = corridor()
+    initial = np.zeros(mdp.n_states)
+    initial[-1] = 1.0
+    with pytest.raises(ModelError, match="terminal"):
+        q_learning(mdp.with_rewards(mdp.R, initial=initial), episodes=2)
