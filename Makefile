@@ -18,8 +18,19 @@ $(VENV)/.installed-bench: $(STAMP)
 	$(PY) -m pip install -q -e ".[dev,bench]"
 	touch $@
 
+ADPART := $(VENV)/bin/adpart
+DEMO   := demo-output
+
+# The main job on the embedded default knowledge base ($$ADPART_KB, else ~/.local/share/adpart/kb):
+# exact solutions rendered as maps, then Q-learning on two-rooms and three-floor, recorded in the KB.
 demo: $(STAMP)
-	$(PY) -m adpart.demo demo-output
+	$(ADPART) env show two-rooms --task reach-goal --out $(DEMO)/two-rooms-vstar.png --json
+	$(ADPART) env show three-floor --task reach-goal --out $(DEMO)/three-floor-vstar.png --json
+	$(ADPART) learn two-rooms --task reach-goal --runs 10 --episodes 500 --alpha 1 --epsilon 0.5 \
+		--out $(DEMO)/two-rooms --json
+	$(ADPART) learn three-floor --task reach-goal --runs 10 --episodes 500 --eval-every 25 \
+		--alpha 1 --max-steps 5000 --out $(DEMO)/three-floor --json
+	$(ADPART) kb info
 
 test: $(STAMP)
 	$(PY) -m pytest -n 2 -q

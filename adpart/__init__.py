@@ -1,4 +1,4 @@
-"""adpart: state and action hierarchies for reinforcement learning by action-dependent partitioning."""
+"""adpart: state and action hierarchies for RL by action-dependent partitioning."""
 
 from importlib.metadata import PackageNotFoundError, version
 

@@ -35,9 +35,10 @@ class Executor(ABC):
         """``[fn(item) for item in items]``, possibly computed in parallel, in order."""
 
     def close(self) -> None:
-        """Release workers (idempotent)."""
+        """Release workers (idempotent); executors without workers have nothing to release."""
+        self._closed = True
 
-    def __enter__(self) -> Executor:
+    def __enter__(self) -> Executor:  # noqa: PYI034 (Self needs Python 3.11)
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -65,7 +66,9 @@ class LocalExecutor(Executor):
         if self._pool is None:
             # forkserver: workers fork from a clean server process, not from a parent that may
             # hold threads (BLAS, numba), and still start far faster than with spawn.
-            method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
+            method = (
+                "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
+            )
             context = multiprocessing.get_context(method)
             self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=context)
         return self._pool

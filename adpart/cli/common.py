@@ -60,7 +60,9 @@ def echo_json(data: Any) -> None:
     click.echo(dumps(data))
 
 
-def progress_callback(enabled: bool, total: int, label: str) -> tuple[Callable[[int, int], None], Callable[[], None]]:
+def progress_callback(
+    enabled: bool, total: int, label: str
+) -> tuple[Callable[[int, int], None], Callable[[], None]]:
     """A ``progress(done, total)`` callable drawing a bar on stderr, and a function to close it."""
     if not enabled or not sys.stderr.isatty():
         return (lambda done, total: None), (lambda: None)

@@ -63,7 +63,9 @@ def env_group() -> None:
 
 @env_group.command(name="show")
 @click.argument("name")
-@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), help="Write the map to this PNG.")
+@click.option(
+    "--out", type=click.Path(dir_okay=False, path_type=Path), help="Write the map to this PNG."
+)
 @click.option("--task", help="Overlay this task's optimal values (V*) on the map.")
 @click.option("--json", "as_json", is_flag=True, help="Print the description as JSON.")
 def env_show(name: str, out: Path | None, task: str | None, as_json: bool) -> None:

@@ -1,4 +1,4 @@
-"""``adpart learn``: learn one task with a learner plugin, write its curve, policy, plot and summary.
+"""``adpart learn``: learn a task with a learner plugin; write curve, policy, plot and summary.
 
 Every learner plugin's declared parameters become options of this command (shown in ``--help``
 with the learners that take them); an option that the chosen learner does not declare is an error.
@@ -18,7 +18,6 @@ import numpy as np
 
 from adpart.cli.common import CLIError, dumps, echo_json, progress_callback, registry
 from adpart.cli.envs import resolve_domain
-from adpart.cli.kb import kb_option
 from adpart.errors import TaskError
 from adpart.store.location import KBLocation
 
@@ -77,33 +76,82 @@ def _learn_batch(job: dict[str, Any]) -> dict[str, Any]:
 def _batch_seeds(seed: int, n: int) -> list[int]:
     if n == 1:
         return [seed]
-    return [int(c.generate_state(1, np.uint64)[0] >> np.uint64(1)) for c in np.random.SeedSequence(seed).spawn(n)]
+    return [
+        int(c.generate_state(1, np.uint64)[0] >> np.uint64(1))
+        for c in np.random.SeedSequence(seed).spawn(n)
+    ]
 
 
 @click.command(name="learn", cls=LearnerOptionsCommand)
 @click.argument("env")
 @click.option("--task", help="Task name (see `adpart envs`) or goal:FEATURE=VALUE,... .")
 @click.option("--learner", default="q-learning", show_default=True, help="Learner plugin.")
-@click.option("--episodes", type=click.IntRange(min=1), default=300, show_default=True,
-              help="Episodes per run (sweeps for value-iteration).")
-@click.option("--runs", type=click.IntRange(min=1), default=10, show_default=True,
-              help="Independent runs.")
+@click.option(
+    "--episodes",
+    type=click.IntRange(min=1),
+    default=300,
+    show_default=True,
+    help="Episodes per run (sweeps for value-iteration).",
+)
+@click.option(
+    "--runs", type=click.IntRange(min=1), default=10, show_default=True, help="Independent runs."
+)
 @click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True, help="Root seed.")
-@click.option("--eval-every", type=click.IntRange(min=1), default=10, show_default=True,
-              help="Score the greedy policy exactly every N episodes.")
+@click.option(
+    "--eval-every",
+    type=click.IntRange(min=1),
+    default=10,
+    show_default=True,
+    help="Score the greedy policy exactly every N episodes.",
+)
 @click.option("--executor", default="local", show_default=True, help="Executor plugin for batches.")
-@click.option("--runs-per-batch", type=click.IntRange(min=0), default=0, show_default=True,
-              help="Split runs into batches of this size for the executor (0 = one batch).")
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
-              help="Output folder [default: adpart-learn/ENV_TASK_LEARNER_seedS].")
+@click.option(
+    "--runs-per-batch",
+    type=click.IntRange(min=0),
+    default=0,
+    show_default=True,
+    help="Split runs into batches of this size for the executor (0 = one batch).",
+)
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Output folder [default: adpart-learn/ENV_TASK_LEARNER_seedS].",
+)
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
 @click.option("--no-store", is_flag=True, help="Do not record the run in the knowledge base.")
-@kb_option
-def learn_cmd(env: str, task: str | None, learner: str, episodes: int, runs: int, seed: int,
-              eval_every: int, executor: str, runs_per_batch: int, out: Path | None,
-              as_json: bool, quiet: bool, no_store: bool, kb_location: KBLocation,
-              **plugin_options: str | None) -> None:
+@click.option(
+    "--kb",
+    "kb_path",
+    envvar="ADPART_KB",
+    metavar="PATH|URL",
+    help="Knowledge base directory or database URL [env ADPART_KB; default "
+    "$ADPART_HOME/kb or ~/.local/share/adpart/kb]",
+)
+@click.option(
+    "--kb-artifacts",
+    envvar="ADPART_KB_ARTIFACTS",
+    metavar="URI",
+    help="Artifact root for a database URL (any pyarrow filesystem URI)",
+)
+def learn_cmd(
+    env: str,
+    task: str | None,
+    learner: str,
+    episodes: int,
+    runs: int,
+    seed: int,
+    eval_every: int,
+    executor: str,
+    runs_per_batch: int,
+    out: Path | None,
+    as_json: bool,
+    quiet: bool,
+    no_store: bool,
+    kb_path: str | None,
+    kb_artifacts: str | None,
+    **plugin_options: str | None,
+) -> None:
     """Learn a task of ENV with a learner plugin; write curve, policies, plot and summary.
 
     \b
@@ -137,9 +185,17 @@ def learn_cmd(env: str, task: str | None, learner: str, episodes: int, runs: int
     n_batches = math.ceil(runs / size)
     counts = [size] * (n_batches - 1) + [runs - size * (n_batches - 1)]
     jobs = [
-        {"env": env, "task": task_obj.name if task is None else task, "learner": learner,
-         "params": params, "runs": k, "episodes": episodes, "seed": s, "eval_every": eval_every}
-        for k, s in zip(counts, _batch_seeds(seed, n_batches))
+        {
+            "env": env,
+            "task": task_obj.name if task is None else task,
+            "learner": learner,
+            "params": params,
+            "runs": k,
+            "episodes": episodes,
+            "seed": s,
+            "eval_every": eval_every,
+        }
+        for k, s in zip(counts, _batch_seeds(seed, n_batches), strict=True)
     ]
     update, close = progress_callback(not quiet and n_batches == 1, episodes, f"{learner} on {env}")
     try:
@@ -156,7 +212,10 @@ def learn_cmd(env: str, task: str | None, learner: str, episodes: int, runs: int
 
     curve = _merge_curves([b["curve"] for b in batches], batches[0]["metadata"])
     Q = np.concatenate([b["Q"] for b in batches])
-    out = out or Path("adpart-learn") / f"{env.replace(':', '_')}_{task_obj.name}_{learner}_seed{seed}"
+    out = (
+        out
+        or Path("adpart-learn") / f"{env.replace(':', '_')}_{task_obj.name}_{learner}_seed{seed}"
+    )
     files = _write_outputs(out, curve, Q, plot_curves)
     gaps = curve.matrix("value_gap")[:, -1]
     summary = {
@@ -179,8 +238,20 @@ def learn_cmd(env: str, task: str | None, learner: str, episodes: int, runs: int
         "files": files,
     }
     if not no_store:
-        summary["kb"] = _store(kb_location, env, domain, task_obj, mdp, spec, Q, curve, summary,
-                               [b["seed"] for b in batches], counts)
+        location = KBLocation.resolve(kb_path, kb_artifacts)  # only now: --no-store writes nothing
+        summary["kb"] = _store(
+            location,
+            env,
+            domain,
+            task_obj,
+            mdp,
+            spec,
+            Q,
+            curve,
+            summary,
+            [b["seed"] for b in batches],
+            counts,
+        )
     files["summary"] = str(out / "summary.json")
     (out / "summary.json").write_text(dumps(summary))
     if as_json:
@@ -195,13 +266,25 @@ def learn_cmd(env: str, task: str | None, learner: str, episodes: int, runs: int
     click.echo(f"wrote {out}/: curve.parquet policy.parquet curve.png summary.json")
     if "kb" in summary:
         stored = summary["kb"]
-        click.echo(f"stored in {stored['location']}: {stored['run']}, {stored['task']}, policies "
-                   f"{stored['policies'][0]} .. {stored['policies'][-1]}")
+        click.echo(
+            f"stored in {stored['location']}: {stored['run']}, {stored['task']}, policies "
+            f"{stored['policies'][0]} .. {stored['policies'][-1]}"
+        )
 
 
-def _store(location: KBLocation, env: str, domain: Any, task: Any, mdp: Any, spec: Any,
-           Q: np.ndarray, curve: Any, summary: dict[str, Any], batch_seeds: list[int],
-           counts: list[int]) -> dict[str, Any]:
+def _store(
+    location: KBLocation,
+    env: str,
+    domain: Any,
+    task: Any,
+    mdp: Any,
+    spec: Any,
+    Q: np.ndarray,
+    curve: Any,
+    summary: dict[str, Any],
+    batch_seeds: list[int],
+    counts: list[int],
+) -> dict[str, Any]:
     """Record environment, task, one policy per run and the run itself; return their ids."""
     from adpart.store import KnowledgeBase
 
@@ -209,31 +292,67 @@ def _store(location: KBLocation, env: str, domain: Any, task: Any, mdp: Any, spe
     kb = KnowledgeBase.open(location)
     try:
         environment = kb.put_environment(
-            env, model_hash=dyn.content_hash, n_states=dyn.n_states, n_actions=dyn.n_actions,
-            spec={"name": env, "source": domain.source, "actions": list(dyn.action_names)})
-        task_rec = kb.put_task(environment, task.name,
-                               spec={**task.spec, "name": task.name, "model_hash": mdp.content_hash},
-                               gamma=task.gamma)
+            env,
+            model_hash=dyn.content_hash,
+            n_states=dyn.n_states,
+            n_actions=dyn.n_actions,
+            spec={"name": env, "source": domain.source, "actions": list(dyn.action_names)},
+        )
+        task_rec = kb.put_task(
+            environment,
+            task.name,
+            spec={**task.spec, "name": task.name, "model_hash": mdp.content_hash},
+            gamma=task.gamma,
+        )
         steps = curve.matrix("steps").sum(axis=1)
         run_seeds = np.repeat(batch_seeds, counts)
         policies = [
-            kb.put_policy(task_rec, spec.name, q=np.where(np.isfinite(Q[k]), Q[k], np.nan),
-                          pi=np.argmax(Q[k], axis=1).astype(np.int64), seed=int(run_seeds[k]),
-                          episodes=summary["episodes"], steps=int(steps[k]),
-                          plugin_version=spec.version, parameters=summary["params"])
+            kb.put_policy(
+                task_rec,
+                spec.name,
+                q=np.where(np.isfinite(Q[k]), Q[k], np.nan),
+                pi=np.argmax(Q[k], axis=1).astype(np.int64),
+                seed=int(run_seeds[k]),
+                episodes=summary["episodes"],
+                steps=int(steps[k]),
+                plugin_version=spec.version,
+                parameters=summary["params"],
+            )
             for k in range(Q.shape[0])
         ]
-        metrics = {k: summary[k] for k in ("final_value_gap", "optimal_runs", "total_steps",
-                                           "v_star_start", "runs", "episodes")}
-        run = kb.put_run(task_rec, spec.name, curve=curve.to_arrow(), metrics=metrics,
-                         seed=summary["seed"], plugin_version=spec.version,
-                         parameters={**summary["params"], "batch_seeds": batch_seeds,
-                                     "policies": [p.id for p in policies]})
+        metrics = {
+            k: summary[k]
+            for k in (
+                "final_value_gap",
+                "optimal_runs",
+                "total_steps",
+                "v_star_start",
+                "runs",
+                "episodes",
+            )
+        }
+        run = kb.put_run(
+            task_rec,
+            spec.name,
+            curve=curve.to_arrow(),
+            metrics=metrics,
+            seed=summary["seed"],
+            plugin_version=spec.version,
+            parameters={
+                **summary["params"],
+                "batch_seeds": batch_seeds,
+                "policies": [p.id for p in policies],
+            },
+        )
     finally:
         kb.close()
-    return {"location": kb.label, "environment": f"environment:{environment.id}",
-            "task": f"task:{task_rec.id}", "run": f"run:{run.id}",
-            "policies": [f"policy:{p.id}" for p in policies]}
+    return {
+        "location": kb.label,
+        "environment": f"environment:{environment.id}",
+        "task": f"task:{task_rec.id}",
+        "run": f"run:{run.id}",
+        "policies": [f"policy:{p.id}" for p in policies],
+    }
 
 
 def _merge_curves(parts: list[dict[str, np.ndarray]], metadata: dict[str, Any]) -> Any:
@@ -257,15 +376,19 @@ def _write_outputs(out: Path, curve: Any, Q: np.ndarray, plot_curves: Any) -> di
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise TaskError(f"cannot create output folder {out}: {exc.strerror}; choose another --out") from exc
+        raise TaskError(
+            f"cannot create output folder {out}: {exc.strerror}; choose another --out"
+        ) from exc
     K, S, _ = Q.shape
     actions = np.argmax(Q, axis=2)
-    policy = pa.table({
-        "run": np.repeat(np.arange(K, dtype=np.int64), S),
-        "state": np.tile(np.arange(S, dtype=np.int64), K),
-        "action": actions.reshape(-1).astype(np.int64),
-        "value": np.take_along_axis(Q, actions[:, :, None], axis=2).reshape(-1),
-    })
+    policy = pa.table(
+        {
+            "run": np.repeat(np.arange(K, dtype=np.int64), S),
+            "state": np.tile(np.arange(S, dtype=np.int64), K),
+            "action": actions.reshape(-1).astype(np.int64),
+            "value": np.take_along_axis(Q, actions[:, :, None], axis=2).reshape(-1),
+        }
+    )
     pq.write_table(curve.to_arrow(), out / "curve.parquet", compression="zstd")
     pq.write_table(policy, out / "policy.parquet", compression="zstd")
     plot_curves(curve, out / "curve.png", metric="value_gap")

@@ -77,9 +77,17 @@ class Dynamics:
         P.eliminate_zeros()
         h = hashlib.sha256()
         h.update(json.dumps({"shape": list(P.shape), "actions": list(self.action_names)}).encode())
-        adm = np.ones((self.n_states, self.n_actions), bool) if self.admissible is None else self.admissible
-        for arr in (P.indptr.astype(np.int64), P.indices.astype(np.int64), P.data.astype(np.float64),
-                    np.asarray(adm, dtype=bool)):
+        adm = (
+            np.ones((self.n_states, self.n_actions), bool)
+            if self.admissible is None
+            else self.admissible
+        )
+        for arr in (
+            P.indptr.astype(np.int64),
+            P.indices.astype(np.int64),
+            P.data.astype(np.float64),
+            np.asarray(adm, dtype=bool),
+        ):
             h.update(np.ascontiguousarray(arr).tobytes())
         return h.hexdigest()
 
@@ -172,9 +180,14 @@ class GoalSpec:
             initial=initial / initial.sum(),
             gamma=self.gamma,
             description=f"reach {dict(self.goal)}",
-            spec={"kind": "goal", "goal": dict(self.goal), "goal_reward": self.goal_reward,
-                  "start": dict(self.start) if self.start else None, "gamma": self.gamma,
-                  "step_costs": list(costs)},
+            spec={
+                "kind": "goal",
+                "goal": dict(self.goal),
+                "goal_reward": self.goal_reward,
+                "start": dict(self.start) if self.start else None,
+                "gamma": self.gamma,
+                "step_costs": list(costs),
+            },
         )
 
 
@@ -187,7 +200,9 @@ def _parse_assignments(part: str, whole: str) -> dict[str, int]:
         try:
             out[key.strip()] = int(value)
         except ValueError:
-            raise TaskError(f"goal spec {whole!r}: value {value!r} of {key!r} is not an integer") from None
+            raise TaskError(
+                f"goal spec {whole!r}: value {value!r} of {key!r} is not an integer"
+            ) from None
     if not out:
         raise TaskError(f"goal spec {whole!r} names no feature; write e.g. x=3,y=4")
     return out

@@ -111,7 +111,7 @@ def _initial_state(
     q_init: float, mu: np.ndarray,
 ) -> _kernels.LockStepState:
     S, A = mdp.n_states, mdp.n_actions
-    keys, _ = mdp._sampler  # the same keys FiniteMDP.sample_next searches
+    keys = mdp.sampler_keys  # the same keys FiniteMDP.sample_next searches
     adm = mdp.admissible
     rows, cols = np.nonzero(adm)
     adm_ptr = np.zeros(S + 1, dtype=np.int64)

@@ -70,8 +70,15 @@ def value_iteration_curve(mdp: FiniteMDP, *, sweeps: int, seed: int = 0) -> Refe
         discounted_returns=nan,
         eval_value=eval_value,
         value_gap=v_star - eval_value,
-        metadata={"learner": "value-iteration", "mdp": mdp.name, "mdp_hash": mdp.content_hash,
-                  "gamma": mdp.gamma, "v_star_start": v_star, **parameters},
+        metadata={
+            "learner": "value-iteration",
+            "mdp": mdp.name,
+            "mdp_hash": mdp.content_hash,
+            "gamma": mdp.gamma,
+            "v_star_start": v_star,
+            **parameters,
+        },
     )
-    return ReferenceResult(Q=Q[None], curve=curve, seed=seed, v_star_start=v_star,
-                           parameters=parameters)
+    return ReferenceResult(
+        Q=Q[None], curve=curve, seed=seed, v_star_start=v_star, parameters=parameters
+    )

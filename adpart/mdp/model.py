@@ -157,8 +157,10 @@ class FiniteMDP:
         P = _as_action_major_csr(transitions, None)
         n_states = P.shape[1]
         n_actions = P.shape[0] // n_states
-        names = tuple(action_names) if action_names is not None else tuple(
-            f"a{a}" for a in range(n_actions)
+        names = (
+            tuple(action_names)
+            if action_names is not None
+            else tuple(f"a{a}" for a in range(n_actions))
         )
         if len(names) != n_actions:
             raise ModelError(
@@ -254,7 +256,8 @@ class FiniteMDP:
         if off.size:
             s, a = off[0]
             raise ModelError(
-                f"transition row for state {s}, action {self._action(a)} sums to {float(sums[s, a])!r}; "
+                f"transition row for state {s}, action {self._action(a)} sums to "
+                f"{float(sums[s, a])!r}; "
                 f"rows of admissible pairs must sum to 1 within {ROW_SUM_ATOL}"
             )
         init = self.initial
@@ -264,7 +267,9 @@ class FiniteMDP:
                 f"{init.shape}"
             )
         if abs(init.sum() - 1.0) > ROW_SUM_ATOL:
-            raise ModelError(f"initial distribution sums to {float(init.sum())!r}; it must sum to 1")
+            raise ModelError(
+                f"initial distribution sums to {float(init.sum())!r}; it must sum to 1"
+            )
         for key, col in self.features.items():
             if col.shape != (S,):
                 raise ModelError(f"feature {key!r} has shape {col.shape}; expected ({S},)")
@@ -292,8 +297,7 @@ class FiniteMDP:
 
     @cached_property
     def _smdp(self) -> SMDPModel:
-        S, A = self.n_states, self.n_actions
-        keep = np.tile(~self.terminal, A).astype(np.float64)
+        keep = np.tile(~self.terminal, self.n_actions).astype(np.float64)
         F = sp.csr_array(sp.diags_array(keep * self.gamma) @ self.P)
         F.eliminate_zeros()
         R = np.where(self.terminal[:, None], 0.0, self.R)
@@ -324,19 +328,26 @@ class FiniteMDP:
         return h.hexdigest()
 
     @cached_property
-    def _sampler(self) -> tuple[np.ndarray, np.ndarray]:
-        """Row-offset cumulative probabilities: entry k of row r holds ``r + cumsum_in_row``."""
+    def sampler_keys(self) -> np.ndarray:
+        """Row-offset cumulative probabilities: entry k of row r holds ``r + cumsum_in_row``.
+
+        ``searchsorted(sampler_keys, row + u, side="right")`` (clipped to the row's last entry)
+        is the CSR position of a successor drawn with ``u ~ U[0, 1)``; compiled learners use the
+        same keys so that their sampling matches :meth:`sample_next` exactly.
+        """
         P = self.P
         counts = np.diff(P.indptr)
         rows = np.repeat(np.arange(P.shape[0], dtype=np.float64), counts)
         csum = np.cumsum(P.data)
         row_start_sum = np.concatenate(([0.0], csum))[P.indptr[:-1]]
         within = csum - np.repeat(row_start_sum, counts)
-        return rows + within, counts
+        keys = rows + within
+        keys.setflags(write=False)
+        return keys
 
-    def sample_next(self, states: np.ndarray, actions: np.ndarray, rng: np.random.Generator) -> (
-        np.ndarray
-    ):
+    def sample_next(
+        self, states: np.ndarray, actions: np.ndarray, rng: np.random.Generator
+    ) -> np.ndarray:
         """Sample successors for many ``(state, action)`` pairs at once (one ``searchsorted``).
 
         Args:
@@ -347,7 +358,7 @@ class FiniteMDP:
         Returns:
             int64 array of successor states with the shape of ``states``.
         """
-        keys, _ = self._sampler
+        keys = self.sampler_keys
         rows = np.asarray(actions, dtype=np.int64) * self.n_states + np.asarray(states)
         u = rng.random(rows.shape)
         k = np.searchsorted(keys, rows + u, side="right")

@@ -60,7 +60,7 @@ def _blocked() -> set[str]:
 
 
 def make_plugin_manager(*, load_entrypoints: bool = True) -> PluginManager:
-    """A fresh manager with every installed ``adpart`` entry point (and the built-ins) registered."""
+    """A fresh manager with every installed ``adpart`` entry point and the built-ins registered."""
     pm = PluginManager()
     blocked = _blocked()
     adpart_version = _version("adpart")
@@ -76,7 +76,7 @@ def make_plugin_manager(*, load_entrypoints: bool = True) -> PluginManager:
                     continue
                 try:
                     plugin = ep.load()
-                except Exception as exc:  # a broken third-party package must not break adpart
+                except Exception as exc:  # noqa: BLE001 (a broken plugin must not break adpart)
                     warnings.warn(
                         f"plugin package {package!r} failed to import (entry point {ep.name} = "
                         f"{ep.value}): {type(exc).__name__}: {exc}. It is skipped; everything "
@@ -110,7 +110,7 @@ def build_registry(pm: PluginManager) -> Registry:
             package, version = pm.sources.get(impl.plugin_name, (impl.plugin_name, ""))
             try:
                 impl.function(register=Registrar(registry, kind, package, version))
-            except Exception as exc:  # one plugin's failing hook must not break the others
+            except Exception as exc:  # noqa: BLE001 (one failing hook must not break the others)
                 warnings.warn(
                     f"plugin package {package!r} failed in {hook_name}: "
                     f"{type(exc).__name__}: {exc}; its {kind} plugins are skipped",

@@ -107,7 +107,8 @@ class PluginSpec:
         if unknown:
             known = ", ".join(f"--{n}" for n in declared) or "none"
             raise PluginError(
-                f"{self.kind} {self.name!r} has no parameter --{unknown[0]}; its parameters: {known}"
+                f"{self.kind} {self.name!r} has no parameter --{unknown[0]}; "
+                f"its parameters: {known}"
             )
         owner = f"{self.kind} {self.name!r}"
         return {

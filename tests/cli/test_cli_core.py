@@ -42,7 +42,8 @@ class UniformLearner:
         ones = np.ones((runs, episodes), dtype=np.int64)
         nan = np.full((runs, episodes), np.nan)
         curve = LearningCurve.from_matrices(steps=ones, decisions=ones, returns=nan,
-                                            discounted_returns=nan, eval_value=np.zeros((runs, episodes)),
+                                            discounted_returns=nan,
+                                            eval_value=np.zeros((runs, episodes)),
                                             value_gap=np.zeros((runs, episodes)))
         return Result(Q, curve, seed)
 
@@ -103,8 +104,25 @@ def test_env_show_writes_png_with_values(tmp_path):
 
 def test_learn_writes_curve_policy_plot_summary(tmp_path):
     out = tmp_path / "run"
-    result = run("learn", "two-rooms", "--task", "reach-goal", "--runs", "3", "--episodes", "40",
-                 "--eval-every", "10", "--seed", "5", "--out", str(out), "--json", "--epsilon", "0.2")
+    result = run(
+        "learn",
+        "two-rooms",
+        "--task",
+        "reach-goal",
+        "--runs",
+        "3",
+        "--episodes",
+        "40",
+        "--eval-every",
+        "10",
+        "--seed",
+        "5",
+        "--out",
+        str(out),
+        "--json",
+        "--epsilon",
+        "0.2",
+    )
     assert result.exit_code == 0, result.output
     summary = json.loads(result.output)
     assert summary["runs"] == 3 and summary["episodes"] == 40 and summary["states"] == 55
@@ -121,8 +139,19 @@ def test_learn_writes_curve_policy_plot_summary(tmp_path):
 
 
 def test_learn_same_seed_is_bit_identical_and_batches_are_executor_independent(tmp_path):
-    args = ["learn", "two-rooms", "--runs", "4", "--episodes", "20", "--seed", "3", "--json",
-            "--runs-per-batch", "2"]
+    args = [
+        "learn",
+        "two-rooms",
+        "--runs",
+        "4",
+        "--episodes",
+        "20",
+        "--seed",
+        "3",
+        "--json",
+        "--runs-per-batch",
+        "2",
+    ]
     a = run(*args, "--out", str(tmp_path / "a"), "--executor", "serial")
     b = run(*args, "--out", str(tmp_path / "b"), "--executor", "local")
     assert a.exit_code == 0 and b.exit_code == 0, a.output + b.output
@@ -135,8 +164,19 @@ def test_learn_same_seed_is_bit_identical_and_batches_are_executor_independent(t
 
 
 def test_learn_value_iteration_reference(tmp_path):
-    result = run("learn", "four-rooms", "--task", "G1", "--learner", "value-iteration",
-                 "--episodes", "60", "--out", str(tmp_path / "vi"), "--json")
+    result = run(
+        "learn",
+        "four-rooms",
+        "--task",
+        "G1",
+        "--learner",
+        "value-iteration",
+        "--episodes",
+        "60",
+        "--out",
+        str(tmp_path / "vi"),
+        "--json",
+    )
     assert result.exit_code == 0, result.output
     summary = json.loads(result.output)
     assert summary["runs"] == 1
@@ -146,11 +186,22 @@ def test_learn_value_iteration_reference(tmp_path):
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (["learn", "five-rooms"], "no environment named 'five-rooms'.*Did you mean 'four-rooms'.*gym:<id>"),
-        (["learn", "two-rooms", "--task", "reach-gaol"], "no task 'reach-gaol'.*Did you mean 'reach-goal'"),
-        (["learn", "two-rooms", "--learner", "q-lerning"], "no learner named 'q-lerning'.*Did you mean 'q-learning'"),
-        (["learn", "two-rooms", "--learner", "value-iteration", "--alpha", "0.1"],
-         "--alpha is not a parameter of learner 'value-iteration'"),
+        (
+            ["learn", "five-rooms"],
+            "no environment named 'five-rooms'.*Did you mean 'four-rooms'.*gym:<id>",
+        ),
+        (
+            ["learn", "two-rooms", "--task", "reach-gaol"],
+            "no task 'reach-gaol'.*Did you mean 'reach-goal'",
+        ),
+        (
+            ["learn", "two-rooms", "--learner", "q-lerning"],
+            "no learner named 'q-lerning'.*Did you mean 'q-learning'",
+        ),
+        (
+            ["learn", "two-rooms", "--learner", "value-iteration", "--alpha", "0.1"],
+            "--alpha is not a parameter of learner 'value-iteration'",
+        ),
         (["learn", "two-rooms", "--max-steps", "many"], "--max-steps expects int, got 'many'"),
         (["learn", "two-rooms", "--alpha", "fast"], "cannot read a schedule from 'fast'"),
         (["learn", "two-rooms", "--kernel", "gpu"], "--kernel must be one of"),
@@ -160,7 +211,9 @@ def test_learn_value_iteration_reference(tmp_path):
     ],
 )
 def test_errors_exit_2_with_one_line(args, message, tmp_path):
-    result = CliRunner().invoke(cli, [*args, "--out", str(tmp_path / "o")] if args[0] == "learn" else args)
+    result = CliRunner().invoke(
+        cli, [*args, "--out", str(tmp_path / "o")] if args[0] == "learn" else args
+    )
     assert result.exit_code == 2, result.output
     lines = [line for line in result.output.splitlines() if line.strip()]
     assert len(lines) == 1, result.output
@@ -180,8 +233,21 @@ def test_third_party_learner_is_listed_and_used_by_learn(tmp_path, monkeypatch):
         assert "constant-q" in listed.output and "fake-adpart-learner 0.1" in listed.output
         help_text = run("learn", "--help").output
         assert "--level" in help_text and "constant-q" in help_text
-        result = run("learn", "two-rooms", "--learner", "constant-q", "--level", "2.5", "--runs", "2",
-                     "--episodes", "3", "--out", str(tmp_path / "o"), "--json")
+        result = run(
+            "learn",
+            "two-rooms",
+            "--learner",
+            "constant-q",
+            "--level",
+            "2.5",
+            "--runs",
+            "2",
+            "--episodes",
+            "3",
+            "--out",
+            str(tmp_path / "o"),
+            "--json",
+        )
         assert result.exit_code == 0, result.output
         summary = json.loads(result.output)
         assert summary["learner_package"] == "fake-adpart-learner"
@@ -194,7 +260,9 @@ def test_third_party_learner_is_listed_and_used_by_learn(tmp_path, monkeypatch):
 
 def test_broken_plugin_shows_warning_and_cli_still_works(tmp_path, monkeypatch):
     site = tmp_path / "site"
-    install_fake_distribution(site, "fake-adpart-broken2", "fake_adpart_broken2", "raise RuntimeError('bad build')\n")
+    install_fake_distribution(
+        site, "fake-adpart-broken2", "fake_adpart_broken2", "raise RuntimeError('bad build')\n"
+    )
     monkeypatch.syspath_prepend(str(site))
     reset_registry()
     try:
@@ -204,3 +272,80 @@ def test_broken_plugin_shows_warning_and_cli_still_works(tmp_path, monkeypatch):
         assert "q-learning" in result.output
     finally:
         reset_registry()
+
+
+def test_learn_records_policies_and_run_in_the_knowledge_base(tmp_path):
+    kb_dir = tmp_path / "kb"
+    result = run(
+        "learn",
+        "two-rooms",
+        "--runs",
+        "2",
+        "--episodes",
+        "15",
+        "--seed",
+        "4",
+        "--out",
+        str(tmp_path / "o"),
+        "--kb",
+        str(kb_dir),
+        "--json",
+    )
+    assert result.exit_code == 0, result.output
+    ids = json.loads(result.output)["kb"]
+    assert len(ids["policies"]) == 2
+    from adpart.store import KnowledgeBase
+
+    kb = KnowledgeBase.open(str(kb_dir))
+    try:
+        run_rec = kb.get("run", int(ids["run"].split(":")[1]))
+        assert run_rec.learner == "q-learning" and run_rec.seed == 4
+        curve = kb.load(run_rec, "curve")
+        assert curve.num_rows == 2 * 15
+        policy = kb.get("policy", int(ids["policies"][1].split(":")[1]))
+        stored_pi = kb.load(policy, "pi")
+        written = pq.read_table(tmp_path / "o" / "policy.parquet").to_pydict()
+        np.testing.assert_array_equal(
+            stored_pi, np.array(written["action"])[np.array(written["run"]) == 1]
+        )
+        env = kb.get(
+            "environment", run_rec.task_id and kb.get("task", run_rec.task_id).environment_id
+        )
+        assert env.n_states == 55
+    finally:
+        kb.close()
+    again = run(
+        "learn",
+        "two-rooms",
+        "--runs",
+        "1",
+        "--episodes",
+        "5",
+        "--out",
+        str(tmp_path / "p"),
+        "--kb",
+        str(kb_dir),
+        "--json",
+    )
+    assert json.loads(again.output)["kb"]["task"] == ids["task"]  # same task record reused
+
+
+def test_learn_no_store_leaves_the_knowledge_base_alone(tmp_path):
+    kb_dir = tmp_path / "kb"
+    result = run(
+        "learn",
+        "two-rooms",
+        "--runs",
+        "1",
+        "--episodes",
+        "5",
+        "--out",
+        str(tmp_path / "o"),
+        "--kb",
+        str(kb_dir),
+        "--no-store",
+        "--json",
+    )
+    assert result.exit_code == 0
+    assert "kb" not in json.loads(result.output)
+    assert not kb_dir.exists()

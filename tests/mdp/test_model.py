@@ -35,8 +35,14 @@ def test_action_major_layout():
     ("mutate", "message"),
     [
         (lambda P, R: P.__setitem__((2, 1, 2), 0.5), r"state 2, action 'Stay' \(1\) sums to 0.5"),
-        (lambda P, R: P.__setitem__((1, 0, 0), -0.25), r"P\(s'=0 \| s=1, a='Right' \(0\)\) = -0.25 is negative"),
-        (lambda P, R: P.__setitem__((3, 1, 3), np.nan), r"s=3, a='Stay' \(1\)\) = nan is not a finite"),
+        (
+            lambda P, R: P.__setitem__((1, 0, 0), -0.25),
+            r"P\(s'=0 \| s=1, a='Right' \(0\)\) = -0.25 is negative",
+        ),
+        (
+            lambda P, R: P.__setitem__((3, 1, 3), np.nan),
+            r"s=3, a='Stay' \(1\)\) = nan is not a finite",
+        ),
         (lambda P, R: R.__setitem__((0, 1), np.nan), r"reward R\[s=0, a='Stay' \(1\)\] = nan"),
         (lambda P, R: R.__setitem__((2, 0), np.inf), r"reward R\[s=2, a='Right' \(0\)\] = inf"),
     ],
@@ -54,15 +60,15 @@ def test_shape_mismatch_messages():
         FiniteMDP.from_dense(P, np.zeros((4, 3)), 0.9)
     with pytest.raises(ModelError, match=r"shape \(7, 4\).*\(n_actions \* n_states, n_states\)"):
         FiniteMDP(sp.csr_array(np.ones((7, 4)) / 4), np.zeros((4, 1)), 0.9)
-    with pytest.raises(ModelError, match="different shapes"):
+    with pytest.raises(ModelError, match=r"different shapes"):
         FiniteMDP([sp.eye_array(3), sp.eye_array(4)], np.zeros((3, 2)), 0.9)
     with pytest.raises(ModelError, match=r"terminal mask has shape \(3,\)"):
         FiniteMDP.from_dense(P, R, 0.9, terminal=np.zeros(3, bool))
-    with pytest.raises(ModelError, match="action_names has 3 entries"):
+    with pytest.raises(ModelError, match=r"action_names has 3 entries"):
         FiniteMDP.from_dense(P, R, 0.9, action_names=("a", "b", "c"))
     with pytest.raises(ModelError, match=r"gamma = 1.5 is outside \(0, 1\]"):
         FiniteMDP.from_dense(P, R, 1.5)
-    with pytest.raises(ModelError, match="expected \\(S, A, S\\)"):
+    with pytest.raises(ModelError, match=r"expected \(S, A, S\)"):
         FiniteMDP.from_dense(np.ones((2, 2)), R, 0.9)
 
 
@@ -70,7 +76,7 @@ def test_state_without_admissible_action_is_named():
     P, R = chain()
     adm = np.ones((4, 2), bool)
     adm[3] = False
-    with pytest.raises(ModelError, match="state 3 has no admissible action"):
+    with pytest.raises(ModelError, match=r"state 3 has no admissible action"):
         FiniteMDP.from_dense(P, R, 0.9, admissible=adm)
 
 
@@ -86,7 +92,7 @@ def test_inadmissible_rows_may_be_empty():
 def test_arrays_are_read_only():
     P, R = chain()
     m = FiniteMDP.from_dense(P, R, 0.9)
-    with pytest.raises(ValueError, match="read-only"):
+    with pytest.raises(ValueError, match=r"read-only"):
         m.R[0, 0] = 5.0
 
 

@@ -104,7 +104,8 @@ def test_policy_evaluation_matches_dense_solve(seed, S, A):
 
 
 @given(st.integers(0, 10_000), st.integers(2, 15), st.integers(1, 4))
-def test_smdp_option_models_solve_like_their_semi_markov_oracle(seed, S, O):
+def test_smdp_option_models_solve_like_their_semi_markov_oracle(seed, S, n_options):
+    O = n_options  # noqa: E741 (the dissertation's name for the option count)
     """Stacked SMDP models (R, discounted F with varying row mass) against a dense solve."""
     rng = np.random.default_rng(seed)
     F = rng.random((O, S, S)) * (rng.random((O, S, S)) < 0.5)
@@ -153,19 +154,19 @@ def test_max_sweeps_reports_not_converged():
 def test_solver_input_errors():
     P, R = random_dense(3, 5, 2, 0.5)
     mdp = FiniteMDP.from_dense(P, R, 0.9)
-    with pytest.raises(ModelError, match="epsilon"):
+    with pytest.raises(ModelError, match=r"epsilon"):
         value_iteration(mdp, 0.0)
-    with pytest.raises(ModelError, match="initial values have shape"):
+    with pytest.raises(ModelError, match=r"initial values have shape"):
         value_iteration(mdp, V0=np.zeros(3))
-    with pytest.raises(ModelError, match="unknown solver method 'pi'"):
+    with pytest.raises(ModelError, match=r"unknown solver method 'pi'"):
         solve(mdp, method="pi")
-    with pytest.raises(ModelError, match="outside 0..1"):
+    with pytest.raises(ModelError, match=r"outside 0..1"):
         policy_evaluation(mdp, np.full(5, 4))
     adm = np.ones((5, 2), bool)
     adm[2, 1] = False
     P[2, 1] = 0
     masked = FiniteMDP.from_dense(P, R, 0.9, admissible=adm)
-    with pytest.raises(ModelError, match="inadmissible action 1 in state 2"):
+    with pytest.raises(ModelError, match=r"inadmissible action 1 in state 2"):
         policy_evaluation(masked, np.ones(5, dtype=int))
 
 
@@ -173,5 +174,5 @@ def test_improper_policy_with_gamma_one_is_reported():
     P = np.zeros((2, 1, 2))
     P[0, 0, 0] = P[1, 0, 1] = 1.0
     mdp = FiniteMDP.from_dense(P, -np.ones((2, 1)), 1.0)
-    with pytest.raises(ModelError, match="singular|never terminate"):
+    with pytest.raises(ModelError, match=r"singular|never terminate"):
         policy_evaluation(mdp, np.zeros(2, dtype=int))

@@ -41,7 +41,7 @@ def test_every_hook_is_documented_and_every_kind_has_a_hook():
     hooks = {n for n in dir(hookspecs) if n.startswith("register_")}
     assert hooks == set(KINDS.values())
     for hook in hooks:
-        assert re.search(rf"^### {hook}\(register\)$", text, re.M), f"{hook} undocumented"
+        assert re.search(rf"^### {hook}\(register\)$", text, re.MULTILINE), f"{hook} undocumented"
 
 
 def test_third_party_entry_point_is_discovered(plugin_site):
@@ -55,16 +55,23 @@ def test_third_party_entry_point_is_discovered(plugin_site):
 
 
 def test_broken_plugin_warns_with_package_name_and_rest_keeps_working(plugin_site):
-    install_fake_distribution(plugin_site, "fake-adpart-broken", "fake_adpart_broken", "import no_such_module_xyz\n")
-    with pytest.warns(PluginWarning, match="'fake-adpart-broken' failed to import.*no_such_module_xyz"):
+    install_fake_distribution(
+        plugin_site, "fake-adpart-broken", "fake_adpart_broken", "import no_such_module_xyz\n"
+    )
+    with pytest.warns(
+        PluginWarning, match=r"'fake-adpart-broken' failed to import.*no_such_module_xyz"
+    ):
         reg = get_registry()
     assert "local" in reg.names("executor")
 
 
 def test_misspelled_hook_warns(plugin_site):
-    source = "from adpart.plugins import hookimpl\n@hookimpl\ndef register_lerners(register):\n    pass\n"
+    source = (
+        "from adpart.plugins import hookimpl\n"
+        "@hookimpl\ndef register_lerners(register):\n    pass\n"
+    )
     install_fake_distribution(plugin_site, "fake-adpart-typo", "fake_adpart_typo", source)
-    with pytest.warns(PluginWarning, match="'fake-adpart-typo'.*register_lerners"):
+    with pytest.warns(PluginWarning, match=r"'fake-adpart-typo'.*register_lerners"):
         reg = get_registry()
     assert "serial" in reg.names("executor")
 
@@ -72,7 +79,7 @@ def test_misspelled_hook_warns(plugin_site):
 def test_duplicate_name_keeps_builtin_and_names_both_packages(plugin_site):
     source = FAKE_PLUGIN.replace('name = "reversed-serial"', 'name = "serial"')
     install_fake_distribution(plugin_site, "fake-adpart-dup", "fake_adpart_dup", source)
-    with pytest.warns(PluginWarning, match="named 'serial'.*'adpart'.*'fake-adpart-dup'"):
+    with pytest.warns(PluginWarning, match=r"named 'serial'.*'adpart'.*'fake-adpart-dup'"):
         reg = get_registry()
     assert reg.get("executor", "serial").package == "adpart"
 
@@ -85,7 +92,9 @@ def test_failing_registration_hook_is_contained():
 
     pm = make_plugin_manager()
     pm.register_checked(Exploding(), "exploding", "exploding-pkg", "1.0")
-    with pytest.warns(PluginWarning, match="'exploding-pkg' failed in register_executors: RuntimeError: boom"):
+    with pytest.warns(
+        PluginWarning, match=r"'exploding-pkg' failed in register_executors: RuntimeError: boom"
+    ):
         reg = build_registry(pm)
     assert "local" in reg.names("executor")
 
@@ -99,9 +108,9 @@ def test_disable_plugins_env_var(monkeypatch):
 
 def test_unknown_names_suggest_the_closest():
     reg = get_registry()
-    with pytest.raises(UnknownNameError, match="no executor named 'locl'.*Did you mean 'local'"):
+    with pytest.raises(UnknownNameError, match=r"no executor named 'locl'.*Did you mean 'local'"):
         reg.get("executor", "locl")
-    with pytest.raises(UnknownNameError, match="unknown plugin kind"):
+    with pytest.raises(UnknownNameError, match=r"unknown plugin kind"):
         reg.get("widget", "x")
 
 
@@ -109,18 +118,18 @@ def test_params_are_validated_and_converted():
     spec = get_registry().get("executor", "local")
     assert spec.resolve_params({}) == {"workers": 0}
     assert spec.resolve_params({"workers": "3"}) == {"workers": 3}
-    with pytest.raises(PluginError, match="--workers expects int, got 'two'"):
+    with pytest.raises(PluginError, match=r"--workers expects int, got 'two'"):
         spec.resolve_params({"workers": "two"})
-    with pytest.raises(PluginError, match="--workers must be >= 0"):
+    with pytest.raises(PluginError, match=r"--workers must be >= 0"):
         spec.resolve_params({"workers": -1})
-    with pytest.raises(PluginError, match="has no parameter --threads; its parameters: --workers"):
+    with pytest.raises(PluginError, match=r"has no parameter --threads; its parameters: --workers"):
         spec.resolve_params({"threads": 2})
     choice = Param("mode", "str", "a", "mode", choices=("a", "b"))
-    with pytest.raises(PluginError, match="must be one of a, b"):
+    with pytest.raises(PluginError, match=r"must be one of a, b"):
         choice.convert("c", "x")
     flag = Param("on", "bool", False, "flag")
     assert flag.convert("yes", "x") is True
-    with pytest.raises(PluginError, match="expects true or false"):
+    with pytest.raises(PluginError, match=r"expects true or false"):
         flag.convert("maybe", "x")
 
 

@@ -22,20 +22,43 @@ class QLearner:
         Param("kernel", "str", "auto", "step kernel", choices=("auto", "numba", "numpy", "python")),
     )
 
-    def __init__(self, alpha: str = "1/n^0.8", epsilon: str = "0.1", max_steps: int = 1000,
-                 q_init: float = 0.0, kernel: str = "auto") -> None:
+    def __init__(
+        self,
+        alpha: str = "1/n^0.8",
+        epsilon: str = "0.1",
+        max_steps: int = 1000,
+        q_init: float = 0.0,
+        kernel: str = "auto",
+    ) -> None:
         self.alpha, self.epsilon = alpha, epsilon
         self.max_steps, self.q_init = max_steps, q_init
         self.kernel = None if kernel == "auto" else kernel
 
-    def learn(self, mdp: FiniteMDP, *, runs: int, episodes: int, seed: int, eval_every: int,
-              progress: Callable[[int, int], object] | None = None) -> object:
+    def learn(
+        self,
+        mdp: FiniteMDP,
+        *,
+        runs: int,
+        episodes: int,
+        seed: int,
+        eval_every: int,
+        progress: Callable[[int, int], object] | None = None,
+    ) -> object:
         from adpart.learning.qlearning import q_learning
 
-        return q_learning(mdp, runs=runs, episodes=episodes, seed=seed, alpha=self.alpha,
-                          epsilon=self.epsilon, max_steps_per_episode=self.max_steps,
-                          eval_every=eval_every, progress=progress, q_init=self.q_init,
-                          kernel=self.kernel)
+        return q_learning(
+            mdp,
+            runs=runs,
+            episodes=episodes,
+            seed=seed,
+            alpha=self.alpha,
+            epsilon=self.epsilon,
+            max_steps_per_episode=self.max_steps,
+            eval_every=eval_every,
+            progress=progress,
+            q_init=self.q_init,
+            kernel=self.kernel,
+        )
 
 
 class ValueIterationLearner:
@@ -45,8 +68,16 @@ class ValueIterationLearner:
     description = "exact value iteration on the model (reference; one run, a row per sweep)"
     params = ()
 
-    def learn(self, mdp: FiniteMDP, *, runs: int, episodes: int, seed: int, eval_every: int,
-              progress: Callable[[int, int], object] | None = None) -> object:
+    def learn(
+        self,
+        mdp: FiniteMDP,
+        *,
+        runs: int,
+        episodes: int,
+        seed: int,
+        eval_every: int,
+        progress: Callable[[int, int], object] | None = None,
+    ) -> object:
         from adpart.learning.reference import value_iteration_curve
 
         result = value_iteration_curve(mdp, sweeps=episodes, seed=seed)
