@@ -8,21 +8,7 @@ import click
 
 from adpart.cli.common import echo_json, registry
 from adpart.envs.base import Domain
-from adpart.envs.registry import GYM_PREFIX, get_domain
-from adpart.errors import UnknownNameError
-
-
-def resolve_domain(name: str) -> Domain:
-    """A registered environment plugin by name, or ``gym:<id>`` through the Gymnasium adapter."""
-    if name.startswith(GYM_PREFIX):
-        return get_domain(name)
-    try:
-        spec = registry().get("environment", name)
-    except UnknownNameError as exc:
-        raise UnknownNameError(
-            f"{exc}. Gymnasium environments are named gym:<id>, e.g. gym:Taxi-v4"
-        ) from None
-    return spec.factory()
+from adpart.workflows.resolve import resolve_domain
 
 
 def describe(name: str, domain: Domain) -> dict[str, object]:

@@ -1,0 +1,23 @@
+"""Workflows: the library procedures the CLI, sweeps and experiments share.
+
+They resolve names through the plugin registry, run the numeric cores, and record results in the
+knowledge base; the CLI only parses arguments and prints.
+"""
+
+from adpart.workflows.learning import (
+    LearnOutcome,
+    LearnRequest,
+    record_learning,
+    run_learning,
+    write_learning_outputs,
+)
+from adpart.workflows.resolve import resolve_domain
+
+__all__ = [
+    "LearnOutcome",
+    "LearnRequest",
+    "record_learning",
+    "resolve_domain",
+    "run_learning",
+    "write_learning_outputs",
+]

@@ -1,0 +1,284 @@
+"""Learn one task with a learner plugin: batches through an executor, outputs, KB records.
+
+Runs can be split into batches that an executor computes in parallel; batch ``b`` of a request
+with seed ``S`` and ``n > 1`` batches is seeded from ``SeedSequence(S).spawn(n)[b]``, so results
+depend on the seed and the batch size, never on the executor or the number of workers.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from adpart.errors import TaskError
+from adpart.execution import Executor, SerialExecutor
+from adpart.learning.curves import LearningCurve
+from adpart.plugins import get_registry
+from adpart.workflows.resolve import resolve_domain
+
+
+@dataclass(frozen=True)
+class LearnRequest:
+    """What to learn; plain data, so it can travel to worker processes and into JSON.
+
+    Attributes:
+        env: environment name (a plugin, or ``gym:<id>``).
+        task: task name or ``goal:...`` spec; None for the environment's default task.
+        learner: learner plugin name.
+        params: learner parameters as given (validated against the plugin's declaration).
+        runs: independent runs.
+        episodes: episodes per run.
+        seed: root seed.
+        eval_every: score greedy policies exactly every this many episodes.
+        runs_per_batch: batch size for the executor (0 = all runs in one batch).
+    """
+
+    env: str
+    task: str | None = None
+    learner: str = "q-learning"
+    params: dict[str, Any] = field(default_factory=dict)
+    runs: int = 10
+    episodes: int = 300
+    seed: int = 0
+    eval_every: int = 10
+    runs_per_batch: int = 0
+
+    def batches(self) -> list[tuple[int, int]]:
+        """``(runs, seed)`` of every batch."""
+        size = self.runs if self.runs_per_batch == 0 else min(self.runs_per_batch, self.runs)
+        n = math.ceil(self.runs / size)
+        counts = [size] * (n - 1) + [self.runs - size * (n - 1)]
+        if n == 1:
+            return [(counts[0], self.seed)]
+        seeds = [
+            int(c.generate_state(1, np.uint64)[0] >> np.uint64(1))
+            for c in np.random.SeedSequence(self.seed).spawn(n)
+        ]
+        return list(zip(counts, seeds, strict=True))
+
+
+@dataclass(frozen=True, eq=False)
+class LearnOutcome:
+    """The merged result of all batches of a :class:`LearnRequest`."""
+
+    request: LearnRequest
+    task_name: str
+    params: dict[str, Any]
+    learner_package: str
+    learner_version: str
+    Q: np.ndarray
+    curve: LearningCurve
+    batches: list[tuple[int, int]]
+    v_star_start: float
+    n_states: int
+    n_actions: int
+    model_hash: str
+
+    def summary(self) -> dict[str, Any]:
+        gaps = self.curve.matrix("value_gap")[:, -1]
+        return {
+            "env": self.request.env,
+            "task": self.task_name,
+            "learner": self.request.learner,
+            "learner_package": self.learner_package,
+            "params": self.params,
+            "seed": self.request.seed,
+            "batch_seeds": [s for _, s in self.batches],
+            "runs": int(self.Q.shape[0]),
+            "episodes": self.request.episodes,
+            "states": self.n_states,
+            "actions": self.n_actions,
+            "model_hash": self.model_hash,
+            "v_star_start": self.v_star_start,
+            "final_value_gap": {"mean": float(np.mean(gaps)), "max": float(np.max(gaps))},
+            "optimal_runs": int(np.sum(gaps < 1e-6)),
+            "total_steps": int(self.curve["steps"].sum()),
+        }
+
+
+def _learn_batch(job: dict[str, Any]) -> dict[str, Any]:
+    """Executor work item: one batch of runs. Module-level so process pools can run it."""
+    domain = resolve_domain(job["env"])
+    mdp = domain.mdp(job["task"])
+    learner = get_registry().get("learner", job["learner"]).create(job["params"])
+    result = learner.learn(
+        mdp,
+        runs=job["runs"],
+        episodes=job["episodes"],
+        seed=job["seed"],
+        eval_every=job["eval_every"],
+        progress=job.get("progress"),
+    )
+    return {
+        "Q": result.Q,
+        "curve": result.curve.to_dict(),
+        "metadata": dict(result.curve.metadata),
+        "v_star_start": result.v_star_start,
+    }
+
+
+def run_learning(
+    request: LearnRequest,
+    *,
+    executor: Executor | None = None,
+    progress: Callable[[int, int], object] | None = None,
+) -> LearnOutcome:
+    """Validate ``request``, learn all its batches (on ``executor`` when there are several).
+
+    ``progress(done, total)`` is reported for a single batch computed in this process.
+    """
+    spec = get_registry().get("learner", request.learner)
+    params = spec.resolve_params(request.params)
+    domain = resolve_domain(request.env)
+    task = domain.task(request.task)
+    mdp = domain.mdp(task)
+    batches = request.batches()
+    jobs = [
+        {
+            "env": request.env,
+            "task": task.name if request.task is None else request.task,
+            "learner": request.learner,
+            "params": params,
+            "runs": runs,
+            "episodes": request.episodes,
+            "seed": seed,
+            "eval_every": request.eval_every,
+        }
+        for runs, seed in batches
+    ]
+    if len(jobs) == 1:
+        results = [_learn_batch({**jobs[0], "progress": progress})]
+    else:
+        with executor or SerialExecutor() as ex:
+            results = ex.map(_learn_batch, jobs)
+    return LearnOutcome(
+        request=request,
+        task_name=task.name,
+        params=params,
+        learner_package=spec.package,
+        learner_version=spec.version,
+        Q=np.concatenate([r["Q"] for r in results]),
+        curve=_merge_curves([r["curve"] for r in results], results[0]["metadata"]),
+        batches=batches,
+        v_star_start=float(results[0]["v_star_start"]),
+        n_states=mdp.n_states,
+        n_actions=mdp.n_actions,
+        model_hash=mdp.content_hash,
+    )
+
+
+def _merge_curves(parts: list[dict[str, np.ndarray]], metadata: dict[str, Any]) -> LearningCurve:
+    offset = 0
+    columns: dict[str, list[np.ndarray]] = {}
+    for part in parts:
+        shifted = dict(part)
+        shifted["run"] = np.asarray(part["run"]) + offset
+        offset = int(shifted["run"].max()) + 1
+        for key, col in shifted.items():
+            columns.setdefault(key, []).append(np.asarray(col))
+    return LearningCurve({k: np.concatenate(v) for k, v in columns.items()}, metadata)
+
+
+def write_learning_outputs(out: Path, outcome: LearnOutcome) -> dict[str, str]:
+    """curve.parquet, policy.parquet (run, state, action, value) and curve.png in ``out``."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from adpart.learning.curves import plot_curves
+
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise TaskError(
+            f"cannot create output folder {out}: {exc.strerror}; choose another --out"
+        ) from exc
+    Q = outcome.Q
+    K, S, _ = Q.shape
+    actions = np.argmax(Q, axis=2)
+    policy = pa.table(
+        {
+            "run": np.repeat(np.arange(K, dtype=np.int64), S),
+            "state": np.tile(np.arange(S, dtype=np.int64), K),
+            "action": actions.reshape(-1).astype(np.int64),
+            "value": np.take_along_axis(Q, actions[:, :, None], axis=2).reshape(-1),
+        }
+    )
+    pq.write_table(outcome.curve.to_arrow(), out / "curve.parquet", compression="zstd")
+    pq.write_table(policy, out / "policy.parquet", compression="zstd")
+    plot_curves(outcome.curve, out / "curve.png", metric="value_gap")
+    return {name: str(out / name) for name in ("curve.parquet", "policy.parquet", "curve.png")}
+
+
+def record_learning(kb: Any, outcome: LearnOutcome) -> dict[str, Any]:
+    """Record environment, task, one policy per run and the run itself; return their ids."""
+    request = outcome.request
+    domain = resolve_domain(request.env)
+    dyn = domain.dynamics()
+    task = domain.task(request.task)
+    summary = outcome.summary()
+    environment = kb.put_environment(
+        request.env,
+        model_hash=dyn.content_hash,
+        n_states=dyn.n_states,
+        n_actions=dyn.n_actions,
+        spec={"name": request.env, "source": domain.source, "actions": list(dyn.action_names)},
+    )
+    task_rec = kb.put_task(
+        environment,
+        task.name,
+        spec={**task.spec, "name": task.name, "model_hash": outcome.model_hash},
+        gamma=task.gamma,
+    )
+    Q = outcome.Q
+    steps = outcome.curve.matrix("steps").sum(axis=1)
+    run_seeds = np.repeat([s for _, s in outcome.batches], [k for k, _ in outcome.batches])
+    provenance = {"plugin_version": outcome.learner_version, "parameters": outcome.params}
+    policies = [
+        kb.put_policy(
+            task_rec,
+            request.learner,
+            q=np.where(np.isfinite(Q[k]), Q[k], np.nan),
+            pi=np.argmax(Q[k], axis=1).astype(np.int64),
+            seed=int(run_seeds[k]),
+            episodes=request.episodes,
+            steps=int(steps[k]),
+            **provenance,
+        )
+        for k in range(Q.shape[0])
+    ]
+    metrics = {
+        k: summary[k]
+        for k in (
+            "final_value_gap",
+            "optimal_runs",
+            "total_steps",
+            "v_star_start",
+            "runs",
+            "episodes",
+        )
+    }
+    run = kb.put_run(
+        task_rec,
+        request.learner,
+        curve=outcome.curve.to_arrow(),
+        metrics=metrics,
+        seed=request.seed,
+        plugin_version=outcome.learner_version,
+        parameters={
+            **outcome.params,
+            "request": asdict(request),
+            "policies": [p.id for p in policies],
+        },
+    )
+    return {
+        "location": kb.label,
+        "environment": f"environment:{environment.id}",
+        "task": f"task:{task_rec.id}",
+        "run": f"run:{run.id}",
+        "policies": [f"policy:{p.id}" for p in policies],
+    }
