@@ -1,6 +1,6 @@
 """Four rooms (Sutton, Precup & Singh 1999, "Between MDPs and semi-MDPs", AIJ 112, Fig. 2).
 
-The 13 x 13 map of /work/shared/ENVIRONMENTS.md with its 104 free cells; the hallways at
+The 13 x 13 map of Sutton, Precup & Singh (1999) with its 104 free cells; the hallways at
 (row, col) (3,6), (6,2), (7,9), (10,6) are states 25, 51, 62, 88 (row-major order over free
 cells) and carry the feature ``hallway`` = 1 (used by the hallway options). Four moves; the
 intended move succeeds w.p. 2/3 and each of the other three happens w.p. 1/9; a move into a wall
@@ -50,7 +50,7 @@ class FourRooms(GridDomain):
 
     name = "four-rooms"
     description = "13x13 four-room grid, 104 states, moves succeed 2/3 else 1/9 each other move"
-    source = "Sutton, Precup & Singh 1999 (AIJ 112), Fig. 2; /work/shared/ENVIRONMENTS.md"
+    source = "Sutton, Precup & Singh 1999 (AIJ 112), Fig. 2"
     default_task = "G1"
 
     MAP = FOUR_ROOMS_MAP
