@@ -7,6 +7,7 @@ import click
 from adpart import __version__
 from adpart.cli.common import AdpartGroup
 from adpart.cli.envs import env_group, envs_cmd
+from adpart.cli.experiment import experiment_cmd
 from adpart.cli.kb import kb
 from adpart.cli.learn import learn_cmd
 from adpart.cli.plugins_cmd import plugins_cmd
@@ -31,3 +32,4 @@ cli.add_command(envs_cmd)
 cli.add_command(env_group)
 cli.add_command(learn_cmd)
 cli.add_command(kb)
+cli.add_command(experiment_cmd)

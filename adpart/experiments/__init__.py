@@ -1,0 +1,35 @@
+"""The seed's experiments as runnable, plotted, stored procedures (``adpart experiment NAME``)."""
+
+from __future__ import annotations
+
+import importlib
+
+from adpart.experiments.base import (
+    EXPERIMENTS,
+    Experiment,
+    ExperimentConfig,
+    ExperimentReport,
+    experiment,
+    get_experiment,
+    run_experiment,
+)
+
+#: Modules that define experiments (imported on first lookup).
+EXPERIMENT_MODULES: tuple[str, ...] = ()
+
+
+def load_all() -> None:
+    for module in EXPERIMENT_MODULES:
+        importlib.import_module(module)
+
+
+__all__ = [
+    "EXPERIMENTS",
+    "Experiment",
+    "ExperimentConfig",
+    "ExperimentReport",
+    "experiment",
+    "get_experiment",
+    "load_all",
+    "run_experiment",
+]

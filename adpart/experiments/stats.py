@@ -1,0 +1,122 @@
+"""Statistics for claims over runs: confidence intervals instead of eyeballed curves.
+
+Issue texts ask for "a statistical statement for each pairwise claim". We compare per-run
+quantities (e.g. episodes or primitive steps until the greedy policy's value gap falls below a
+threshold) with a Welch t-interval on the difference of means and a bootstrap interval on the
+ratio of means; both are reported with the run counts.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from scipy import stats
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """``a`` vs ``b`` over runs: means, Welch CI of the difference, bootstrap CI of the ratio."""
+
+    label_a: str
+    label_b: str
+    n_a: int
+    n_b: int
+    mean_a: float
+    mean_b: float
+    diff: float
+    diff_ci: tuple[float, float]
+    ratio: float
+    ratio_ci: tuple[float, float]
+    level: float
+
+    @property
+    def a_smaller(self) -> bool:
+        """The difference ``a - b`` is below zero with the stated confidence."""
+        return self.diff_ci[1] < 0
+
+    def sentence(self, what: str) -> str:
+        verdict = (
+            f"{self.label_a} is smaller"
+            if self.diff_ci[1] < 0
+            else f"{self.label_b} is smaller"
+            if self.diff_ci[0] > 0
+            else "no significant difference"
+        )
+        pct = round(100 * self.level)
+        return (
+            f"{what}: {self.label_a} {self.mean_a:.4g} vs {self.label_b} {self.mean_b:.4g} "
+            f"(n={self.n_a}/{self.n_b}); ratio {self.ratio:.3g} "
+            f"[{pct}% CI {self.ratio_ci[0]:.3g}, {self.ratio_ci[1]:.3g}]; "
+            f"difference {self.diff:.4g} [{pct}% CI {self.diff_ci[0]:.4g}, {self.diff_ci[1]:.4g}]"
+            f" - {verdict}"
+        )
+
+    def to_dict(self) -> dict[str, object]:
+        return asdict(self)
+
+
+def compare(
+    a: np.ndarray,
+    b: np.ndarray,
+    label_a: str,
+    label_b: str,
+    *,
+    level: float = 0.95,
+    n_boot: int = 2000,
+    seed: int = 0,
+) -> Comparison:
+    """Welch CI for ``mean(a) - mean(b)`` and a percentile bootstrap CI for ``mean(a)/mean(b)``."""
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    ma, mb = float(a.mean()), float(b.mean())
+    va = a.var(ddof=1) / a.size if a.size > 1 else 0.0
+    vb = b.var(ddof=1) / b.size if b.size > 1 else 0.0
+    se = float(np.sqrt(va + vb))
+    if se > 0:
+        dof = (va + vb) ** 2 / (
+            (va**2 / (a.size - 1) if a.size > 1 else 0.0)
+            + (vb**2 / (b.size - 1) if b.size > 1 else 0.0)
+        )
+        half = float(stats.t.ppf(0.5 + level / 2, dof)) * se
+    else:
+        half = 0.0
+    rng = np.random.default_rng(seed)
+    boot_a = rng.choice(a, size=(n_boot, a.size)).mean(axis=1)
+    boot_b = rng.choice(b, size=(n_boot, b.size)).mean(axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratios = boot_a / boot_b
+    lo, hi = np.nanpercentile(ratios, [50 * (1 - level), 50 * (1 + level)])
+    return Comparison(
+        label_a,
+        label_b,
+        a.size,
+        b.size,
+        ma,
+        mb,
+        ma - mb,
+        (ma - mb - half, ma - mb + half),
+        ma / mb if mb else float("inf"),
+        (float(lo), float(hi)),
+        level,
+    )
+
+
+def episodes_to_threshold(
+    value_gap: np.ndarray, evaluated: np.ndarray, threshold: float
+) -> np.ndarray:
+    """Per run, the first evaluated episode whose gap (and every later one) is <= ``threshold``.
+
+    Args:
+        value_gap: ``(K, N)`` gaps with NaN where not evaluated.
+        evaluated: 1-based episode numbers that were evaluated (columns of ``value_gap`` - 1).
+        threshold: the bound.
+
+    Returns:
+        ``(K,)`` float episodes; ``inf`` for runs that never stay below the threshold.
+    """
+    gaps = value_gap[:, evaluated - 1]
+    ok = gaps <= threshold
+    stays = np.flip(np.cumprod(np.flip(ok, axis=1), axis=1), axis=1).astype(bool)
+    first = np.argmax(stays, axis=1)
+    return np.where(stays.any(axis=1), evaluated[first].astype(np.float64), np.inf)
