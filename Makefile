@@ -32,11 +32,15 @@ demo: $(STAMP)
 		--alpha 1 --max-steps 5000 --out $(DEMO)/three-floor --json
 	$(ADPART) kb info
 
+# One BLAS thread per test worker: two workers already fill the two cores, and threaded BLAS
+# spinning against each other was measured 10-50x slower on this machine.
+SINGLE_THREAD := OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
+
 test: $(STAMP)
-	$(PY) -m pytest -n 2 -q
+	$(SINGLE_THREAD) $(PY) -m pytest -n 2 -q
 
 test-all: $(STAMP)
-	$(PY) -m pytest -n 2 -q -m ""
+	$(SINGLE_THREAD) $(PY) -m pytest -n 2 -q -m ""
 
 bench: $(VENV)/.installed-bench
 	$(PY) -m benchmarks
