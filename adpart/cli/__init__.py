@@ -10,6 +10,7 @@ from adpart.cli.envs import env_group, envs_cmd
 from adpart.cli.experiment import experiment_cmd
 from adpart.cli.kb import kb
 from adpart.cli.learn import learn_cmd
+from adpart.cli.options_cmd import options_cmd
 from adpart.cli.plugins_cmd import plugins_cmd
 
 
@@ -33,3 +34,4 @@ cli.add_command(env_group)
 cli.add_command(learn_cmd)
 cli.add_command(kb)
 cli.add_command(experiment_cmd)
+cli.add_command(options_cmd)

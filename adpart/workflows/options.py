@@ -1,0 +1,147 @@
+"""Options to discovered subgoals: build them, compute their exact models, keep them in the KB.
+
+The options of a subgoal set are built on the dynamics of the environment under the task whose
+policy the subgoals came from (its gamma discounts the pseudo-reward and ``F``; its rewards give
+``R``). ``F`` and the option itself are reward-independent and reused by later tasks; ``R`` is the
+source task's and is recomputed for a new task (phase 3 of the partitioning does this).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from adpart.errors import TaskError
+from adpart.execution import Executor
+from adpart.mdp.model import FiniteMDP
+from adpart.options.models import OptionModel, option_models
+from adpart.options.option import Option
+from adpart.options.subgoal_options import subgoal_options
+from adpart.workflows.resolve import resolve_domain
+
+INITIATIONS = ("basin", "reachable")
+
+
+@dataclass(frozen=True, eq=False)
+class StoredOptions:
+    """Options with their exact models and the records that hold them."""
+
+    records: list[Any]
+    options: list[Option]
+    models: list[OptionModel]
+    reused: bool
+
+
+def environment_and_mdp(
+    kb: Any, environment_id: int, task_id: int | None
+) -> tuple[Any, Any, FiniteMDP]:
+    """The environment record, its domain (checked against the stored dynamics) and the MDP."""
+    env = kb.get("environment", environment_id)
+    domain = resolve_domain(env.name)
+    if domain.dynamics().content_hash != env.model_hash:
+        raise TaskError(
+            f"environment {env.name!r} in the knowledge base was recorded with other dynamics "
+            f"(model hash {env.model_hash[:12]}) than the installed one "
+            f"({domain.dynamics().content_hash[:12]}); use the adpart version that recorded it"
+        )
+    task_name = None
+    if task_id is not None:
+        task_name = kb.get("task", task_id).name
+    return env, domain, domain.mdp(task_name)
+
+
+def source_task_id(kb: Any, subgoal_set: Any) -> int | None:
+    if subgoal_set.policy_id is None:
+        return None
+    return kb.get("policy", subgoal_set.policy_id).task_id
+
+
+def options_for_subgoals(
+    kb: Any,
+    subgoal_set: Any,
+    *,
+    initiation: str = "basin",
+    executor: Executor | None = None,
+) -> StoredOptions:
+    """Get-or-build the options to every subgoal of ``subgoal_set`` with exact models.
+
+    Options already in the knowledge base for these subgoals with the same initiation rule are
+    loaded instead of rebuilt (``reused=True``).
+    """
+    if initiation not in INITIATIONS:
+        raise TaskError(f"initiation {initiation!r} is not one of {', '.join(INITIATIONS)}")
+    task_id = source_task_id(kb, subgoal_set)
+    env, _, mdp = environment_and_mdp(kb, subgoal_set.environment_id, task_id)
+    wanted = dict(zip(subgoal_set.subgoal_ids, subgoal_set.states, strict=True))
+    existing = [
+        o
+        for o in kb.options_for(env)
+        if o.subgoal_id in wanted
+        and o.provenance.parameters.get("initiation") == initiation
+        and o.provenance.parameters.get("task_id") == task_id
+    ]
+    if wanted and {o.subgoal_id for o in existing} == set(wanted):
+        by_subgoal = {o.subgoal_id: o for o in existing}
+        records = [by_subgoal[i] for i in subgoal_set.subgoal_ids]
+        options, models = load_options(kb, records)
+        return StoredOptions(records, options, models, reused=True)
+    states = np.asarray(subgoal_set.states, dtype=np.int64)
+    options = subgoal_options(mdp, states, initiation=initiation)
+    models = option_models(mdp, options, executor=executor, duration=False)
+    records = []
+    subgoal_of_state = {int(s): i for i, s in wanted.items()}
+    for option, model in zip(options, models, strict=True):
+        records.append(
+            kb.put_option(
+                env,
+                option.name,
+                initiation=option.initiation,
+                policy=option.policy,
+                termination=option.beta,
+                reward=model.R,
+                transitions=model.F,
+                gamma=mdp.gamma,
+                subgoal=subgoal_of_state[int(option.subgoal)],
+                plugin="adpart.options",
+                parameters={
+                    "initiation": initiation,
+                    "task_id": task_id,
+                    "subgoal_set": subgoal_set.id,
+                    "subgoal_state": int(option.subgoal),
+                },
+            )
+        )
+    return StoredOptions(records, options, models, reused=False)
+
+
+def load_options(kb: Any, records: list[Any]) -> tuple[list[Option], list[OptionModel]]:
+    """Options and their models back from their records (verified reads)."""
+    options, models = [], []
+    for rec in records:
+        initiation = kb.load(rec, "initiation").astype(bool)
+        option = Option(
+            name=rec.name,
+            initiation=initiation,
+            policy=kb.load(rec, "policy"),
+            beta=kb.load(rec, "termination"),
+            subgoal=int(rec.provenance.parameters.get("subgoal_state", -1)),
+            meta={"record": rec.ref},
+        )
+        F = kb.option_transitions(rec)
+        R = kb.load(rec, "reward")
+        if F is None or R is None:
+            raise TaskError(f"{rec.ref} has no stored model; rebuild it with `adpart options`")
+        S = initiation.shape[0]
+        models.append(
+            OptionModel(
+                name=rec.name,
+                R=R,
+                F=F,
+                duration=np.full(S, np.nan),
+                admissible=initiation & (np.asarray(F.sum(axis=1)).ravel() > 0),  # I - terminals
+            )
+        )
+        options.append(option)
+    return options, models
