@@ -73,8 +73,10 @@ def register_subgoal_detectors(register: Registrar) -> None:
 def register_partition_criteria(register: Registrar) -> None:
     """Register partition criterion classes with ``register(cls)``.
 
-    Call signature: ``cls(**params).refine(partition, models)`` returning a refined partition
-    (sections 3.2 and 4.2 of the dissertation).
+    Call signature: ``cls(**params).refine(partition, model, **context)`` returning a refined
+    :class:`adpart.partition.Partition`; ``model`` is the options' stacked
+    :class:`adpart.mdp.SMDPModel` and ``context`` may carry ``options``, ``rewards`` or
+    ``termination`` (sections 3.2 and 4.2 of the dissertation).
     """
 
 

@@ -25,6 +25,7 @@ BUILTIN_PLUGINS: dict[str, str] = {
     "environments": "adpart.plugins.builtin.environments",
     "learners": "adpart.plugins.builtin.learners",
     "executors": "adpart.plugins.builtin.executors",
+    "criteria": "adpart.plugins.builtin.criteria",
 }
 
 

@@ -1,0 +1,41 @@
+"""Action-dependent, multi-phase epsilon,delta-partitioning of the state space (section 4.2).
+
+* :class:`Partition` - labels, per-block admissible options, intersect/refine/split/map values;
+* :func:`refine` - delta-stability (eq. 4.6) and epsilon reward homogeneity (eq. 4.7);
+* :func:`exact_lumping` - the delta = epsilon = 0 case by a splitter worklist;
+* :func:`check_stability` - an independent checker of definition 4.4;
+* :class:`MultiPhasePartitioner` - phases 1-3 of section 4.2.1.2;
+* :class:`BPSMDP` - interval models, interval value iteration and a point model (3.2.1, 4.3.3).
+"""
+
+from adpart.partition.bpsmdp import (
+    BPSMDP,
+    IntervalValues,
+    point_model,
+    theorem_4_5_bound,
+    value_gap,
+)
+from adpart.partition.checker import StabilityReport, check_stability
+from adpart.partition.lumping import exact_lumping
+from adpart.partition.multiphase import MultiPhasePartitioner, phase1, phase2, phase3
+from adpart.partition.partition import Partition, canonical_labels, combine_labels
+from adpart.partition.refine import refine
+
+__all__ = [
+    "BPSMDP",
+    "IntervalValues",
+    "MultiPhasePartitioner",
+    "Partition",
+    "StabilityReport",
+    "canonical_labels",
+    "check_stability",
+    "combine_labels",
+    "exact_lumping",
+    "phase1",
+    "phase2",
+    "phase3",
+    "point_model",
+    "refine",
+    "theorem_4_5_bound",
+    "value_gap",
+]

@@ -1,0 +1,248 @@
+"""Refinement to delta-stability (eq. 4.6) and epsilon reward homogeneity (eq. 4.7).
+
+Definition 4.4 asks, for every pair of blocks ``B_i, B_j``, every option ``o`` and all
+``s, s' in B_i``::
+
+    | sum_{s'' in B_j} F(s''|s,o) - sum_{s'' in B_j} F(s''|s',o) | <= delta      (4.6)
+    | R(s,o) - R(s',o) | <= epsilon                                             (4.7)
+
+With ``delta > 0`` "the maximal delta-stable sub-block" of section 4.2.1.1 is not unique (the
+relation is not transitive), so adpart commits to DESIGN.md's rule: a block is split on *one*
+criterion at a time - one ``(option, target block)`` mass, or one option's reward - by sorting its
+states' values and cutting greedily whenever the span from the current group's first value would
+exceed the threshold (the fewest sub-blocks for that criterion); this repeats to a fixpoint. Per
+round, every unstable block is split on its worst criterion (the largest span, ties to the lowest
+option and target), all blocks at once. With ``delta = epsilon = 0`` every cut separates states
+that any exact lumping must separate, so the fixpoint is the unique coarsest exact lumping
+(stochastic bisimulation); :mod:`adpart.partition.lumping` computes that case faster.
+
+Rewards only shrink blocks, never make them unstable again, so eq. 4.7 is enforced first (one
+greedy pass per option suffices: sub-blocks of a homogeneous block stay homogeneous). The delta
+rounds then re-examine only *dirty* blocks: blocks that were split, and blocks holding a
+predecessor of a split block - the only ones whose masses can have changed. Every round is
+vectorised over the dirty blocks, options and target blocks (a sparse product with the block
+indicator matrix, one sort of the non-zero masses); no Python loop runs over states.
+
+Comparisons allow ``atol`` (default 1e-9) on top of delta and epsilon, so that masses equal up to
+floating-point rounding count as equal.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import scipy.sparse as sp
+
+from adpart.errors import ModelError
+from adpart.mdp.model import SMDPModel
+from adpart.partition._kernels import greedy_groups
+from adpart.partition._validate import (
+    DEFAULT_ATOL,
+    as_model,
+    check_atol,
+    check_delta,
+    check_epsilon,
+    check_partition_fits,
+    check_rewards,
+    masked_rows,
+    require_cover,
+    select_options,
+    selected_admissible,
+)
+from adpart.partition.partition import (
+    Partition,
+    block_all,
+    canonical_labels,
+    combine_labels,
+    row_codes,
+)
+
+
+def regroup(
+    labels: np.ndarray, n_blocks: int, states: np.ndarray, values: np.ndarray, width: float
+) -> tuple[np.ndarray, int, np.ndarray]:
+    """Split the blocks of ``states`` greedily by ``values`` (the delta-splitting rule).
+
+    ``states`` must hold every member of each block it touches. The first group of a block keeps
+    the block's id; later groups get new ids ``n_blocks, n_blocks + 1, ...``.
+
+    Returns:
+        ``(labels, n_blocks, split)``: updated labels (a new array), block count, and the ids of
+        the blocks that were split (old ids).
+    """
+    if states.size == 0:
+        return labels, n_blocks, np.zeros(0, dtype=np.int64)
+    seg = labels[states]
+    order = np.lexsort((values, seg))
+    st, v, seg = states[order], values[order], seg[order]
+    group = greedy_groups(seg, np.ascontiguousarray(v, dtype=np.float64), float(width))
+    starts = np.flatnonzero(np.r_[True, group[1:] != group[:-1]])
+    seg_first = np.r_[True, seg[starts][1:] != seg[starts][:-1]]
+    new_rank = np.cumsum(~seg_first) - 1
+    group_label = np.where(seg_first, seg[starts], n_blocks + new_rank)
+    out = labels.copy()
+    out[st] = group_label[group]
+    split = np.unique(seg[starts][~seg_first])
+    return out, n_blocks + int((~seg_first).sum()), split
+
+
+def reward_split(
+    labels: np.ndarray, rewards: np.ndarray, adm: np.ndarray, options: np.ndarray, width: float
+) -> np.ndarray:
+    """Split blocks so every option's reward varies by at most ``width`` inside a block (eq. 4.7).
+
+    One greedy pass per option (a loop over options, each vectorised over all states); rewards of
+    inadmissible pairs are ignored (blocks are admissibility-consistent, so they are 0 throughout).
+    """
+    n_blocks = int(labels.max()) + 1
+    states = np.arange(labels.size)
+    for o in options:
+        values = np.where(adm[:, o], rewards[:, o], 0.0)
+        labels, n_blocks, _ = regroup(labels, n_blocks, states, values, width)
+    return labels
+
+
+def _span_table(
+    sub: sp.csr_array, dstates: np.ndarray, labels: np.ndarray, n_blocks: int, k: int,
+    sizes: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Masses of the dirty states into every block, per option, and their span per criterion.
+
+    Returns per non-zero mass ``(key, state, mass)`` and per criterion ``(ukey, span)`` where
+    ``key = (block * k + option) * n_blocks + target``.
+    """
+    nd = dstates.size
+    S = labels.size
+    onehot = sp.csr_array(
+        (np.ones(S), labels.astype(np.int64), np.arange(S + 1, dtype=np.int64)), shape=(S, n_blocks)
+    )
+    M = sp.coo_array(sub @ onehot)
+    M.sum_duplicates()
+    nz = M.data > 0
+    row, target, mass = M.row[nz].astype(np.int64), M.col[nz].astype(np.int64), M.data[nz]
+    state = dstates[row % nd]
+    block = labels[state]
+    key = (block * k + row // nd) * n_blocks + target
+    order = np.argsort(key, kind="stable")
+    key, state, mass = key[order], state[order], mass[order]
+    if key.size == 0:
+        empty = np.zeros(0, dtype=np.int64)
+        return key, state, mass, empty, np.zeros(0)
+    starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
+    ukey = key[starts]
+    hi = np.maximum.reduceat(mass, starts)
+    lo = np.minimum.reduceat(mass, starts)
+    count = np.diff(np.r_[starts, key.size])
+    ublock = ukey // (k * n_blocks)
+    lo = np.where(count < sizes[ublock], 0.0, lo)
+    return key, state, mass, ukey, hi - lo
+
+
+def delta_refine(
+    labels: np.ndarray, F: sp.csr_array, k: int, delta: float, atol: float,
+    max_rounds: int | None = None,
+) -> tuple[np.ndarray, int]:
+    """Refine ``labels`` until every block is delta-stable for the ``k`` stacked options of ``F``.
+
+    Args:
+        labels: ``(S,)`` labels ``0..B-1`` whose blocks are admissibility-consistent.
+        F: ``(k*S, S)`` CSR, row ``j*S + s`` = masses of option ``j`` (zero rows = inadmissible).
+        k: number of options stacked in ``F``.
+        delta, atol: the threshold of eq. 4.6 and the rounding allowance.
+
+    Returns:
+        ``(labels, rounds)``.
+    """
+    S = labels.size
+    labels = labels.astype(np.int64, copy=True)
+    n_blocks = int(labels.max()) + 1
+    FT = sp.csr_array(F.T)
+    width = delta + atol
+    dirty = np.ones(n_blocks, dtype=bool)
+    rounds = 0
+    while True:
+        dstates = np.flatnonzero(dirty[labels])
+        if dstates.size == 0:
+            break
+        if max_rounds is not None and rounds >= max_rounds:
+            raise ModelError(f"delta refinement did not reach a fixpoint in {max_rounds} rounds")
+        rounds += 1
+        rows = (np.arange(k, dtype=np.int64)[:, None] * S + dstates[None, :]).ravel()
+        sizes = np.bincount(labels, minlength=n_blocks)
+        key, state, mass, ukey, span = _span_table(F[rows], dstates, labels, n_blocks, k, sizes)
+        bad = np.flatnonzero(span > width)
+        if bad.size == 0:
+            break
+        bad_block = ukey[bad] // (k * n_blocks)
+        pick = np.lexsort((ukey[bad], -span[bad], bad_block))
+        first = np.r_[True, bad_block[pick][1:] != bad_block[pick][:-1]]
+        chosen = np.full(n_blocks, -1, dtype=np.int64)
+        chosen[bad_block[pick][first]] = ukey[bad][pick][first]
+        hit = key == chosen[labels[state]]
+        values = np.zeros(S)
+        values[state[hit]] = mass[hit]
+        members = dstates[chosen[labels[dstates]] >= 0]
+        old_n = n_blocks
+        labels, n_blocks, split = regroup(labels, n_blocks, members, values[members], width)
+        # dirty next round: the split blocks, their new parts, and blocks of their predecessors
+        changed = np.zeros(n_blocks, dtype=bool)
+        changed[split] = True
+        changed[old_n:] = True
+        moved = np.flatnonzero(changed[labels])
+        preds = np.unique(FT[moved].indices % S) if moved.size else np.zeros(0, dtype=np.int64)
+        dirty = changed.copy()
+        dirty[labels[preds]] = True
+    return labels, rounds
+
+
+def refine(
+    partition: Partition,
+    model: SMDPModel | object,
+    *,
+    options: Sequence[int] | np.ndarray | None = None,
+    delta: float = 0.0,
+    epsilon: float | None = None,
+    rewards: np.ndarray | None = None,
+    atol: float = DEFAULT_ATOL,
+    require_admissible: bool = True,
+    max_rounds: int | None = None,
+) -> Partition:
+    """Refine ``partition`` to epsilon,delta-stability (definition 4.4) for a set of options.
+
+    Args:
+        partition: the initial partition (the result refines it).
+        model: an :class:`SMDPModel` of the options (or a FiniteMDP: its primitive actions).
+        options: indices of the options the partition must be stable for (default: all).
+        delta: threshold of eq. 4.6, in ``[0, 1]``.
+        epsilon: threshold of eq. 4.7, ``>= 0``; None ignores rewards (phases 1 and 2).
+        rewards: ``(S, O)`` task rewards ``R(s, o)`` (default: the model's ``R``).
+        atol: rounding allowance added to both thresholds.
+        require_admissible: raise when a state has no selected admissible option (the decision
+            layer needs one everywhere); phase 1 of a single option turns this off.
+        max_rounds: safety cap on delta rounds (None: until the fixpoint).
+
+    Returns:
+        The refined :class:`Partition`; its ``admissible`` table offers the selected options only.
+    """
+    smdp = as_model(model)
+    d = check_delta(delta)
+    e = check_epsilon(epsilon)
+    tol = check_atol(atol)
+    if not isinstance(partition, Partition):
+        raise ModelError(f"partition must be a Partition, got {type(partition).__name__}")
+    check_partition_fits(partition.labels, smdp.n_states)
+    sel = select_options(smdp, options)
+    adm = selected_admissible(smdp, sel)
+    if require_admissible:
+        require_cover(adm, sel)
+    pattern = row_codes(adm[:, sel])
+    labels = combine_labels(partition.labels, pattern)
+    if e is not None:
+        R = check_rewards(smdp.R if rewards is None else rewards, smdp)
+        labels = canonical_labels(reward_split(labels, R, adm, sel, e + tol))
+    F = masked_rows(smdp, sel, adm)
+    labels, _ = delta_refine(labels, F, sel.size, d, tol, max_rounds)
+    labels = canonical_labels(labels)
+    n_blocks = int(labels.max()) + 1
+    return Partition(labels, block_all(labels, n_blocks, adm))

@@ -1,0 +1,111 @@
+"""Built-in learner plugins ``smdp-q`` and ``hierarchical`` (docs/hierarchical-learning.md).
+
+A plain ``learn(mdp, ...)`` call carries no options or partition, so both learners take them as
+keywords of :meth:`learn` (``options=`` a list of :class:`adpart.options.Option`, ``partition=`` an
+:class:`adpart.partition.Partition`); the CLI reads them from the knowledge base
+(``adpart learn ENV --learner smdp-q --options ID``, ``--partition ID``). Without options
+``smdp-q`` learns over the primitive actions alone (flat Q-learning in SMDP form) and
+``hierarchical`` refuses to run.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+from adpart.errors import TaskError
+from adpart.mdp.model import FiniteMDP
+from adpart.plugins.hookspecs import hookimpl
+from adpart.plugins.registry import Param, Registrar
+
+
+class SMDPQLearner:
+    """SMDP Q-learning over options, K runs in lock-step, scored exactly."""
+
+    name = "smdp-q"
+    description = "SMDP Q-learning over options (plus primitive actions), runs in lock-step"
+    params = (
+        Param("alpha", "str", "1/n^0.8", "step-size schedule: 0.1 | 1/n^0.8 | exp:0.5,0.99"),
+        Param("epsilon", "str", "0.1", "exploration schedule, same forms as --alpha"),
+        Param("primitives", "bool", False, "offer the primitive actions beside the options"),
+        Param("max-steps", "int", 1000, "primitive-step limit of one episode", min=1),
+        Param("q-init", "float", 0.0, "initial value of every Q(s, o)"),
+        Param("kernel", "str", "auto", "step kernel", choices=("auto", "numba", "python")),
+    )
+
+    def __init__(self, alpha: str = "1/n^0.8", epsilon: str = "0.1", primitives: bool = False,
+                 max_steps: int = 1000, q_init: float = 0.0, kernel: str = "auto") -> None:
+        self.alpha, self.epsilon, self.primitives = alpha, epsilon, bool(primitives)
+        self.max_steps, self.q_init = max_steps, q_init
+        self.kernel = None if kernel == "auto" else kernel
+
+    def learn(self, mdp: FiniteMDP, *, runs: int, episodes: int, seed: int, eval_every: int,
+              progress: Callable[[int, int], object] | None = None,
+              options: Sequence[object] | None = None, partition: object = None) -> object:
+        from adpart.learning.smdp_q import smdp_q_learning
+
+        if partition is not None:
+            raise TaskError("smdp-q learns over states; use --learner hierarchical for a partition")
+        opts = list(options or [])
+        return smdp_q_learning(
+            mdp, opts, include_primitives=self.primitives or not opts, runs=runs,
+            episodes=episodes, seed=seed, alpha=self.alpha, epsilon=self.epsilon,
+            max_steps_per_episode=self.max_steps, eval_every=eval_every, progress=progress,
+            q_init=self.q_init, kernel=self.kernel,
+        )
+
+
+class HierarchicalLearner:
+    """Decision-layer learning with inconsistency refinement or its alternatives (4.3)."""
+
+    name = "hierarchical"
+    description = "SMDP Q on a partition's blocks, refined where flat and abstract values disagree"
+    params = (
+        Param("mode", "str", "inconsistency", "how the goal becomes reachable (section 4.3)",
+              choices=("inconsistency", "action-refinement", "reward-variation")),
+        Param("delta", "float", 0.0, "delta of eq. 4.6 for building/refining blocks", min=0.0),
+        Param("partition-epsilon", "float", 0.0, "epsilon of eq. 4.7 (reward split)", min=0.0),
+        Param("threshold", "float", -1.0, "inconsistency threshold L; < 0 = scale-aware default"),
+        Param("threshold-scale", "float", 0.5, "default L = min(thm 4.5, scale x reward span)",
+              min=0.0),
+        Param("min-visits", "int", 2, "visits of the flat pair and block before a test fires",
+              min=0),
+        Param("alpha", "str", "1/n^0.8", "step-size schedule"),
+        Param("epsilon", "str", "0.1", "exploration schedule"),
+        Param("max-steps", "int", 1000, "primitive-step limit of one episode", min=1),
+        Param("kernel", "str", "auto", "step kernel", choices=("auto", "numba", "python")),
+    )
+
+    def __init__(self, mode: str = "inconsistency", delta: float = 0.0,
+                 partition_epsilon: float = 0.0, threshold: float = -1.0,
+                 threshold_scale: float = 0.5, min_visits: int = 2, alpha: str = "1/n^0.8",
+                 epsilon: str = "0.1", max_steps: int = 1000, kernel: str = "auto") -> None:
+        self.mode, self.delta, self.partition_epsilon = mode, delta, partition_epsilon
+        self.threshold = None if threshold < 0 else threshold
+        self.threshold_scale, self.min_visits = threshold_scale, min_visits
+        self.alpha, self.epsilon, self.max_steps = alpha, epsilon, max_steps
+        self.kernel = None if kernel == "auto" else kernel
+
+    def learn(self, mdp: FiniteMDP, *, runs: int, episodes: int, seed: int, eval_every: int,
+              progress: Callable[[int, int], object] | None = None,
+              options: Sequence[object] | None = None, partition: object = None) -> object:
+        from adpart.learning.hierarchical import hierarchical_learning
+
+        if not options:
+            raise TaskError(
+                "the hierarchical learner needs options (and optionally a partition); pass "
+                "--options ID (and --partition ID) from the knowledge base"
+            )
+        return hierarchical_learning(
+            mdp, list(options), partition, mode=self.mode, delta=self.delta,
+            epsilon=self.partition_epsilon, threshold=self.threshold,
+            threshold_scale=self.threshold_scale, min_visits=self.min_visits, runs=runs,
+            episodes=episodes, seed=seed, alpha=self.alpha, epsilon_greedy=self.epsilon,
+            max_steps_per_episode=self.max_steps, eval_every=eval_every, progress=progress,
+            kernel=self.kernel,
+        )
+
+
+@hookimpl
+def register_learners(register: Registrar) -> None:
+    register(SMDPQLearner)
+    register(HierarchicalLearner)
