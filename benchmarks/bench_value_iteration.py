@@ -35,10 +35,12 @@ import numpy as np
 import scipy.sparse as sp
 from mdptoolbox.mdp import ValueIteration
 
+from adpart.mdp import _kernels
 from adpart.mdp.generate import random_grid_mdp
 from adpart.mdp.model import FiniteMDP
 from adpart.mdp.solvers import (
     _Backup,
+    default_kernel,
     modified_policy_iteration,
     policy_evaluation,
     value_iteration,
@@ -114,8 +116,8 @@ def run_size(n: int, *, epsilon: float = EPSILON, gamma: float = GAMMA, repeats:
     tool = pymdptoolbox_solver(mdp, epsilon)
     k = 5
     t_sweep_tool, _ = _best_time(lambda: tool._bellmanOperator(V0), k)
-    backup = _Backup(smdp)
-    t_sweep_ad, _ = _best_time(lambda: backup.backup(V0), k)
+    backup = _Backup(smdp)  # the default kernel: fused numba backup + greedy policy when present
+    t_sweep_ad, _ = _best_time(lambda: backup.step(V0, want_policy=True), k)
 
     def run_tool() -> ValueIteration:
         vi = pymdptoolbox_solver(mdp, epsilon)
@@ -125,12 +127,21 @@ def run_size(n: int, *, epsilon: float = EPSILON, gamma: float = GAMMA, repeats:
     t_tool, tool = _best_time(run_tool, repeats)
     t_vi, sol_vi = _best_time(lambda: value_iteration(mdp, epsilon), repeats)
     t_mpi, sol_mpi = _best_time(lambda: modified_policy_iteration(mdp, epsilon), repeats)
+    t_np, sol_np = _best_time(
+        lambda: modified_policy_iteration(mdp, epsilon, kernel="numpy"), repeats
+    )
 
     tight = modified_policy_iteration(mdp, 1e-9)
     V_star = tight.V
     pol_tool = np.asarray(tool.policy, dtype=np.int64)
     losses = {}
-    for name, pol in (("pymdptoolbox", pol_tool), ("vi", sol_vi.policy), ("mpi", sol_mpi.policy)):
+    named = (
+        ("pymdptoolbox", pol_tool),
+        ("vi", sol_vi.policy),
+        ("mpi", sol_mpi.policy),
+        ("mpi-numpy", sol_np.policy),
+    )
+    for name, pol in named:
         V_pi, err = _policy_value(mdp, pol, V_star)
         losses[name] = (float(np.max(V_star - V_pi)), err + tight.value_error_bound)
     return {
@@ -144,6 +155,9 @@ def run_size(n: int, *, epsilon: float = EPSILON, gamma: float = GAMMA, repeats:
         "mpi_sweeps": sol_mpi.sweeps,
         "mpi_evals": sol_mpi.evaluation_sweeps,
         "mpi_time": t_mpi,
+        "np_sweeps": sol_np.sweeps,
+        "np_evals": sol_np.evaluation_sweeps,
+        "np_time": t_np,
         "losses": losses,
         # adpart shifts V to MacQueen's midpoint (a constant), so compare values up to a constant.
         "value_gap": float(np.ptp(np.asarray(tool.V) - sol_vi.V)),
@@ -158,7 +172,9 @@ def _print_row(r: dict) -> None:
         f"{r['vi_time']:7.2f} {r['vi_sweeps']:>5d} {r['vi_sweep_ms']:7.2f} "
         f"{r['tool_time'] / r['vi_time']:5.1f}x | "
         f"{r['mpi_time']:7.2f} {r['mpi_sweeps']:>3d}+{r['mpi_evals']:<4d} "
-        f"{r['tool_time'] / r['mpi_time']:5.1f}x | {r['tool_sweep_ms'] / r['vi_sweep_ms']:5.1f}x",
+        f"{r['tool_time'] / r['mpi_time']:5.1f}x | "
+        f"{r['np_time']:7.2f} {r['np_sweeps']:>3d}+{r['np_evals']:<4d} "
+        f"{r['tool_time'] / r['np_time']:5.1f}x | {r['tool_sweep_ms'] / r['vi_sweep_ms']:5.1f}x",
         flush=True,
     )
 
@@ -179,7 +195,18 @@ def main(sizes: Sequence[int] = SIZES, epsilon: float = EPSILON, repeats: int = 
     header = (
         f"{'states':>9} | {'pymdptoolbox':^8} {'sweeps':>5} {'ms/swp':>7} | "
         f"{'vi':>7} {'sweeps':>5} {'ms/swp':>7} {'ratio':>6} | "
-        f"{'mpi':>7} {'sweeps':>8} {'ratio':>6} | {'swp ratio':>6}"
+        f"{'mpi':>7} {'sweeps':>8} {'ratio':>6} | "
+        f"{'mpi-np':>7} {'sweeps':>8} {'ratio':>6} | {'swp ratio':>6}"
+    )
+    kernel = default_kernel()
+    t0 = time.perf_counter()
+    _kernels.load()
+    value_iteration(random_grid_mdp(100, seed=0), epsilon)  # compile (or load the cache) once
+    modified_policy_iteration(random_grid_mdp(100, seed=0), epsilon)
+    print(
+        f"vi/mpi use kernel={kernel!r} (numba compile or cache load "
+        f"{time.perf_counter() - t0:.2f} s, once, not timed); "
+        "mpi-np = modified_policy_iteration(kernel='numpy')"
     )
     print(header)
     print("-" * len(header))

@@ -36,6 +36,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from adpart.errors import ModelError
+from adpart.mdp import _kernels
 from adpart.mdp.model import SMDPModel
 
 
@@ -70,10 +71,35 @@ class Solution:
     rule: str
 
 
-class _Backup:
-    """Precomputed pieces of the Bellman backup for one model (validate and convert once)."""
+#: Names accepted by the solvers' ``kernel`` argument.
+KERNELS = ("numba", "numpy")
 
-    def __init__(self, model: SMDPModel) -> None:
+
+def default_kernel() -> str:
+    """``"numba"`` when numba imports (fused compiled backups, Gauss-Seidel evaluation), else
+    ``"numpy"`` (scipy mat-vecs, BiCGSTAB evaluation)."""
+    return "numba" if _kernels.numba_available() else "numpy"
+
+
+def _resolve_kernel(kernel: str | None) -> str:
+    if kernel is None:
+        return default_kernel()
+    if kernel not in KERNELS:
+        raise ModelError(f"unknown solver kernel {kernel!r}; use one of {KERNELS} (or None)")
+    if kernel == "numba" and not _kernels.numba_available():
+        raise ModelError("kernel='numba' needs numba installed; pip install numba or use 'numpy'")
+    return kernel
+
+
+class _Backup:
+    """Precomputed pieces of the Bellman backup for one model (validate and convert once).
+
+    ``kernel="numba"`` runs the fused compiled kernels of :mod:`adpart.mdp._kernels`;
+    ``"numpy"`` one scipy mat-vec over all ``O*S`` rows plus ``O`` vectorised row operations.
+    Both give bit-identical backups, greedy policies and policy rows.
+    """
+
+    def __init__(self, model: SMDPModel, kernel: str | None = None) -> None:
         self.S, self.O = model.n_states, model.n_actions
         self.F = model.F
         # (O, S) rewards with -inf where the option is not admissible: max() then ignores them.
@@ -81,6 +107,8 @@ class _Backup:
         self.kappa = model.modulus
         self.uniform = model.uniform_discount
         self._states = np.arange(self.S)
+        self.kernel = _resolve_kernel(kernel)
+        self._k = _kernels.load() if self.kernel == "numba" else None
 
     def q_t(self, V: np.ndarray) -> np.ndarray:
         """``(O, S)`` Q values: one sparse mat-vec over the action-major rows."""
@@ -95,18 +123,54 @@ class _Backup:
         ``np.argmax(Qt, axis=0)``, which walks the short axis of a C-ordered array.
         """
         policy = np.zeros(self.S, dtype=np.int64)
-        for o in range(self.O - 1, 0, -1):
+        for o in range(self.O - 1, -1, -1):  # down to 0: a tie with action 0 must give 0
             policy[Qt[o] == V_new] = o
         return policy
 
     def backup(self, V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(T V, Q^T)``; callers derive the greedy policy from both only when they need it."""
+        """``(T V, Q^T)`` by scipy (the numpy path; also the benchmark's per-sweep figure)."""
         Qt = self.q_t(V)
         return Qt.max(axis=0), Qt
 
+    def step(
+        self, V: np.ndarray, want_policy: bool
+    ) -> tuple[np.ndarray, np.ndarray | None, float, float]:
+        """``(T V, greedy policy or None, max(T V - V), min(T V - V))``.
+
+        The compiled kernel gets the policy for free in the same pass; the numpy path extracts
+        it only when ``want_policy`` (value iteration needs it after the last backup only).
+        """
+        if self._k is not None:
+            V_new = np.empty(self.S)
+            policy = np.empty(self.S, dtype=np.int64)
+            dmax, dmin = self._k.bellman_backup(
+                self.F.indptr, self.F.indices, self.F.data, self.R_t, V, V_new, policy
+            )
+            return V_new, policy, float(dmax), float(dmin)
+        V_new, Qt = self.backup(V)
+        delta = V_new - V
+        policy = self.greedy(Qt, V_new) if want_policy else None
+        return V_new, policy, float(delta.max()), float(delta.min())
+
     def policy_rows(self, policy: np.ndarray) -> tuple[sp.csr_array, np.ndarray]:
+        """``(F_pi, R_pi)``: the ``S`` rows ``pi(s)*S + s`` of ``F`` as a CSR, and their rewards."""
+        if self._k is not None:
+            ptr, idx, val, R_pi = self._k.gather_policy(
+                self.F.indptr, self.F.indices, self.F.data, self.R_t, policy
+            )
+            return sp.csr_array((val, idx, ptr), shape=(self.S, self.S)), R_pi
         rows = policy * self.S + self._states
         return self.F[rows], self.R_t[policy, self._states]
+
+    def policy_sweep(self, F_pi: sp.csr_array, R_pi: np.ndarray, V: np.ndarray) -> np.ndarray:
+        """One Jacobi sweep ``R_pi + F_pi V``."""
+        if self._k is not None:
+            out = np.empty(self.S)
+            self._k.policy_product(F_pi.indptr, F_pi.indices, F_pi.data, R_pi, V, out)
+            return out
+        W = F_pi @ V
+        W += R_pi
+        return W
 
 
 def _stop_threshold(kappa: float, epsilon: float, uniform: bool) -> tuple[float, str]:
@@ -123,20 +187,26 @@ def _statistic(delta: np.ndarray, rule: str) -> float:
     return float(np.ptp(delta)) if rule == "span" else float(np.abs(delta).max())
 
 
+def _stat_of(dmax: float, dmin: float, rule: str) -> float:
+    """The stopping statistic from ``max`` and ``min`` of ``T V - V`` (as :func:`_statistic`)."""
+    return dmax - dmin if rule == "span" else max(dmax, -dmin)
+
+
 def _finish(
-    V_new: np.ndarray, delta: np.ndarray, kappa: float, residual: float, rule: str
+    V_new: np.ndarray, dmax: float, dmin: float, kappa: float, residual: float, rule: str
 ) -> tuple[np.ndarray, float, float]:
     """Final values and (policy loss bound, value error bound) after the last backup.
 
-    With the span rule the values are moved to the midpoint of MacQueen's bounds
-    ``T V + kappa/(1-kappa) [min(T V - V), max(T V - V)]`` (Puterman Thm. 6.6.3), which bracket
-    ``V*`` for any ``V``; the greedy policy is unchanged by the constant shift.
+    ``dmax`` and ``dmin`` are ``max`` and ``min`` of ``T V - V``. With the span rule the values
+    are moved to the midpoint of MacQueen's bounds ``T V + kappa/(1-kappa) [dmin, dmax]``
+    (Puterman Thm. 6.6.3), which bracket ``V*`` for any ``V``; the greedy policy is unchanged by
+    the constant shift.
     """
     if kappa >= 1.0:
         return V_new, np.inf, np.inf
     scale = kappa / (1.0 - kappa)
     if rule == "span":
-        shift = scale * 0.5 * (float(delta.max()) + float(delta.min()))
+        shift = scale * 0.5 * (dmax + dmin)
         return V_new + shift, scale * residual, 0.5 * scale * residual
     return V_new, 2.0 * scale * residual, scale * residual
 
@@ -161,6 +231,7 @@ def value_iteration(
     *,
     max_sweeps: int = 100_000,
     V0: np.ndarray | None = None,
+    kernel: str | None = None,
 ) -> Solution:
     """Jacobi value iteration until the greedy policy is ``epsilon``-optimal.
 
@@ -169,27 +240,32 @@ def value_iteration(
         epsilon: the guaranteed bound on the greedy policy's loss ``||V* - V^pi||_inf``.
         max_sweeps: give up after this many backups (``converged`` is then False).
         V0: starting values (zeros by default).
+        kernel: ``"numba"`` (fused compiled backup), ``"numpy"`` (scipy), or ``None`` for
+            :func:`default_kernel`. Both perform bit-identical backups, so the result is the same.
     """
     _check_epsilon(epsilon)
     smdp = model.as_smdp()
-    b = _Backup(smdp)
+    b = _Backup(smdp, kernel)
     threshold, rule = _stop_threshold(b.kappa, epsilon, b.uniform)
     V = _initial_values(V0, b.S)
     residual, converged, sweeps = np.inf, False, 0
     policy = np.zeros(b.S, dtype=np.int64)
-    delta = np.zeros(b.S)
+    dmax = dmin = 0.0
     while sweeps < max_sweeps:
-        V_new, Qt = b.backup(V)
         sweeps += 1
-        delta = V_new - V
-        residual = _statistic(delta, rule)
-        V = V_new
+        last = sweeps == max_sweeps
+        # The numpy path extracts the policy only when it might be the last backup's; its
+        # stopping test needs only T V, so it backs up once more with the policy if it stops.
+        V_new, pol, dmax, dmin = b.step(V, want_policy=last)
+        residual = _stat_of(dmax, dmin, rule)
         converged = residual < threshold
-        if converged or sweeps == max_sweeps:
-            # Only the last backup's policy is returned, so only it is extracted.
-            policy = b.greedy(Qt, V_new)
+        if (converged or last) and pol is None:
+            pol = b.greedy(b.q_t(V), V_new)
+        V = V_new
+        if converged or last:
+            policy = pol  # type: ignore[assignment]
             break
-    V, loss, err = _finish(V, delta, b.kappa, residual, rule)
+    V, loss, err = _finish(V, dmax, dmin, b.kappa, residual, rule)
     return Solution(V, policy, sweeps, 0, residual, loss, err, converged, rule)
 
 
@@ -292,6 +368,7 @@ def modified_policy_iteration(
     evaluation_sweeps: int | None = None,
     max_sweeps: int = 100_000,
     V0: np.ndarray | None = None,
+    kernel: str | None = None,
 ) -> Solution:
     """Modified policy iteration (Puterman 6.5) with value iteration's epsilon-optimal stop.
 
@@ -308,28 +385,31 @@ def modified_policy_iteration(
             (:func:`_bicgstab`) when ``kappa < 1`` and ``T_pi`` sweeps otherwise, using at most
             ``log(EVALUATION_REDUCTION) / log(kappa)`` mat-vecs (20 sweeps when ``kappa >= 1``).
             Each full backup then cuts the residual by about that factor unless the policy
-            changes, so a solve needs about as many full backups as policy iteration.
+            changes, so a solve needs about as many full backups as policy iteration. With the
+            numba kernel the adaptive evaluation is in-place Gauss-Seidel sweeps of ``T_pi``
+            instead (same cap), stopped when a sweep's change has ``stat <= `` that target.
+        kernel: ``"numba"`` (fused compiled backup and Gauss-Seidel evaluation), ``"numpy"``
+            (scipy mat-vecs and BiCGSTAB), or ``None`` for :func:`default_kernel`. Backups and
+            fixed-``evaluation_sweeps`` runs are bit-identical across kernels; adaptive runs
+            reach the same guarantee by different evaluations.
     """
     _check_epsilon(epsilon)
     if evaluation_sweeps is not None and evaluation_sweeps < 0:
         raise ModelError(f"evaluation_sweeps = {evaluation_sweeps} must be >= 0 (or None)")
     smdp = model.as_smdp()
-    b = _Backup(smdp)
+    b = _Backup(smdp, kernel)
     threshold, rule = _stop_threshold(b.kappa, epsilon, b.uniform)
     adaptive = evaluation_sweeps is None
     cap = _evaluation_cap(b.kappa) if adaptive else int(evaluation_sweeps)  # type: ignore[arg-type]
     V = _initial_values(V0, b.S)
     residual, converged, sweeps, partial = np.inf, False, 0, 0
     policy = np.zeros(b.S, dtype=np.int64)
-    delta = np.zeros(b.S)
+    dmax = dmin = 0.0
     while sweeps < max_sweeps:
-        V_new, Qt = b.backup(V)
+        V, pol, dmax, dmin = b.step(V, want_policy=True)
+        policy = pol  # type: ignore[assignment]
         sweeps += 1
-        delta = V_new - V
-        residual = _statistic(delta, rule)
-        V = V_new
-        policy = b.greedy(Qt, V_new)
-        del Qt
+        residual = _stat_of(dmax, dmin, rule)
         if residual < threshold:
             converged = True
             break
@@ -337,19 +417,25 @@ def modified_policy_iteration(
             continue
         F_pi, R_pi = b.policy_rows(policy)
         target = max(EVALUATION_REDUCTION * residual, 0.5 * threshold)
+        if adaptive and b._k is not None:
+            partial += int(
+                b._k.gauss_seidel_evaluation(
+                    F_pi.indptr, F_pi.indices, F_pi.data, R_pi, V, target, cap, rule == "span"
+                )
+            )
+            continue
         if adaptive and b.kappa < 1.0:
             V, used = _bicgstab(F_pi, R_pi, V, target, cap, rule)
             partial += used
             continue
         for _ in range(cap):
-            W = F_pi @ V
-            W += R_pi
+            W = b.policy_sweep(F_pi, R_pi, V)
             partial += 1
             done = adaptive and _statistic(W - V, rule) <= target
             V = W
             if done:
                 break
-    V, loss, err = _finish(V, delta, b.kappa, residual, rule)
+    V, loss, err = _finish(V, dmax, dmin, b.kappa, residual, rule)
     return Solution(V, policy, sweeps, partial, residual, loss, err, converged, rule)
 
 
