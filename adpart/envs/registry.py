@@ -19,6 +19,7 @@ BUILTIN_DOMAINS: dict[str, str] = {
     "three-floor-arm": "adpart.envs.domains.three_floor:ThreeFloorArm",
     "parr-maze": "adpart.envs.domains.parr_maze:ParrMaze",
     "taxi": "adpart.envs.domains.taxi:Taxi",
+    "taxi-fickle": "adpart.envs.domains.taxi:FickleTaxi",
     "urban": "adpart.envs.domains.urban:Urban",
 }
 

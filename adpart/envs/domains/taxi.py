@@ -28,11 +28,24 @@ Two choices are parameters:
   destination, so the passenger can never be re-seated at another landmark mid-episode.
   ``putdown="gymnasium"`` puts the passenger down at that landmark for -1 (Gymnasium's ``P``).
 * ``slip=True``: each move succeeds w.p. 0.8 and goes to each perpendicular side w.p. 0.1; each
-  outcome blocked by a wall stays put (Dietterich's noisy moves). This is only the *move* half of
-  Dietterich's fickle Taxi: the destination change after pickup needs a state flag ("has the taxi
-  moved away from the source yet") that the 500-state encoding lacks, so it is not modelled here.
-  Gymnasium's ``is_rainy`` differs in one point: when the intended move is blocked it keeps the
-  taxi in place with probability 1 (no sideways slip).
+  outcome blocked by a wall stays put (Dietterich's noisy moves). Gymnasium's ``is_rainy``
+  differs in one point: when the intended move is blocked it keeps the taxi in place with
+  probability 1 (no sideways slip).
+* ``fickle=True`` (Dietterich 2000, sec. 7.1; also the environment ``taxi-fickle``): noisy moves
+  *and* a fickle passenger - after the pickup, on the first step on which the taxi actually
+  leaves the source cell, the passenger changes destination with probability
+  ``fickle_probability = 0.3``, to one of the *other* three landmarks uniformly (0.1 each; the
+  rule of Gymnasium's ``fickle_passenger``). This is encoded in the model, not in a simulator:
+  the change depends on "picked up, has not moved yet", which the 500-state encoding cannot
+  express, so fickle Taxi has **516 states**: the 500 above plus 16 *pending* states
+  ``500 + 4 * landmark + destination`` (passenger just picked up at ``landmark``, taxi still on
+  it, destination not yet re-drawn). A legal Pickup enters a pending state; a move that leaves
+  the cell resolves it (destination kept w.p. 0.7, each other landmark w.p. 0.1); a blocked move
+  keeps it. Under the ``dietterich`` putdown rule the passenger is picked up once per episode, so
+  the change can happen at most once, as in the paper; the ``gymnasium`` rule (re-pickups) is
+  refused with fickle. Gymnasium's ``P`` omits the change altogether (it happens in ``step()``),
+  so a model built from it is silently wrong for fickle Taxi. Feature ``pending`` (0/1) marks
+  the 16 states; ``passenger`` is 4 (in the taxi) there.
 
 The discount defaults to ``gamma = 0.95``. Dietterich used undiscounted returns (gamma = 1),
 which FiniteMDP accepts too (``Taxi(gamma=1.0)``); 0.95 keeps every Bellman operator a
@@ -72,6 +85,10 @@ IN_TAXI = 4
 N_PASSENGER = 5
 N_DEST = 4
 N_STATES = N_ROWS * N_COLS * N_PASSENGER * N_DEST
+#: Fickle Taxi: the 500 states plus one "just picked up" state per (landmark, destination).
+N_PENDING = len(LANDMARKS) * N_DEST
+N_STATES_FICKLE = N_STATES + N_PENDING
+FICKLE_PROBABILITY = 0.3
 ACTION_NAMES: tuple[str, ...] = ("South", "North", "East", "West", "Pickup", "Putdown")
 SOUTH, NORTH, EAST, WEST, PICKUP, PUTDOWN = range(6)
 #: (d_row, d_col) of each move action.
@@ -117,6 +134,9 @@ class Taxi(Domain):
         slip: noisy moves, 0.8 intended and 0.1 to each perpendicular side.
         slip_probability: probability of the intended move when ``slip`` is on.
         gamma: discount factor of the ``deliver`` task.
+        fickle: Dietterich's fickle Taxi (516 states; implies ``slip``; see the module docstring).
+        fickle_probability: probability that the passenger changes destination on the first
+            move away from the source.
     """
 
     name = "taxi"
@@ -128,10 +148,30 @@ class Taxi(Domain):
         self,
         *,
         putdown: str = "dietterich",
-        slip: bool = False,
+        slip: bool | None = None,
         slip_probability: float = 0.8,
         gamma: float = 0.95,
+        fickle: bool = False,
+        fickle_probability: float = FICKLE_PROBABILITY,
     ) -> None:
+        fickle = bool(fickle)
+        if slip is None:
+            slip = fickle
+        if fickle and not slip:
+            raise TaskError(
+                "fickle Taxi has noisy moves by definition (Dietterich 2000, sec. 7.1); drop "
+                "slip=False, or use fickle=False for a deterministic taxi"
+            )
+        if fickle and putdown != "dietterich":
+            raise TaskError(
+                "fickle Taxi needs putdown='dietterich': with the 'gymnasium' rule the passenger "
+                "can be re-picked up and the one-off destination change would need another flag"
+            )
+        if not 0.0 <= fickle_probability <= 1.0:
+            raise TaskError(
+                f"fickle_probability = {fickle_probability!r} is not a probability; give a value "
+                "in [0, 1] (0.3 in Dietterich's fickle Taxi)"
+            )
         if putdown not in PUTDOWN_RULES:
             raise TaskError(
                 f"taxi putdown rule {putdown!r} is unknown; use 'dietterich' (wrong-landmark "
@@ -148,6 +188,13 @@ class Taxi(Domain):
         self.slip = bool(slip)
         self.slip_probability = float(slip_probability)
         self.gamma = float(gamma)
+        self.fickle = fickle
+        self.fickle_probability = float(fickle_probability)
+
+    @property
+    def state_count(self) -> int:
+        """500, or 516 for fickle Taxi (the 16 pending states, see the module docstring)."""
+        return N_STATES_FICKLE if self.fickle else N_STATES
 
     # ----------------------------------------------------------------------------- dynamics
     @staticmethod
@@ -191,6 +238,8 @@ class Taxi(Domain):
         return next_pick, r_pick, next_put, r_put
 
     def _build_dynamics(self) -> Dynamics:
+        if self.fickle:
+            return self._build_fickle_dynamics()
         S = N_STATES
         s = np.arange(S)
         row, col, passenger, dest = decode(s)
@@ -236,6 +285,121 @@ class Taxi(Domain):
             start=self.start_distribution(),
         )
 
+    def _move_outcomes(self, a: int) -> list[tuple[int, float]]:
+        """``(direction, probability)`` outcomes of move action ``a`` (slip noise if on)."""
+        if not self.slip:
+            return [(a, 1.0)]
+        p_side = (1.0 - self.slip_probability) / 2.0
+        return [(m, p) for m, p in ((a, self.slip_probability),
+                                    *((side, p_side) for side in PERPENDICULAR[a])) if p > 0.0]
+
+    @staticmethod
+    def fickle_state_table() -> dict[str, np.ndarray]:
+        """``(516,)`` arrays ``row, col, passenger, destination, pending`` of fickle Taxi's states.
+
+        States ``0..499`` decode as in :func:`decode` (pending 0); state ``500 + 4 * l + d`` is
+        the taxi on landmark ``l`` with the passenger just picked up there and destination ``d``.
+        """
+        row, col, passenger, dest = decode(np.arange(N_STATES))
+        k = np.arange(N_PENDING)
+        lm = np.asarray(LANDMARKS)
+        return {
+            "row": np.concatenate([row, lm[k // N_DEST, 0]]),
+            "col": np.concatenate([col, lm[k // N_DEST, 1]]),
+            "passenger": np.concatenate([passenger, np.full(N_PENDING, IN_TAXI)]),
+            "destination": np.concatenate([dest, k % N_DEST]),
+            "pending": np.concatenate([np.zeros(N_STATES, np.int64), np.ones(N_PENDING, np.int64)]),
+        }
+
+    def _fickle_pickup_putdown(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Fickle Taxi's ``(next_pick, r_pick, next_put, r_put)`` over all 516 states.
+
+        A legal Pickup enters the pending state of (landmark, destination); in a pending state
+        Pickup is illegal (the passenger is already in) and Putdown delivers only if the
+        destination is that landmark (never reached from a start state, kept for completeness).
+        """
+        next_pick, r_pick, next_put, r_put = self._pickup_putdown()
+        _, _, passenger, dest = decode(np.arange(N_STATES))
+        lm = np.asarray(LANDMARKS)
+        picked = next_pick != np.arange(N_STATES)
+        # a legal pickup happens on landmark `passenger`; go to its pending state
+        next_pick = np.where(picked, N_STATES + passenger.clip(0, N_DEST - 1) * N_DEST + dest,
+                             next_pick)
+        k = np.arange(N_PENDING)
+        land, pdest = k // N_DEST, k % N_DEST
+        pend = N_STATES + k
+        deliver = land == pdest
+        next_put_p = np.where(deliver, encode(lm[land, 0], lm[land, 1], pdest, pdest), pend)
+        return (
+            np.concatenate([next_pick, pend]),
+            np.concatenate([r_pick, np.full(N_PENDING, ILLEGAL_REWARD)]),
+            np.concatenate([next_put, next_put_p]),
+            np.concatenate([r_put, np.where(deliver, DELIVERY_REWARD, ILLEGAL_REWARD)]),
+        )
+
+    def _build_fickle_dynamics(self) -> Dynamics:
+        """Fickle Taxi's 516-state model (module docstring), vectorised over states."""
+        table = self.fickle_state_table()
+        S = N_STATES_FICKLE
+        s = np.arange(S)
+        row, col, passenger = table["row"], table["col"], table["passenger"]
+        dest, pending = table["destination"], table["pending"].astype(bool)
+        f = self.fickle_probability
+        rows: list[np.ndarray] = []
+        cols: list[np.ndarray] = []
+        probs: list[np.ndarray] = []
+        for a in range(4):
+            for move, p in self._move_outcomes(a):
+                r2, c2 = self._move(row, col, move)
+                moved = (r2 != row) | (c2 != col)
+                stay_pending = pending & ~moved
+                resolves = pending & moved
+                # ordinary outcome (and the "destination kept" share of a resolving move)
+                target = np.where(stay_pending, s, encode(r2, c2, passenger, dest))
+                rows.append(a * S + s)
+                cols.append(target)
+                probs.append(np.where(resolves, p * (1.0 - f), p))
+                # the destination changes to each other landmark w.p. f / 3
+                for shift in range(1, N_DEST):
+                    idx = np.flatnonzero(resolves)
+                    rows.append(a * S + idx)
+                    cols.append(encode(r2[idx], c2[idx], IN_TAXI, (dest[idx] + shift) % N_DEST))
+                    probs.append(np.full(idx.size, p * f / (N_DEST - 1)))
+        next_pick, _, next_put, _ = self._fickle_pickup_putdown()
+        rows += [PICKUP * S + s, PUTDOWN * S + s]
+        cols += [next_pick, next_put]
+        probs += [np.ones(S), np.ones(S)]
+        P = sp.csr_array(
+            (np.concatenate(probs), (np.concatenate(rows), np.concatenate(cols))),
+            shape=(len(ACTION_NAMES) * S, S),
+        )
+        P.sum_duplicates()
+        P.eliminate_zeros()
+        features = {
+            "x": col.astype(np.int64),
+            "y": row.astype(np.int64),
+            "taxi_row": row.astype(np.int64),
+            "taxi_col": col.astype(np.int64),
+            "passenger": passenger.astype(np.int64),
+            "destination": dest.astype(np.int64),
+            "in_taxi": (passenger == IN_TAXI).astype(np.int64),
+            "pending": pending.astype(np.int64),
+        }
+        return Dynamics(
+            P=P,
+            action_names=ACTION_NAMES,
+            action_costs=np.full(len(ACTION_NAMES), STEP_REWARD),
+            features=features,
+            admissible=None,
+            start=self._padded(self.start_distribution()),
+        )
+
+    def _padded(self, values: np.ndarray) -> np.ndarray:
+        """Extend a 500-state array with zeros / False for the pending states of fickle Taxi."""
+        if not self.fickle:
+            return values
+        return np.concatenate([values, np.zeros(N_PENDING, dtype=values.dtype)])
+
     @staticmethod
     def start_distribution() -> np.ndarray:
         """Gymnasium's start distribution: uniform over taxi cell x passenger at a landmark x a
@@ -260,8 +424,11 @@ class Taxi(Domain):
     # -------------------------------------------------------------------------------- tasks
     def deliver_rewards(self) -> np.ndarray:
         """``(S, A)`` rewards of the ``deliver`` task (deterministic given ``(s, a)``)."""
-        _, r_pick, _, r_put = self._pickup_putdown()
-        R = np.full((N_STATES, len(ACTION_NAMES)), STEP_REWARD)
+        if self.fickle:
+            _, r_pick, _, r_put = self._fickle_pickup_putdown()
+        else:
+            _, r_pick, _, r_put = self._pickup_putdown()
+        R = np.full((self.state_count, len(ACTION_NAMES)), STEP_REWARD)
         R[:, PICKUP] = r_pick
         R[:, PUTDOWN] = r_put
         return R
@@ -270,12 +437,14 @@ class Taxi(Domain):
         return Task(
             name="deliver",
             reward=self.deliver_rewards(),
-            terminal=self.delivered(),
-            initial=self.start_distribution(),
+            terminal=self._padded(self.delivered()),
+            initial=self._padded(self.start_distribution()),
             gamma=self.gamma,
             description="pick the passenger up and put them down at their destination",
             spec={"kind": "taxi-deliver", "putdown": self.putdown, "slip": self.slip,
-                  "slip_probability": self.slip_probability, "gamma": self.gamma},
+                  "slip_probability": self.slip_probability, "gamma": self.gamma,
+                  **({"fickle": True, "fickle_probability": self.fickle_probability}
+                     if self.fickle else {})},
         )
 
     def tasks(self) -> Mapping[str, TaskFactory | GoalSpec]:
@@ -299,3 +468,18 @@ class Taxi(Domain):
         for (r, c), label, color in zip(LANDMARKS, LANDMARK_NAMES, colors, strict=True):
             ax.text(c - 0.3, r - 0.22, label, color=color, fontsize=14, fontweight="bold",
                     ha="center", va="center", zorder=6)
+
+
+class FickleTaxi(Taxi):
+    """Dietterich's fickle Taxi (516 states): ``Taxi(fickle=True)`` under its own name."""
+
+    name = "taxi-fickle"
+    description = (
+        "Dietterich's fickle Taxi: noisy moves, the passenger may change destination after "
+        "pickup (516 states)"
+    )
+    source = "Dietterich 2000, JAIR 13, sec. 7.1 (fickle Taxi); dissertation chapter 6"
+
+    def __init__(self, **kwargs: object) -> None:
+        kwargs.setdefault("fickle", True)
+        super().__init__(**kwargs)  # type: ignore[arg-type]

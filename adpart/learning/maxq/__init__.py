@@ -1,0 +1,32 @@
+"""MAXQ-Q (Dietterich 2000): declarative task graphs, the learner, and the built-in graphs.
+
+See ``docs/maxq.md``. :class:`TaskGraph` / :class:`Subtask` describe a hierarchy,
+:func:`maxq_q` learns it, :func:`get_graph` returns the built-in ``taxi`` graph.
+"""
+
+from __future__ import annotations
+
+from adpart.learning.maxq.graphs import GRAPHS, get_graph, graph_for, taxi_graph
+from adpart.learning.maxq.maxq_q import (
+    MaxQResult,
+    MaxQTables,
+    decomposed_values,
+    greedy_hierarchical_policy,
+    maxq_q,
+)
+from adpart.learning.maxq.taskgraph import CompiledGraph, Subtask, TaskGraph
+
+__all__ = [
+    "GRAPHS",
+    "CompiledGraph",
+    "MaxQResult",
+    "MaxQTables",
+    "Subtask",
+    "TaskGraph",
+    "decomposed_values",
+    "get_graph",
+    "graph_for",
+    "greedy_hierarchical_policy",
+    "maxq_q",
+    "taxi_graph",
+]
