@@ -24,6 +24,8 @@ ENTRY_POINT_GROUP = "adpart"
 BUILTIN_PLUGINS: dict[str, str] = {
     "environments": "adpart.plugins.builtin.environments",
     "learners": "adpart.plugins.builtin.learners",
+    "maxq": "adpart.plugins.builtin.maxq",
+    "hierarchical": "adpart.plugins.builtin.hierarchical",
     "executors": "adpart.plugins.builtin.executors",
     "criteria": "adpart.plugins.builtin.criteria",
 }

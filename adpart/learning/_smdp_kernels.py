@@ -1,0 +1,396 @@
+"""The lock-step SMDP Q-learning kernel over options on a (per-run) decision layer.
+
+One rule, two executions of the *same source*: :func:`lockstep` is plain Python over numpy arrays
+(the ``python`` kernel, the reference) and the identical function compiled by numba (the ``numba``
+kernel, the default). Both use only scalar IEEE operations and ``math.pow``, so they agree bit for
+bit.
+
+What one call does: it advances K independent agents until every agent has completed
+``target[k]`` episodes (returns 0), or some still-active agent has used up its pre-drawn uniforms
+(returns 1; the driver refills that agent's buffers from its own generators), or some agent met an
+inconsistency (returns 2; ``fired[k] = (state, block, action)`` and the driver refines that run's
+partition, section 4.3.3, before calling again).
+
+**Decision layer.** Run ``k`` decides on blocks: ``labels[k, s]`` is the block of state ``s`` and
+``adm[k, b, o]`` says whether option ``o`` is offered in block ``b``; ``Q[k, b, o]`` is its SMDP
+Q-value (``-inf`` where not offered). Plain SMDP Q-learning over states is the identity partition
+(``labels[k] = arange(S)``, ``adm[k] =`` the initiation sets).
+
+**One primitive step** of agent ``k`` reads one row of four uniforms ``u = U[k, c]`` and one row of
+two auxiliary uniforms ``v = W[k, c]`` (a separate stream, so that the four-uniform stream is the
+flat learner's exactly, :mod:`adpart.learning._kernels`):
+
+0. (hierarchical only, at a decision point in state ``s`` of block ``b``) the inconsistency test:
+   with ``a*`` the flat greedy action of ``s`` (lowest index on ties), if ``a*`` is not yet
+   offered in ``b``, ``n_flat(s, a*) >= min_visits``, ``n(b) >= min_visits`` and
+   ``Q_flat(s, a*) - max_o Q(b, o) > threshold``, the agent stops *before* using its row and the
+   kernel returns 2;
+1. at a decision point: ``n(b) += 1``; ``epsilon = max(floor, eps_ep * n(b)**-omega)``; if
+   ``u[0] < epsilon`` the option is the ``floor(u[1] m)``-th of the ``m`` options offered in ``b``
+   (in index order; hierarchical: also every primitive action admissible in ``s`` - "the agent
+   has access to the original actions as well as to all options", 4.3.3 - whose step updates the
+   flat Q only, as it is not an option of ``b``), else the ``floor(u[1] t)``-th of the ``t``
+   options tied for ``max_o Q(b, o)``;
+   the option starts: ``s0 = s``, ``b0 = b``, ``G = 0``, ``g = 1``;
+2. the option's action in ``s``: its deterministic action, or for a stochastic policy the first
+   action whose cumulative probability exceeds ``v[0]``;
+3. ``s'`` = the successor drawn with ``u[2]`` exactly as :meth:`FiniteMDP.sample_next`;
+4. (hierarchical only) the flat Watkins update of ``Q_flat(s, a)`` with its own visit count;
+5. ``G += g r``; ``g *= gamma``;
+6. the option ends if ``s'`` is terminal (no bootstrap: ``target = G``), if the episode's step
+   limit is hit (the cut bootstraps), or if ``v[1] < beta_o(s')``; then, with ``n(b0, o) += 1`` and
+   ``alpha = max(floor, alpha_ep * n(b0, o)**-omega)``,
+   ``Q(b0, o) += alpha (G + g max_o' Q(block(s'), o') - Q(b0, o))`` (section 3.1, SMDP Q-learning);
+7. the episode ends on arrival in a terminal state or after ``horizon`` steps; the next start
+   state is the first whose cumulative start probability exceeds ``u[3]``.
+
+With every option a primitive action (``beta = 1``, deterministic) and the identity partition this
+is the flat kernel's rule operation for operation: ``G + g * best = (0 + 1 * r) + gamma * best``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+#: Uniforms per agent-step in the main stream (explore?, which option, successor, next start).
+UNIFORMS_PER_STEP = 4
+#: Uniforms per agent-step in the auxiliary stream (stochastic action, termination draw).
+AUX_PER_STEP = 2
+
+
+@dataclass
+class SMDPLockStepState:
+    """All arrays the kernel reads and writes (the driver owns them; the kernel mutates in place).
+
+    Model: ``keys``/``indptr``/``indices`` (the transition CSR and its sampler keys), ``R`` (S, A),
+    ``terminal`` (S,), ``start_cdf`` (S,), ``last_start``, ``gamma``, ``horizon``, the schedules
+    ``alpha``/``eps`` as ``(scale, rate, omega, floor)``.
+
+    Options: ``pol_act`` (O, S) int64: the action, ``-1`` undefined, ``-2 - m`` = stochastic row
+    ``m`` of ``pol_cdf`` (M, A) (cumulative, 2.0 from the last positive entry on); ``beta`` (O, S).
+
+    Decision layer per run: ``labels`` (K, S), ``adm`` (K, Bcap, O) bool, ``Q`` (K, Bcap, O),
+    ``n_o`` (K, Bcap, O) and ``n_d`` (K, Bcap) counts, ``n_blocks`` (K,).
+
+    Flat layer (hierarchical): ``track_flat``, ``Qf``/``nf`` (K, S, A); inconsistency test
+    ``check_on``, ``threshold``, ``min_visits``, ``prim_opt`` (A,) option index of each primitive
+    action (-1: none); ``prim_adm`` (S, A) where each action may be taken; ``fired`` (K, 3).
+
+    Agents: ``state``, ``episode``, ``target``, ``t_ep``, ``d_ep``, ``ret``, ``dret``, ``gpow``,
+    ``cur`` (running option or -1), ``s0``, ``b0``, ``G``, ``g``, ``alpha_ep``, ``eps_ep``;
+    uniforms ``U`` (K, B, 4), ``W`` (K, B, 2), ``cursor`` (K,).
+
+    Outputs (K, N): ``out_steps``, ``out_dec``, ``out_ret``, ``out_dret``, ``out_blocks``.
+    """
+
+    keys: np.ndarray
+    indptr: np.ndarray
+    indices: np.ndarray
+    R: np.ndarray
+    terminal: np.ndarray
+    start_cdf: np.ndarray
+    last_start: int
+    gamma: float
+    horizon: int
+    alpha: tuple[float, float, float, float]
+    eps: tuple[float, float, float, float]
+    pol_act: np.ndarray
+    pol_cdf: np.ndarray
+    beta: np.ndarray
+    labels: np.ndarray
+    adm: np.ndarray
+    Q: np.ndarray
+    n_o: np.ndarray
+    n_d: np.ndarray
+    n_blocks: np.ndarray
+    track_flat: bool
+    Qf: np.ndarray
+    nf: np.ndarray
+    check_on: bool
+    threshold: float
+    min_visits: int
+    prim_opt: np.ndarray
+    prim_adm: np.ndarray
+    fired: np.ndarray
+    state: np.ndarray
+    episode: np.ndarray
+    target: np.ndarray
+    t_ep: np.ndarray
+    d_ep: np.ndarray
+    ret: np.ndarray
+    dret: np.ndarray
+    gpow: np.ndarray
+    cur: np.ndarray
+    s0: np.ndarray
+    b0: np.ndarray
+    G: np.ndarray
+    g: np.ndarray
+    alpha_ep: np.ndarray
+    eps_ep: np.ndarray
+    U: np.ndarray
+    W: np.ndarray
+    cursor: np.ndarray
+    out_steps: np.ndarray
+    out_dec: np.ndarray
+    out_ret: np.ndarray
+    out_dret: np.ndarray
+    out_blocks: np.ndarray
+    cache: dict = field(default_factory=dict)
+
+    def start_state(self, u: float) -> int:
+        """The start state drawn by uniform ``u`` (as the flat learner draws it)."""
+        return min(int(np.searchsorted(self.start_cdf, u, side="right")), self.last_start)
+
+    def episode_factors(self, k: int | np.ndarray) -> None:
+        """Cache ``scale * rate**episode`` of both schedules for agent(s) ``k``."""
+        e = np.atleast_1d(self.episode[k]).astype(np.float64)
+        ks = np.atleast_1d(k)
+        self.alpha_ep[ks] = [self.alpha[0] * math.pow(self.alpha[1], x) for x in e]
+        self.eps_ep[ks] = [self.eps[0] * math.pow(self.eps[1], x) for x in e]
+
+    def args(self) -> tuple:
+        """The kernel's positional arguments, in order."""
+        return (
+            self.keys, self.indptr, self.indices, self.R, self.terminal, self.start_cdf,
+            self.last_start, self.gamma, self.horizon, *self.alpha, *self.eps,
+            self.pol_act, self.pol_cdf, self.beta, self.labels, self.adm, self.Q, self.n_o,
+            self.n_d, self.n_blocks, self.track_flat, self.Qf, self.nf, self.check_on,
+            self.threshold, self.min_visits, self.prim_opt, self.prim_adm, self.fired, self.state,
+            self.episode,
+            self.target, self.t_ep, self.d_ep, self.ret, self.dret, self.gpow, self.cur, self.s0,
+            self.b0, self.G, self.g, self.alpha_ep, self.eps_ep, self.U, self.W, self.cursor,
+            self.out_steps, self.out_dec, self.out_ret, self.out_dret, self.out_blocks,
+        )
+
+
+def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, horizon,
+             a_scale, a_rate, a_omega, a_floor, e_scale, e_rate, e_omega, e_floor,
+             pol_act, pol_cdf, beta, labels, adm, Q, n_o, n_d, n_blocks, track_flat, Qf, nf,
+             check_on, threshold, min_visits, prim_opt, prim_adm, fired, state, episode, target,
+             t_ep,
+             d_ep, ret, dret, gpow, cur, s0, b0, G, g, alpha_ep, eps_ep, U, W, cursor,
+             out_steps, out_dec, out_ret, out_dret, out_blocks):
+    """The rule of the module docstring; returns 0 (all done), 1 (refill) or 2 (inconsistency)."""
+    K = Q.shape[0]
+    O = Q.shape[2]  # noqa: E741 (the thesis' symbol)
+    S = R.shape[0]
+    A = R.shape[1]
+    B = U.shape[1]
+    n_start = start_cdf.shape[0]
+    neg_inf = -math.inf
+    while True:
+        any_active = False
+        for k in range(K):
+            if episode[k] < target[k]:
+                any_active = True
+                if cursor[k] == B:
+                    return 1
+        if not any_active:
+            return 0
+        for k in range(K):
+            if episode[k] >= target[k]:
+                continue
+            c = cursor[k]
+            s = state[k]
+            if cur[k] < 0:
+                d = labels[k, s]
+                if check_on:
+                    best_a = -1
+                    vf = neg_inf
+                    for a in range(A):
+                        if Qf[k, s, a] > vf:
+                            vf = Qf[k, s, a]
+                            best_a = a
+                    if best_a >= 0:
+                        oa = prim_opt[best_a]
+                        if (oa >= 0 and not adm[k, d, oa] and nf[k, s, best_a] >= min_visits
+                                and n_d[k, d] >= min_visits):
+                            vp = neg_inf
+                            for o in range(O):
+                                if adm[k, d, o] and Q[k, d, o] > vp:
+                                    vp = Q[k, d, o]
+                            if vf - vp > threshold:
+                                fired[k, 0] = s
+                                fired[k, 1] = d
+                                fired[k, 2] = best_a
+                                return 2
+                n_d[k, d] += 1
+                eps = eps_ep[k]
+                if e_omega != 0.0:
+                    eps = eps * math.pow(float(n_d[k, d]), -e_omega)
+                eps = max(e_floor, eps)
+                u0 = U[k, c, 0]
+                u1 = U[k, c, 1]
+                o_sel = -1
+                if u0 < eps:
+                    m = 0
+                    for o in range(O):
+                        if adm[k, d, o] or (track_flat and o < A and prim_adm[s, o]):
+                            m += 1
+                    j = min(int(u1 * m), m - 1)
+                    for o in range(O):
+                        if adm[k, d, o] or (track_flat and o < A and prim_adm[s, o]):
+                            if j == 0:
+                                o_sel = o
+                                break
+                            j -= 1
+                else:
+                    best = Q[k, d, 0]
+                    for o in range(1, O):
+                        best = max(best, Q[k, d, o])
+                    t = 0
+                    for o in range(O):
+                        if Q[k, d, o] == best:
+                            t += 1
+                    j = min(int(u1 * t), t - 1)
+                    for o in range(O):
+                        if Q[k, d, o] == best:
+                            if j == 0:
+                                o_sel = o
+                                break
+                            j -= 1
+                cur[k] = o_sel
+                s0[k] = s
+                b0[k] = d
+                G[k] = 0.0
+                g[k] = 1.0
+                d_ep[k] += 1
+            o = cur[k]
+            p = pol_act[o, s]
+            if p >= 0:
+                a = p
+            else:
+                row_m = -p - 2
+                v0 = W[k, c, 0]
+                a = 0
+                while pol_cdf[row_m, a] <= v0:
+                    a += 1
+            row = a * S + s
+            x = row + U[k, c, 2]
+            lo = indptr[row]
+            hi = indptr[row + 1]
+            left = lo
+            right = hi
+            while left < right:  # first position in the row with keys > x
+                mid = (left + right) >> 1
+                if keys[mid] <= x:
+                    left = mid + 1
+                else:
+                    right = mid
+            s2 = indices[min(left, hi - 1)]
+            cursor[k] = c + 1
+            r = R[s, a]
+            done = terminal[s2]
+            if track_flat:
+                nf[k, s, a] += 1
+                alpha = alpha_ep[k]
+                if a_omega != 0.0:
+                    alpha = alpha * math.pow(float(nf[k, s, a]), -a_omega)
+                alpha = max(a_floor, alpha)
+                if done:
+                    tdf = r
+                else:
+                    bn = Qf[k, s2, 0]
+                    for b in range(1, A):
+                        bn = max(bn, Qf[k, s2, b])
+                    tdf = r + gamma * bn
+                old = Qf[k, s, a]
+                Qf[k, s, a] = old + alpha * (tdf - old)
+            G[k] += g[k] * r
+            g[k] *= gamma
+            ret[k] += r
+            dret[k] += gpow[k] * r
+            gpow[k] *= gamma
+            t_ep[k] += 1
+            cut = t_ep[k] == horizon
+            if (done or cut or W[k, c, 1] < beta[o, s2]) and not adm[k, b0[k], o]:
+                cur[k] = -1  # an exploratory primitive action not offered in the block
+            elif done or cut or W[k, c, 1] < beta[o, s2]:
+                b = b0[k]
+                n_o[k, b, o] += 1
+                alpha = alpha_ep[k]
+                if a_omega != 0.0:
+                    alpha = alpha * math.pow(float(n_o[k, b, o]), -a_omega)
+                alpha = max(a_floor, alpha)
+                if done:
+                    tdo = G[k]
+                else:
+                    d2 = labels[k, s2]
+                    bn = Q[k, d2, 0]
+                    for oo in range(1, O):
+                        bn = max(bn, Q[k, d2, oo])
+                    tdo = G[k] + g[k] * bn
+                old = Q[k, b, o]
+                Q[k, b, o] = old + alpha * (tdo - old)
+                cur[k] = -1
+            if done or cut:
+                ep = episode[k]
+                out_steps[k, ep] = t_ep[k]
+                out_dec[k, ep] = d_ep[k]
+                out_ret[k, ep] = ret[k]
+                out_dret[k, ep] = dret[k]
+                out_blocks[k, ep] = n_blocks[k]
+                ep += 1
+                episode[k] = ep
+                t_ep[k] = 0
+                d_ep[k] = 0
+                ret[k] = 0.0
+                dret[k] = 0.0
+                gpow[k] = 1.0
+                cur[k] = -1
+                left = 0
+                right = n_start
+                u3 = U[k, c, 3]
+                while left < right:
+                    mid = (left + right) >> 1
+                    if start_cdf[mid] <= u3:
+                        left = mid + 1
+                    else:
+                        right = mid
+                state[k] = min(left, last_start)
+                alpha_ep[k] = a_scale * math.pow(a_rate, float(ep))
+                eps_ep[k] = e_scale * math.pow(e_rate, float(ep))
+            else:
+                state[k] = s2
+
+
+_NUMBA_KERNEL: Callable[..., int] | None = None
+
+
+def numba_available() -> bool:
+    """Whether numba can be imported (the ``numba`` kernel is then the default)."""
+    try:
+        import numba  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def numba_kernel(st: SMDPLockStepState) -> int:
+    """:func:`lockstep` compiled with numba (compiled once per process, cached on disk)."""
+    global _NUMBA_KERNEL
+    if _NUMBA_KERNEL is None:
+        import numba
+
+        _NUMBA_KERNEL = numba.njit(cache=True, nogil=True)(lockstep)
+    return int(_NUMBA_KERNEL(*st.args()))
+
+
+def python_kernel(st: SMDPLockStepState) -> int:
+    """:func:`lockstep` run by the interpreter (the reference; slow but identical)."""
+    return int(lockstep(*st.args()))
+
+
+KERNELS: dict[str, Callable[[SMDPLockStepState], int]] = {
+    "numba": numba_kernel,
+    "python": python_kernel,
+}
+
+
+def default_kernel() -> str:
+    """``"numba"`` when numba imports, else the ``"python"`` reference."""
+    return "numba" if numba_available() else "python"

@@ -1,0 +1,451 @@
+"""Hierarchical learning on a decision layer with inconsistency refinement (section 4.3).
+
+The agent decides on the *decision layer*, a :class:`~adpart.partition.Partition` whose blocks
+offer options (SMDP Q-learning over (block, option), :mod:`adpart.learning.smdp_q`), while every
+primitive step also updates a flat Q over (state, action) (section 4.3.3). The option columns are
+the primitive actions' one-step options ``0..A-1`` followed by the given options, so a primitive
+action can join a block's options.
+
+Three modes (``mode=``), the alternatives of section 4.3 the seed compares in 5.1.3:
+
+* ``inconsistency`` (4.3.3, Fig. 4.6): at a decision point in state ``s`` of block ``b``, with
+  ``a*`` the flat greedy action, if ``a*`` is not yet offered in ``b``, both the pair
+  ``(s, a*)`` and the block have at least ``min_visits`` visits, and
+  ``max_a Q_flat(s, a) - max_{o in O_b} Q_P(b, o) > L``, then ``a*`` joins ``O_b`` and ``b`` is
+  refined for the new set (eqs. 4.6-4.7 with the learner's ``delta`` and ``epsilon``; only ``b``
+  is split, to a fixpoint, the other blocks stay). The children inherit ``b``'s Q values and counts;
+  the new option's value in a child starts at the mean flat ``Q_flat(s, a*)`` of the child's
+  states (the best estimate at hand). Partitions are per run: runs refine independently.
+* ``action-refinement`` (4.3.2): before learning, every block holding a state with a reward above
+  the minimum ``r_min = min R(s, a)`` gets all primitive actions and is refined for them; the other
+  blocks keep the options only. No test during learning.
+* ``reward-variation`` (4.3.1): before partitioning, every state with some ``R(s, a) > r_min``
+  becomes an extra subgoal (an option to it from every state that can reach it); the decision layer
+  is then built by the multi-phase partitioner from the extended option set. No test during
+  learning.
+
+**Threshold.** Theorem 4.5 bounds ``||V* - V*_P||`` by ``2 (1 + gamma/(1-gamma) max(eps, delta))``;
+the seed uses it as the inconsistency threshold. The bound mixes units: with the seed's own
+``epsilon = 10-20`` and ``gamma >= 0.9`` it is 180-360, above the whole value range of its tasks, so
+the test would never fire. The default ``L`` is therefore scale-aware:
+``L = min(theorem 4.5 bound, threshold_scale * (max R - min R))`` over the admissible non-terminal
+pairs, ``threshold_scale = 0.5`` by default: an inconsistency must be half a reward span, the
+size of the difference a missing goal makes at the goal itself (where the flat value is the goal
+reward and the abstract one is blind to it). A number given as ``threshold`` is used as is.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from adpart.errors import ModelError, TaskError
+from adpart.learning.curves import (
+    LearningCurve,
+    optimal_start_value,
+    start_distribution,
+    start_values,
+)
+from adpart.learning.qlearning import _count, _schedule, _seed
+from adpart.learning.schedules import Schedule, constant, visit_count
+from adpart.learning.smdp_q import drive, kernel_function, make_state, option_set
+from adpart.mdp.model import FiniteMDP, SMDPModel
+from adpart.mdp.solvers import greedy_policy
+from adpart.options.models import OptionModel, option_models
+from adpart.options.option import Option
+from adpart.options.subgoal_options import subgoal_option
+from adpart.partition._validate import DEFAULT_ATOL, masked_rows
+from adpart.partition.bpsmdp import theorem_4_5_bound
+from adpart.partition.multiphase import MultiPhasePartitioner
+from adpart.partition.partition import (
+    Partition,
+    block_all,
+    canonical_labels,
+    combine_labels,
+    row_codes,
+)
+from adpart.partition.refine import delta_refine, reward_split
+
+__all__ = [
+    "MODES",
+    "HierarchicalResult",
+    "decision_layer",
+    "default_threshold",
+    "hierarchical_learning",
+    "refine_block",
+    "reward_states",
+]
+
+MODES = ("inconsistency", "action-refinement", "reward-variation")
+#: Default fraction of the reward span used as the inconsistency threshold (module docstring).
+THRESHOLD_SCALE = 0.5
+#: Default minimum visits of the flat pair and of the block before the test may fire.
+MIN_VISITS = 2
+
+
+@dataclass(frozen=True, eq=False)
+class HierarchicalResult:
+    """What :func:`hierarchical_learning` returns.
+
+    Attributes:
+        Q: ``(K, S, O)`` the decision layer's values lifted to states (``Q_P(block(s), o)``).
+        block_Q: per run, the ``(B_k, O)`` block values.
+        partitions: per run, the final decision layer.
+        Q_flat: ``(K, S, A)`` the flat values learned beside it.
+        curve: the :class:`LearningCurve`.
+        blocks: ``(K, N)`` number of blocks at the end of each episode (Figs. 5.10, 5.13).
+        refinements: one dict per refinement: run, episode (0-based, the one in progress),
+            state, block, action, blocks before and after.
+        seed, v_star_start, option_names, parameters: as :class:`SMDPQResult`.
+    """
+
+    Q: np.ndarray
+    block_Q: list[np.ndarray]
+    partitions: list[Partition]
+    Q_flat: np.ndarray
+    curve: LearningCurve
+    blocks: np.ndarray
+    refinements: list[dict[str, int]]
+    seed: int
+    v_star_start: float
+    option_names: tuple[str, ...]
+    parameters: dict[str, object] = field(default_factory=dict)
+
+    @property
+    def runs(self) -> int:
+        return self.Q.shape[0]
+
+    @property
+    def n_refinements(self) -> np.ndarray:
+        """``(K,)`` refinements per run."""
+        counts = np.zeros(self.runs, dtype=np.int64)
+        for event in self.refinements:
+            counts[event["run"]] += 1
+        return counts
+
+    def greedy_policies(self) -> np.ndarray:
+        """``(K, S)`` greedy option indices (lowest on ties), as evaluated."""
+        K, S, O = self.Q.shape  # noqa: E741 (the thesis' symbol)
+        return greedy_policy(self.Q.reshape(K * S, O)).reshape(K, S)
+
+    def blocks_table(self) -> dict[str, np.ndarray]:
+        """Blocks over time as columns ``run``, ``episode`` (1-based), ``blocks``."""
+        K, N = self.blocks.shape
+        return {"run": np.repeat(np.arange(K), N), "episode": np.tile(np.arange(1, N + 1), K),
+                "blocks": self.blocks.reshape(-1)}
+
+
+# --------------------------------------------------------------------------- decision layers
+
+
+def reward_states(mdp: FiniteMDP, *, arrivals: bool = False) -> np.ndarray:
+    """``(S,)`` bool: non-terminal states with some admissible ``R(s, a) > min R`` (4.3.1).
+
+    With ``arrivals=True`` also the terminal states such a rewarding pair can arrive in: adpart's
+    domains pay a goal's reward on *arrival* in a terminal goal (the seed pays it on leaving the
+    goal), so there the goal itself is the state "with a high reward" an option must capture.
+    """
+    live = mdp.admissible & ~mdp.terminal[:, None]
+    if not live.any():
+        return np.zeros(mdp.n_states, dtype=bool)
+    r_min = float(mdp.R[live].min())
+    rewarding = live & (mdp.R > r_min)
+    found = np.any(rewarding, axis=1)
+    if arrivals and rewarding.any():
+        s, a = np.nonzero(rewarding)
+        reached = np.unique(mdp.P[a * mdp.n_states + s].indices)
+        found[reached[mdp.terminal[reached]]] = True
+    return found
+
+
+def decision_layer(
+    mdp: FiniteMDP, options: Sequence[Option], *, delta: float = 0.0,
+    epsilon: float | None = 0.0, models: Sequence[OptionModel] | None = None,
+) -> tuple[Partition, list[Option], SMDPModel]:
+    """The multi-phase partition (section 4.2.1.2) over ``options`` for the learner's columns.
+
+    Phase 1 starts each option from {beta = 1, rest of I, outside I}; phase 2 intersects and
+    refines for all options; phase 3 (when ``epsilon`` is not None) splits by the options'
+    discounted rewards within ``epsilon``. Primitive actions are columns ``0..A-1`` of the
+    result but offered nowhere.
+
+    Returns:
+        ``(partition, learner options, stacked model)`` with the primitives first.
+    """
+    full, smdp = option_set(mdp, options, include_primitives=True, models=models)
+    A = mdp.n_actions
+    if len(full) == A:
+        raise ModelError("a decision layer needs at least one option besides the primitives")
+    termination = np.zeros(smdp.R.shape, dtype=bool)
+    termination[:, A:] = np.stack([o.beta >= 1.0 for o in full[A:]], axis=1)
+    partitioner = MultiPhasePartitioner(smdp, termination, delta=delta)
+    result = partitioner.run(np.arange(A, len(full)), epsilon=epsilon)
+    return result.final, full, smdp
+
+
+def refine_block(
+    partition: Partition, block: int, new_options: Sequence[int], model: SMDPModel, *,
+    delta: float, epsilon: float | None, atol: float = DEFAULT_ATOL,
+) -> Partition:
+    """Add ``new_options`` to ``block`` and refine that block alone for its option set.
+
+    The block is split by where the new options may start, then by the rewards of its options
+    within ``epsilon`` (eq. 4.7) and to delta-stability (eq. 4.6) against the current blocks,
+    to a fixpoint (section 4.3.3). Other blocks are unchanged; children inherit the block's
+    options, except a new option in a child where some state may not start it.
+    """
+    S = partition.n_states
+    adm_rows = partition.admissible.copy()
+    adm_rows[block, list(new_options)] = True
+    members = partition.labels == block
+    sel = np.flatnonzero(adm_rows[block])
+    state_adm = np.zeros(model.admissible.shape, dtype=bool)
+    state_adm[:, sel] = model.admissible[:, sel] & members[:, None]
+    pattern = np.where(members, row_codes(state_adm[:, sel]) + 1, 0)
+    work = combine_labels(partition.labels, pattern)
+    if epsilon is not None:
+        work = canonical_labels(reward_split(work, model.R, state_adm, sel, epsilon + atol))
+    F = masked_rows(model, sel, state_adm)
+    work, _ = delta_refine(work, F, sel.size, delta, atol)
+    refined = partition.with_admissible(adm_rows).refine_by(canonical_labels(work))
+    allowed = block_all(refined.labels, refined.n_blocks, model.admissible)
+    if refined.n_blocks > S:  # pragma: no cover - a partition never has more blocks than states
+        raise ModelError("refinement produced more blocks than states")
+    return refined.with_admissible(refined.admissible & allowed)
+
+
+def default_threshold(mdp: FiniteMDP, *, epsilon: float | None, delta: float,
+                      scale: float = THRESHOLD_SCALE) -> float:
+    """The scale-aware inconsistency threshold (module docstring)."""
+    bound = theorem_4_5_bound(mdp.gamma, 0.0 if epsilon is None else epsilon, delta) if (
+        mdp.gamma < 1.0) else np.inf
+    live = mdp.admissible & ~mdp.terminal[:, None]
+    span = float(mdp.R[live].max() - mdp.R[live].min()) if live.any() else 0.0
+    return float(min(bound, scale * span)) if span > 0 else float(bound)
+
+
+def _pad_partition(partition: Partition, n_prim: int, n_total: int, model: SMDPModel
+                   ) -> Partition:
+    """The partition over the learner's columns (primitives first), checked against the model."""
+    if not isinstance(partition, Partition):
+        raise TaskError(f"partition must be an adpart Partition, got {type(partition).__name__}")
+    if partition.n_states != model.n_states:
+        raise TaskError(
+            f"the partition covers {partition.n_states} states but the MDP has {model.n_states}; "
+            "build the decision layer for this environment"
+        )
+    if partition.n_options == n_total - n_prim:
+        adm = np.zeros((partition.n_blocks, n_total), dtype=bool)
+        adm[:, n_prim:] = partition.admissible
+        partition = partition.with_admissible(adm)
+    elif partition.n_options != n_total:
+        raise TaskError(
+            f"the partition offers {partition.n_options} options; expected {n_total - n_prim} "
+            f"(the given options) or {n_total} (primitive actions first, then the options)"
+        )
+    allowed = block_all(partition.labels, partition.n_blocks, model.admissible)
+    bad = np.argwhere(partition.admissible & ~allowed)
+    if bad.size:
+        b, o = bad[0]
+        raise TaskError(
+            f"block {int(b)} offers option column {int(o)}, which some of its states may not "
+            "start; build the partition from the options' initiation sets"
+        )
+    empty = np.flatnonzero(~partition.admissible.any(axis=1))
+    if empty.size:
+        raise TaskError(
+            f"block {int(empty[0])} offers no option, so no decision can be taken there; use a "
+            "partition whose blocks all offer an option"
+        )
+    return partition
+
+
+# --------------------------------------------------------------------------- the learner
+
+
+def hierarchical_learning(
+    mdp: FiniteMDP,
+    options: Sequence[Option],
+    partition: Partition | None = None,
+    *,
+    mode: str = "inconsistency",
+    delta: float = 0.0,
+    epsilon: float | None = 0.0,
+    threshold: float | None = None,
+    threshold_scale: float = THRESHOLD_SCALE,
+    min_visits: int = MIN_VISITS,
+    models: Sequence[OptionModel] | None = None,
+    runs: int = 10,
+    episodes: int = 500,
+    seed: int | None = None,
+    alpha: Schedule | str | float = visit_count(0.8),  # noqa: B008 (immutable)
+    epsilon_greedy: Schedule | str | float = constant(0.1),  # noqa: B008 (immutable)
+    max_steps_per_episode: int = 1000,
+    eval_every: int = 10,
+    reference_values: np.ndarray | None = None,
+    progress: Callable[[int, int], object] | None = None,
+    q_init: float = 0.0,
+    kernel: str | None = None,
+) -> HierarchicalResult:
+    """Learn ``mdp`` on a decision layer over ``options`` (section 4.3; module docstring).
+
+    Args:
+        options: the (subgoal) options of the decision layer.
+        partition: the decision layer, over ``options`` (``(B, len(options))`` admissibility) or
+            over the primitives then the options; built by :func:`decision_layer` when omitted.
+            Must be omitted in ``reward-variation`` mode (it builds its own).
+        mode: ``inconsistency``, ``action-refinement`` or ``reward-variation``.
+        delta, epsilon: thresholds of eqs. 4.6-4.7 for building and refining blocks
+            (``epsilon=None``: no reward split).
+        threshold: the inconsistency threshold ``L``; default :func:`default_threshold`.
+        threshold_scale: the reward-span fraction of the default threshold.
+        min_visits: visits of the flat pair and of the block before the test may fire.
+        models: exact models of ``options`` (computed when omitted).
+        runs, episodes, seed, alpha, max_steps_per_episode, eval_every, reference_values,
+        progress, q_init, kernel: as :func:`adpart.learning.smdp_q.smdp_q_learning`;
+        epsilon_greedy: the exploration schedule (``epsilon`` is the partition's).
+
+    Returns:
+        A :class:`HierarchicalResult`.
+    """
+    if not isinstance(mdp, FiniteMDP):
+        raise ModelError(f"hierarchical_learning needs a FiniteMDP, got {type(mdp).__name__}")
+    if mode not in MODES:
+        raise TaskError(f"mode = {mode!r}; choose one of {list(MODES)}")
+    K = _count(runs, "runs")
+    N = _count(episodes, "episodes")
+    M = _count(eval_every, "eval_every")
+    H = _count(max_steps_per_episode, "max_steps_per_episode")
+    V = _count(min_visits, "min_visits") if min_visits != 0 else 0
+    root_seed = _seed(seed)
+    alpha_s = _schedule(alpha, "alpha")
+    eps_s = _schedule(epsilon_greedy, "epsilon_greedy")
+    if not np.isfinite(q_init):
+        raise TaskError(f"q_init = {q_init!r} must be a finite number")
+    if threshold is not None and not (isinstance(threshold, (int, float)) and threshold >= 0):
+        raise TaskError(
+            f"threshold = {threshold!r} must be a number >= 0 (or None for the default)")
+    kernel_name, step_kernel = kernel_function(kernel)
+    S, A = mdp.n_states, mdp.n_actions
+    options = list(options)
+
+    extra: list[Option] = []
+    if mode == "reward-variation":
+        if partition is not None:
+            raise TaskError(
+                "reward-variation builds its own decision layer from the options plus the "
+                "reward states as subgoals (section 4.3.1); do not pass a partition"
+            )
+        goals = np.flatnonzero(reward_states(mdp, arrivals=True))
+        extra = [subgoal_option(mdp, int(g), initiation="reachable", name=f"reward-{int(g)}")
+                 for g in goals]
+        if models is not None:
+            models = list(models) + option_models(mdp, extra, duration=False)
+        options = options + extra
+    if partition is None:
+        part0, full, smdp = decision_layer(mdp, options, delta=delta, epsilon=epsilon,
+                                           models=models)
+    else:
+        full, smdp = option_set(mdp, options, include_primitives=True, models=models)
+        part0 = partition
+    part0 = _pad_partition(part0, A, len(full), smdp)
+    prims = np.arange(A)
+    if mode == "action-refinement":
+        for s in np.flatnonzero(reward_states(mdp)):  # few reward states, each one block
+            b = int(part0.labels[s])
+            if not part0.admissible[b, :A].all():
+                part0 = refine_block(part0, b, prims, smdp, delta=delta, epsilon=epsilon)
+    L = default_threshold(mdp, epsilon=epsilon, delta=delta, scale=threshold_scale) if (
+        threshold is None) else float(threshold)
+    check = mode == "inconsistency"
+
+    mu = start_distribution(mdp)
+    v_star = optimal_start_value(mdp, mu, reference_values)
+    B0 = part0.n_blocks
+    capacity = min(S, max(2 * B0, B0 + 64))
+    st = make_state(
+        mdp, full, np.broadcast_to(part0.labels, (K, S)),
+        np.broadcast_to(part0.admissible, (K, B0, len(full))), episodes=N, horizon=H,
+        alpha=alpha_s, epsilon=eps_s, q_init=q_init, mu=mu, capacity=capacity,
+        track_flat=True, threshold=L if check else np.inf, min_visits=V, prim_opt=prims,
+    )
+    parts = [part0] * K
+    events: list[dict[str, int]] = []
+
+    def grow(needed: int) -> None:
+        cap = st.Q.shape[1]
+        if needed <= cap:
+            return
+        new_cap = min(S, max(needed, 2 * cap))
+        pad = new_cap - cap
+        st.Q = np.concatenate([st.Q, np.full((K, pad, st.Q.shape[2]), -np.inf)], axis=1)
+        st.adm = np.concatenate([st.adm, np.zeros((K, pad, st.adm.shape[2]), bool)], axis=1)
+        st.n_o = np.concatenate([st.n_o, np.zeros((K, pad, st.n_o.shape[2]), np.int64)], axis=1)
+        st.n_d = np.concatenate([st.n_d, np.zeros((K, pad), np.int64)], axis=1)
+
+    def on_fire(k: int) -> None:
+        s, b, a = (int(x) for x in st.fired[k])
+        old = parts[k]
+        new = refine_block(old, b, [a], smdp, delta=delta, epsilon=epsilon)
+        B_old, B_new = old.n_blocks, new.n_blocks
+        grow(B_new)
+        parent = new.parent_map(old)
+        Qn = st.Q[k, :B_old][parent]
+        n_on = st.n_o[k, :B_old][parent]
+        added = new.admissible & ~old.admissible[parent]
+        if added.any():
+            flat = np.where(np.isfinite(st.Qf[k]), st.Qf[k], 0.0)
+            sums = np.zeros((B_new, A))
+            np.add.at(sums, new.labels, flat)
+            mean = sums / np.bincount(new.labels, minlength=B_new)[:, None]
+            rows, cols = np.nonzero(added)
+            Qn[rows, cols] = mean[rows, cols]  # primitive columns 0..A-1 are the actions
+            n_on[rows, cols] = 0
+        Qn[~new.admissible] = -np.inf
+        st.Q[k, :B_new], st.Q[k, B_new:] = Qn, -np.inf
+        st.n_o[k, :B_new], st.n_o[k, B_new:] = n_on, 0
+        st.n_d[k, :B_new] = st.n_d[k, :B_old][parent]
+        st.n_d[k, B_new:] = 0
+        st.adm[k, :B_new], st.adm[k, B_new:] = new.admissible, False
+        st.labels[k] = new.labels
+        st.n_blocks[k] = B_new
+        parts[k] = new
+        events.append({"run": k, "episode": int(st.episode[k]), "state": s, "block": b,
+                       "action": a, "blocks_before": B_old, "blocks_after": B_new})
+
+    def lifted() -> np.ndarray:
+        return np.take_along_axis(st.Q, st.labels[:, :, None], axis=1)
+
+    def score() -> np.ndarray:
+        Qs = lifted()
+        policies = greedy_policy(Qs.reshape(K * S, -1)).reshape(K, S)
+        return start_values(smdp, policies, mu)
+
+    eval_value = drive(st, step_kernel, root_seed, episodes=N, eval_every=M, score=score,
+                       progress=progress, on_fire=on_fire if check else None)
+    names = tuple(o.name for o in full)
+    parameters: dict[str, object] = {
+        "runs": K, "episodes": N, "seed": root_seed, "mode": mode, "delta": float(delta),
+        "epsilon": None if epsilon is None else float(epsilon), "threshold": L,
+        "threshold_rule": "given" if threshold is not None else
+        f"min(theorem 4.5 bound, {threshold_scale} x reward span)",
+        "theorem_4_5_bound": default_threshold(mdp, epsilon=epsilon, delta=delta, scale=np.inf),
+        "min_visits": V, "alpha": alpha_s.to_dict(), "epsilon_greedy": eps_s.to_dict(),
+        "max_steps_per_episode": H, "eval_every": M, "q_init": float(q_init),
+        "kernel": kernel_name, "options": list(names), "extra_subgoals": [o.subgoal for o in extra],
+        "initial_blocks": B0, "reference": "given" if reference_values is not None else "solved",
+    }
+    curve = LearningCurve.from_matrices(
+        steps=st.out_steps, decisions=st.out_dec, returns=st.out_ret,
+        discounted_returns=st.out_dret, eval_value=eval_value, value_gap=v_star - eval_value,
+        metadata={"learner": "hierarchical", "mdp": mdp.name, "mdp_hash": mdp.content_hash,
+                  "gamma": mdp.gamma, "v_star_start": v_star, **parameters},
+    )
+    return HierarchicalResult(
+        Q=lifted(), block_Q=[st.Q[k, :parts[k].n_blocks].copy() for k in range(K)],
+        partitions=parts, Q_flat=st.Qf.copy(), curve=curve, blocks=st.out_blocks.copy(),
+        refinements=events, seed=root_seed, v_star_start=v_star, option_names=names,
+        parameters=parameters,
+    )

@@ -1,0 +1,376 @@
+"""SMDP Q-learning over options, K runs in lock-step in the real environment (section 3.1).
+
+The update (Bradtke & Duff 1995; Sutton, Precup & Singh 1999; dissertation section 3.1) is applied
+when an option ``o`` started in ``s`` terminates in ``s'`` after ``tau`` primitive steps:
+
+    Q(s, o) <- Q(s, o) + alpha (G + gamma^tau max_{o' in O(s')} Q(s', o') - Q(s, o)),
+    G = r_1 + gamma r_2 + ... + gamma^(tau-1) r_tau,
+
+with target ``G`` alone when ``s'`` is terminal (the episode ends on arrival; value 0). The option
+runs step by step in the environment, sampled exactly like the flat learner samples
+(:attr:`FiniteMDP.sampler_keys`); the exact per-step rule, including how every uniform is used, is
+in :mod:`adpart.learning._smdp_kernels`. Choices (docs/hierarchical-learning.md):
+
+* **Options and order.** The learner's option set is ``options`` preceded, with
+  ``include_primitives=True``, by the one-step options of the primitive actions (columns ``0..A-1``,
+  as :func:`adpart.options.stack_models` orders them). An option is chosen only where it may start
+  (its initiation set); a non-terminal state where none may start is an error.
+* **Lock-step, randomness, exploration** as the flat learner (:mod:`adpart.learning.qlearning`):
+  run ``k`` uses ``np.random.default_rng(seed).spawn(runs)[k]`` for its start state and its rows of
+  four uniforms per primitive step, and a child of that generator (``.spawn(1)[0]``) for the two
+  uniforms per step an option needs beyond a primitive action (stochastic policy, termination).
+  With options = the primitive actions the run is therefore *bit-identical* to
+  :func:`~adpart.learning.qlearning.q_learning` with the same seed and settings (tested).
+  The exploration count of the epsilon schedule is the number of decisions taken in the state,
+  the step-size count the number of updates of the pair ``(s, o)``.
+* **Step limit.** An episode ends after ``max_steps_per_episode`` *primitive* steps; an option cut
+  there is updated with a bootstrap from where it stands (the cut is not part of the task).
+* **Counts.** The curve's ``steps`` are primitive steps and ``decisions`` option choices.
+* **Exact scoring.** The greedy option policy ``mu(s) = argmax_o Q(s, o)`` (lowest index on ties)
+  is an SMDP policy; its value is the fixed point of ``V = R_mu + F_mu V`` on the options' exact
+  multi-time models (eqs. 3.1-3.2), i.e. the value of executing it in the MDP. The models are
+  stacked into one :class:`~adpart.mdp.model.SMDPModel` and every run's policy is evaluated by
+  :func:`adpart.learning.curves.start_values` (one sparse solve for all distinct policies), against
+  the flat MDP's ``V*`` - so a set of options that cannot express the optimal policy shows a gap.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from adpart.errors import ModelError, TaskError, UnknownNameError
+from adpart.learning import _smdp_kernels as kernels
+from adpart.learning.curves import (
+    LearningCurve,
+    optimal_start_value,
+    start_distribution,
+    start_values,
+)
+from adpart.learning.qlearning import BLOCK_ROWS, _count, _schedule, _seed
+from adpart.learning.schedules import Schedule, constant, visit_count
+from adpart.mdp.model import FiniteMDP, SMDPModel
+from adpart.mdp.solvers import greedy_policy
+from adpart.options.models import OptionModel, option_models
+from adpart.options.option import Option, primitive_options
+from adpart.options.smdp import stack_models
+
+__all__ = ["SMDPQResult", "compile_options", "option_set", "smdp_q_learning"]
+
+
+@dataclass(frozen=True, eq=False)
+class SMDPQResult:
+    """What :func:`smdp_q_learning` returns.
+
+    Attributes:
+        Q: ``(K, S, O)`` option values of every run; ``-inf`` where the option may not start.
+        visits: ``(K, S, O)`` number of updates of each pair.
+        curve: the per-run, per-episode :class:`LearningCurve` (``steps`` primitive, ``decisions``
+            option choices).
+        seed: the seed used.
+        v_star_start: ``sum_s mu(s) V*(s)`` of the flat MDP, the reference of the value gap.
+        option_names: the ``O`` option names, in column order.
+        parameters: JSON-ready settings.
+    """
+
+    Q: np.ndarray
+    visits: np.ndarray
+    curve: LearningCurve
+    seed: int
+    v_star_start: float
+    option_names: tuple[str, ...]
+    parameters: dict[str, object] = field(default_factory=dict)
+
+    @property
+    def runs(self) -> int:
+        return self.Q.shape[0]
+
+    def greedy_policies(self) -> np.ndarray:
+        """``(K, S)`` greedy option indices (lowest on ties), as evaluated."""
+        K, S, O = self.Q.shape  # noqa: E741 (the thesis' symbol)
+        return greedy_policy(self.Q.reshape(K * S, O)).reshape(K, S)
+
+
+def option_set(
+    mdp: FiniteMDP, options: Sequence[Option], *, include_primitives: bool,
+    models: Sequence[OptionModel] | None = None,
+) -> tuple[list[Option], SMDPModel]:
+    """The learner's options (primitive one-step options first, if asked) and their stacked model.
+
+    Args:
+        models: exact models of ``options`` in the same order (computed when omitted).
+
+    Raises:
+        ModelError: an invalid option, mismatched models, or a state no option may start in.
+    """
+    options = list(options)
+    if not options and not include_primitives:
+        raise ModelError("no options given; pass options or include_primitives=True")
+    for o in options:
+        if not isinstance(o, Option):
+            raise ModelError(
+                f"expected adpart.options.Option objects, got {type(o).__name__}; build options "
+                "with adpart.options (subgoal_options, hallway_options, ...)"
+            )
+    if models is None:
+        models = option_models(mdp, options, duration=False)
+    models = list(models)
+    if len(models) != len(options) or any(
+            m.name != o.name for m, o in zip(models, options, strict=True)):
+        raise ModelError(
+            "the option models do not match the options (one model per option, same order and "
+            "names); compute them with adpart.options.option_models(mdp, options)"
+        )
+    smdp = stack_models(mdp, models, include_primitives=include_primitives)
+    full = (primitive_options(mdp) if include_primitives else []) + options
+    return full, smdp
+
+
+def compile_options(options: Sequence[Option], n_actions: int) -> tuple[
+    np.ndarray, np.ndarray, np.ndarray
+]:
+    """Kernel arrays of the options: ``pol_act`` (O, S), ``pol_cdf`` (M, A), ``beta`` (O, S).
+
+    ``pol_act[o, s]`` is the deterministic action, ``-1`` where undefined, or ``-2 - m`` to use
+    row ``m`` of ``pol_cdf``: the cumulative action probabilities of a stochastic policy in that
+    state, set to 2.0 from its last positive action on (so a draw never lands past it).
+    """
+    O = len(options)  # noqa: E741 (the thesis' symbol)
+    S = options[0].n_states
+    pol_act = np.full((O, S), -1, dtype=np.int64)
+    beta = np.ones((O, S))
+    cdf_rows: list[np.ndarray] = []
+    n_rows = 0
+    for i, opt in enumerate(options):  # one vectorised conversion per option
+        beta[i] = opt.beta
+        if opt.deterministic:
+            pol_act[i] = opt.policy
+            continue
+        probs = opt.policy
+        defined = np.flatnonzero(probs.sum(axis=1) > 0)
+        cdf = np.cumsum(probs[defined], axis=1)
+        last = (n_actions - 1) - np.argmax((probs[defined] > 0)[:, ::-1], axis=1)
+        cdf[np.arange(n_actions)[None, :] >= last[:, None]] = 2.0
+        pol_act[i, defined] = -2 - (n_rows + np.arange(defined.size))
+        n_rows += defined.size
+        cdf_rows.append(cdf)
+    pol_cdf = np.concatenate(cdf_rows) if cdf_rows else np.full((1, n_actions), 2.0)
+    return pol_act, np.ascontiguousarray(pol_cdf), beta
+
+
+def kernel_function(kernel: str | None) -> tuple[str, Callable[[kernels.SMDPLockStepState], int]]:
+    """The kernel by name (``numba`` / ``python``; default :func:`_smdp_kernels.default_kernel`)."""
+    name = kernels.default_kernel() if kernel is None else kernel
+    if name not in kernels.KERNELS:
+        raise UnknownNameError(
+            f"unknown SMDP Q-learning kernel {name!r}; choose one of {list(kernels.KERNELS)}"
+        )
+    return name, kernels.KERNELS[name]
+
+
+def make_state(
+    mdp: FiniteMDP, options: Sequence[Option], labels: np.ndarray, block_adm: np.ndarray,
+    *, episodes: int, horizon: int, alpha: Schedule, epsilon: Schedule, q_init: float,
+    mu: np.ndarray, capacity: int, track_flat: bool = False, threshold: float = np.inf,
+    min_visits: int = 0, prim_opt: np.ndarray | None = None,
+) -> kernels.SMDPLockStepState:
+    """Kernel state for K runs on decision layers ``labels`` (K, S) / ``block_adm`` (K, B, O)."""
+    K, S = labels.shape
+    A = mdp.n_actions
+    O = len(options)  # noqa: E741 (the thesis' symbol)
+    pol_act, pol_cdf, beta = compile_options(options, A)
+    adm = np.zeros((K, capacity, O), dtype=bool)
+    adm[:, :block_adm.shape[1]] = block_adm
+    Q = np.where(adm, float(q_init), -np.inf)
+    flat_shape = (K, S, A) if track_flat else (K, 1, A)
+    Qf = np.where(mdp.admissible, float(q_init), -np.inf) if track_flat else np.zeros((1, A))
+    st = kernels.SMDPLockStepState(
+        keys=np.ascontiguousarray(mdp.sampler_keys, dtype=np.float64),
+        indptr=mdp.P.indptr.astype(np.int64),
+        indices=mdp.P.indices.astype(np.int64),
+        R=np.ascontiguousarray(mdp.R, dtype=np.float64),
+        terminal=np.ascontiguousarray(mdp.terminal, dtype=bool),
+        start_cdf=np.cumsum(mu),
+        last_start=int(np.flatnonzero(mu > 0)[-1]),
+        gamma=float(mdp.gamma),
+        horizon=int(horizon),
+        alpha=alpha.params(),
+        eps=epsilon.params(),
+        pol_act=pol_act,
+        pol_cdf=pol_cdf,
+        beta=beta,
+        labels=np.array(labels, dtype=np.int64, order="C", copy=True),
+        adm=adm,
+        Q=Q,
+        n_o=np.zeros((K, capacity, O), dtype=np.int64),
+        n_d=np.zeros((K, capacity), dtype=np.int64),
+        n_blocks=np.full(K, block_adm.shape[1], dtype=np.int64),
+        track_flat=bool(track_flat),
+        Qf=np.broadcast_to(Qf, flat_shape).copy(),
+        nf=np.zeros(flat_shape, dtype=np.int64),
+        check_on=bool(track_flat and np.isfinite(threshold)),
+        threshold=float(threshold),
+        min_visits=int(min_visits),
+        prim_opt=np.full(A, -1, dtype=np.int64) if prim_opt is None else prim_opt.astype(np.int64),
+        prim_adm=np.ascontiguousarray(mdp.admissible, dtype=bool),
+        fired=np.full((K, 3), -1, dtype=np.int64),
+        state=np.zeros(K, dtype=np.int64),
+        episode=np.zeros(K, dtype=np.int64),
+        target=np.zeros(K, dtype=np.int64),
+        t_ep=np.zeros(K, dtype=np.int64),
+        d_ep=np.zeros(K, dtype=np.int64),
+        ret=np.zeros(K),
+        dret=np.zeros(K),
+        gpow=np.ones(K),
+        cur=np.full(K, -1, dtype=np.int64),
+        s0=np.zeros(K, dtype=np.int64),
+        b0=np.zeros(K, dtype=np.int64),
+        G=np.zeros(K),
+        g=np.ones(K),
+        alpha_ep=np.zeros(K),
+        eps_ep=np.zeros(K),
+        U=np.zeros((K, BLOCK_ROWS, kernels.UNIFORMS_PER_STEP)),
+        W=np.zeros((K, BLOCK_ROWS, kernels.AUX_PER_STEP)),
+        cursor=np.full(K, BLOCK_ROWS, dtype=np.int64),
+        out_steps=np.zeros((K, episodes), dtype=np.int64),
+        out_dec=np.zeros((K, episodes), dtype=np.int64),
+        out_ret=np.zeros((K, episodes)),
+        out_dret=np.zeros((K, episodes)),
+        out_blocks=np.zeros((K, episodes), dtype=np.int64),
+    )
+    st.episode_factors(np.arange(K))
+    return st
+
+
+def drive(
+    st: kernels.SMDPLockStepState,
+    step_kernel: Callable[[kernels.SMDPLockStepState], int],
+    seed: int,
+    *,
+    episodes: int,
+    eval_every: int,
+    score: Callable[[], np.ndarray],
+    progress: Callable[[int, int], object] | None = None,
+    on_fire: Callable[[int], None] | None = None,
+) -> np.ndarray:
+    """Run the kernel through all evaluation blocks; returns ``eval_value`` (K, N), NaN between.
+
+    Run ``k`` draws its first start state and its main uniforms from
+    ``default_rng(seed).spawn(K)[k]`` and its auxiliary uniforms from that generator's child. On
+    an inconsistency (kernel code 2) ``on_fire(k)`` is called for each run that fired.
+    """
+    K, N = st.out_steps.shape
+    rngs = np.random.default_rng(seed).spawn(K)
+    aux = [r.spawn(1)[0] for r in rngs]
+    st.state[:] = [st.start_state(r.random()) for r in rngs]
+    B = st.U.shape[1]
+    eval_value = np.full((K, N), np.nan)
+    for boundary in sorted({*range(eval_every, episodes + 1, eval_every), episodes}):
+        st.target[:] = boundary
+        while True:
+            code = step_kernel(st)
+            if code == 0:
+                break
+            if code == 1:
+                for k in np.flatnonzero((st.cursor == B) & (st.episode < st.target)):
+                    rngs[k].random(out=st.U[k])
+                    aux[k].random(out=st.W[k])
+                    st.cursor[k] = 0
+                continue
+            if on_fire is None:  # pragma: no cover - the kernel fires only when checks are on
+                raise ModelError("the kernel reported an inconsistency but no refiner is set")
+            for k in np.flatnonzero(st.fired[:, 0] >= 0):
+                on_fire(int(k))
+                st.fired[k] = -1
+        eval_value[:, boundary - 1] = score()
+        if progress is not None:
+            progress(boundary, episodes)
+    return eval_value
+
+
+def smdp_q_learning(
+    mdp: FiniteMDP,
+    options: Sequence[Option] = (),
+    *,
+    include_primitives: bool = False,
+    models: Sequence[OptionModel] | None = None,
+    runs: int = 10,
+    episodes: int = 500,
+    seed: int | None = None,
+    alpha: Schedule | str | float = visit_count(0.8),  # noqa: B008 (immutable)
+    epsilon: Schedule | str | float = constant(0.1),  # noqa: B008 (immutable)
+    max_steps_per_episode: int = 1000,
+    eval_every: int = 10,
+    reference_values: np.ndarray | None = None,
+    progress: Callable[[int, int], object] | None = None,
+    q_init: float = 0.0,
+    kernel: str | None = None,
+) -> SMDPQResult:
+    """Learn ``mdp`` over ``options`` with ``runs`` independent SMDP Q-learners in lock-step.
+
+    Args:
+        mdp: the task.
+        options: the options (section 3.1); see ``include_primitives``.
+        include_primitives: put the primitive actions' one-step options first.
+        models: exact models of ``options`` (same order), for scoring; computed when omitted.
+        runs, episodes, seed, alpha, epsilon, max_steps_per_episode, eval_every,
+        reference_values, progress, q_init: as :func:`adpart.learning.q_learning` (``alpha``
+            counts updates of ``(s, o)``, ``epsilon`` decisions in ``s``).
+        kernel: ``"numba"`` or ``"python"`` (identical results).
+
+    Returns:
+        An :class:`SMDPQResult`.
+
+    Raises:
+        TaskError: a setting out of range. ModelError: bad options or MDP.
+    """
+    if not isinstance(mdp, FiniteMDP):
+        raise ModelError(
+            f"smdp_q_learning needs a FiniteMDP, got {type(mdp).__name__}; build one with "
+            "adpart.envs.registry.get_domain(name).mdp()"
+        )
+    K = _count(runs, "runs")
+    N = _count(episodes, "episodes")
+    M = _count(eval_every, "eval_every")
+    H = _count(max_steps_per_episode, "max_steps_per_episode")
+    root_seed = _seed(seed)
+    alpha_s = _schedule(alpha, "alpha")
+    eps_s = _schedule(epsilon, "epsilon")
+    if not np.isfinite(q_init):
+        raise TaskError(f"q_init = {q_init!r} must be a finite number")
+    name, step_kernel = kernel_function(kernel)
+    full, smdp = option_set(mdp, options, include_primitives=include_primitives, models=models)
+    S = mdp.n_states
+    state_adm = smdp.admissible  # terminal rows: every option, never chosen (episode over)
+    mu = start_distribution(mdp)
+    v_star = optimal_start_value(mdp, mu, reference_values)
+    labels = np.broadcast_to(np.arange(S, dtype=np.int64), (K, S))
+    st = make_state(mdp, full, labels, np.broadcast_to(state_adm, (K, S, len(full))),
+                    episodes=N, horizon=H, alpha=alpha_s, epsilon=eps_s, q_init=q_init, mu=mu,
+                    capacity=S)
+
+    def score() -> np.ndarray:
+        policies = greedy_policy(st.Q.reshape(K * S, -1)).reshape(K, S)
+        return start_values(smdp, policies, mu)
+
+    eval_value = drive(st, step_kernel, root_seed, episodes=N, eval_every=M, score=score,
+                       progress=progress)
+    names = tuple(o.name for o in full)
+    parameters: dict[str, object] = {
+        "runs": K, "episodes": N, "seed": root_seed, "alpha": alpha_s.to_dict(),
+        "epsilon": eps_s.to_dict(), "max_steps_per_episode": H, "eval_every": M,
+        "q_init": float(q_init), "kernel": name, "include_primitives": bool(include_primitives),
+        "options": list(names), "reference": "given" if reference_values is not None else "solved",
+    }
+    curve = LearningCurve.from_matrices(
+        steps=st.out_steps, decisions=st.out_dec, returns=st.out_ret,
+        discounted_returns=st.out_dret, eval_value=eval_value, value_gap=v_star - eval_value,
+        metadata={"learner": "smdp-q", "mdp": mdp.name, "mdp_hash": mdp.content_hash,
+                  "gamma": mdp.gamma, "v_star_start": v_star, **parameters},
+    )
+    for arr in (st.Q, st.n_o):
+        arr.setflags(write=False)
+    return SMDPQResult(Q=st.Q, visits=st.n_o, curve=curve, seed=root_seed, v_star_start=v_star,
+                       option_names=names, parameters=parameters)

@@ -1,0 +1,163 @@
+"""Hierarchical learning with inconsistency refinement (section 4.3.3) and its alternatives.
+
+The test domain: a deterministic 5 x 5 grid whose terminal goal is the centre cell (arrival pays
++1), with options to the four corners (reachable initiation). The options' policies avoid the
+goal (arrival there would end them with pseudo-reward 0), so the goal is *not* a subgoal and the
+delta = 0.2 decision layer lumps the goal's neighbours with other states.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from adpart.errors import TaskError
+from adpart.learning.hierarchical import (
+    decision_layer,
+    default_threshold,
+    hierarchical_learning,
+    refine_block,
+    reward_states,
+)
+from adpart.mdp.model import FiniteMDP
+from adpart.options import subgoal_option
+from adpart.partition import theorem_4_5_bound
+
+SIDE = 5
+DELTA = 0.2
+SETTINGS = {"delta": DELTA, "epsilon": 0.0, "runs": 4, "episodes": 600, "seed": 3,
+            "eval_every": 100,
+                "epsilon_greedy": 0.3}
+
+
+def goal_grid(side: int = SIDE, gamma: float = 0.9) -> FiniteMDP:
+    S = side * side
+    moves = ((-1, 0), (0, 1), (1, 0), (0, -1))
+    P = np.zeros((S, 4, S))
+    R = np.zeros((S, 4))
+    goal = (side // 2) * side + side // 2
+    for s in range(S):
+        r, c = divmod(s, side)
+        for a, (dr, dc) in enumerate(moves):
+            rr, cc = r + dr, c + dc
+            t = rr * side + cc if 0 <= rr < side and 0 <= cc < side else s
+            P[s, a, t] = 1.0
+            R[s, a] = float(t == goal)
+    terminal = np.zeros(S, bool)
+    terminal[goal] = True
+    init = np.where(terminal, 0.0, 1.0)
+    return FiniteMDP.from_dense(P, R, gamma, terminal=terminal, initial=init / init.sum(),
+                                action_names=("N", "E", "S", "W"), name="goal-grid")
+
+
+@pytest.fixture(scope="module")
+def setup():
+    mdp = goal_grid()
+    corners = (0, SIDE - 1, SIDE * (SIDE - 1), SIDE * SIDE - 1)
+    opts = [subgoal_option(mdp, c, initiation="reachable") for c in corners]
+    part, _full, smdp = decision_layer(mdp, opts, delta=DELTA, epsilon=0.0)
+    return mdp, opts, part, smdp
+
+
+def final_gap(result) -> np.ndarray:
+    return result.curve.matrix("value_gap")[:, -1]
+
+
+def test_the_decision_layer_lumps_the_goal_neighbours(setup):
+    mdp, _, part, _ = setup
+    goal = int(np.flatnonzero(mdp.terminal)[0])
+    near = np.flatnonzero(reward_states(mdp))
+    assert sorted(near) == sorted([goal - 1, goal + 1, goal - SIDE, goal + SIDE])
+    assert part.n_blocks < mdp.n_states
+    assert any(part.sizes[part.labels[s]] > 1 for s in near)
+    assert not part.admissible[:, :mdp.n_actions].any()  # primitives offered nowhere
+
+
+def test_without_refinement_the_goal_is_never_reached_with_refinement_it_is(setup):
+    mdp, opts, part, _ = setup
+    off = hierarchical_learning(mdp, opts, part, threshold=np.inf, **SETTINGS)
+    on = hierarchical_learning(mdp, opts, part, **SETTINGS)
+    np.testing.assert_allclose(final_gap(off), off.v_star_start)  # value 0: never gets there
+    assert (off.n_refinements == 0).all() and (off.blocks == part.n_blocks).all()
+    assert (on.n_refinements > 0).all()
+    assert final_gap(on).mean() < 0.35 * on.v_star_start
+    # the stated bound: theorem 4.5 for the partition's epsilon, delta
+    bound = theorem_4_5_bound(mdp.gamma, 0.0, DELTA)
+    assert on.parameters["theorem_4_5_bound"] == pytest.approx(bound)
+    assert (final_gap(on) <= bound).all()
+    # blocks over time: per run, per episode, never shrinking, ending at the final partition
+    assert on.blocks.shape == (4, 600)
+    assert (np.diff(on.blocks, axis=1) >= 0).all()
+    assert on.blocks[:, -1].tolist() == [p.n_blocks for p in on.partitions]
+    for event in on.refinements:
+        assert event["blocks_after"] >= event["blocks_before"]
+        assert event["action"] in range(mdp.n_actions)
+
+
+def test_same_seed_same_results_and_kernels_agree(setup):
+    mdp, opts, part, _ = setup
+    kw = dict(SETTINGS, runs=2, episodes=150, eval_every=50)
+    a = hierarchical_learning(mdp, opts, part, kernel="numba", **kw)
+    b = hierarchical_learning(mdp, opts, part, kernel="numba", **kw)
+    c = hierarchical_learning(mdp, opts, part, kernel="python", **kw)
+    for other in (b, c):
+        np.testing.assert_array_equal(a.Q, other.Q)
+        np.testing.assert_array_equal(a.Q_flat, other.Q_flat)
+        np.testing.assert_array_equal(a.blocks, other.blocks)
+        assert a.refinements == other.refinements
+
+
+def test_refine_block_children_inherit_and_only_that_block_splits(setup):
+    mdp, _, part, smdp = setup
+    goal = int(np.flatnonzero(mdp.terminal)[0])
+    b = int(part.labels[goal - 1])
+    new = refine_block(part, b, [1], smdp, delta=DELTA, epsilon=0.0)  # action E into the goal
+    parent = new.parent_map(part)
+    assert parent is not None
+    assert new.admissible[new.labels[goal - 1], 1]
+    for child in np.flatnonzero(parent != b):  # the other blocks are unchanged
+        assert np.array_equal(new.members(child), part.members(parent[child]))
+    kids = np.flatnonzero(parent == b)
+    assert len(kids) >= 2  # the rewarding state leaves its block
+    Q = np.arange(part.n_blocks * part.n_options, dtype=float).reshape(part.n_blocks, -1)
+    np.testing.assert_array_equal(new.map_values(Q, part)[kids], Q[[b] * len(kids)])
+
+
+def test_children_inherit_q_in_the_learner(setup):
+    mdp, opts, part, _ = setup
+    res = hierarchical_learning(mdp, opts, part, **dict(SETTINGS, runs=1, episodes=100))
+    assert res.refinements
+    P = res.partitions[0]
+    lifted = res.block_Q[0][P.labels]
+    np.testing.assert_array_equal(res.Q[0], lifted)
+
+
+def test_alternatives_action_refinement_and_reward_variation(setup):
+    mdp, opts, part, _ = setup
+    act = hierarchical_learning(mdp, opts, part, mode="action-refinement", **SETTINGS)
+    var = hierarchical_learning(mdp, opts, mode="reward-variation", **SETTINGS)
+    assert not act.refinements and not var.refinements
+    goal_near = np.flatnonzero(reward_states(mdp))
+    for P in act.partitions:  # the rewarding blocks got every primitive action
+        assert P.admissible[P.labels[goal_near], :mdp.n_actions].all()
+    goal = int(np.flatnonzero(mdp.terminal)[0])
+    assert sorted(var.parameters["extra_subgoals"]) == sorted([goal, *goal_near.tolist()])
+    assert final_gap(var).mean() < 0.5 * var.v_star_start
+    with pytest.raises(TaskError, match="reward-variation"):
+        hierarchical_learning(mdp, opts, part, mode="reward-variation", runs=1, episodes=1)
+
+
+def test_default_threshold_is_scale_aware():
+    mdp = goal_grid()
+    # seed-like settings: epsilon = 20, gamma = 0.9 -> theorem 4.5 gives 362, far above V <= 1
+    assert theorem_4_5_bound(0.9, 20.0, 0.3) > 300
+    assert default_threshold(mdp, epsilon=20.0, delta=0.3) == pytest.approx(0.5)
+    assert default_threshold(mdp, epsilon=0.0, delta=0.0, scale=10.0) == pytest.approx(2.0)
+
+
+def test_bad_inputs(setup):
+    mdp, opts, part, _ = setup
+    with pytest.raises(TaskError, match="mode"):
+        hierarchical_learning(mdp, opts, part, mode="magic")
+    with pytest.raises(TaskError, match="options"):
+        hierarchical_learning(mdp, opts[:2], part, runs=1, episodes=1)
