@@ -10,6 +10,16 @@ the same directory and renamed into place, so a reader never sees half a file: a
 mid-way leaves at most a ``.tmp-*`` file, which ``adpart kb gc`` removes. Nothing is pickled: the
 values are a single Parquet column (``values``) and the dtype/shape sit in the schema metadata, so
 any Parquet reader can open an artifact.
+
+Verification costs one disk read, one hash and one decode per read. A write encodes the Parquet
+file in memory from the values whose content hash names the artifact and records the SHA-256 of
+exactly those bytes (the *file hash*); an already present file is first decoded and compared with
+the values, so a file hash is never recorded for damaged bytes. A read loads the file's bytes
+once, hashes them on a second thread while pyarrow decodes the same buffer, and accepts the values
+when the hash equals the recorded file hash: equal hashes mean the bytes are the ones the encoder
+produced from those values, and the Parquet round trip is exact, so the content hash need not be
+recomputed. Without a recorded file hash, and in ``verify`` (``adpart kb check``), the content
+hash is recomputed as well. See docs/knowledge-base.md, "Why one hash is enough".
 """
 
 from __future__ import annotations
@@ -19,6 +29,7 @@ import json
 import os
 import re
 import uuid
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
@@ -37,6 +48,7 @@ _ROW_GROUP = 1 << 20  # row groups of 1M values let pyarrow decode in parallel o
 _SUPPORTED_KINDS = "biuf"  # bool, signed/unsigned integers, floats
 _TMP_PREFIX = ".tmp-"
 _NAME = re.compile(r"^[0-9a-f]{2}/[0-9a-f]{64}\.parquet$")
+_THREADED_HASH_BYTES = 1 << 20  # below this a second thread costs more than it saves
 
 
 @dataclass(frozen=True)
@@ -123,6 +135,70 @@ def table_sha256(table: pa.Table) -> str:
     return digest.hexdigest()
 
 
+def _label(sha256: str, context: str) -> str:
+    return f"artifact {sha256[:12]}" + (f" (referenced by {context})" if context else "")
+
+
+def _hash_and_decode(buffer: pa.Buffer) -> tuple[str, pa.Table | None, Exception | None]:
+    """SHA-256 of ``buffer`` and its Parquet decoding (or the decoding error), side by side.
+
+    Large buffers are hashed on a second thread while pyarrow decodes: hashlib and the Parquet
+    reader both release the GIL, so the hash costs little wall time on a multi-core machine.
+    """
+    def decode() -> tuple[pa.Table | None, Exception | None]:
+        try:
+            return pq.read_table(pa.BufferReader(buffer)), None
+        except (pa.ArrowException, OSError, ValueError) as exc:
+            return None, exc
+
+    if buffer.size < _THREADED_HASH_BYTES:
+        return hashlib.sha256(buffer).hexdigest(), *decode()
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        digest = pool.submit(lambda: hashlib.sha256(buffer).hexdigest())
+        table, problem = decode()
+        return digest.result(), table, problem
+
+
+def _table_meta(table: pa.Table) -> dict[str, Any]:
+    """The adpart metadata of a decoded artifact file (raises KeyError/ValueError if absent)."""
+    meta = json.loads((table.schema.metadata or {})[_META_KEY])
+    if not isinstance(meta, dict):
+        raise TypeError("adpart metadata is not an object")
+    return meta
+
+
+def _array_from_table(table: pa.Table) -> np.ndarray:
+    """The array an array artifact's decoded file holds, in its stored (little-endian) dtype."""
+    meta = _table_meta(table)
+    if meta.get("format") != ARRAY_FORMAT:
+        raise ValueError(f"format {meta.get('format')!r} is not an array")
+    dtype = np.dtype(meta["dtype"])
+    values = table.column("values").to_numpy(zero_copy_only=False)
+    return np.asarray(values, dtype=dtype).reshape(tuple(meta["shape"]))
+
+
+def _holds_array(table: pa.Table, canon: np.ndarray) -> bool:
+    """Whether a decoded array artifact holds ``canon`` bit for bit (NaN payloads included).
+
+    Compared row group by row group against slices of ``canon``, so no full-size copy or mask
+    is made.
+    """
+    meta = _table_meta(table)
+    if (meta.get("format") != ARRAY_FORMAT or np.dtype(meta["dtype"]) != canon.dtype
+            or tuple(meta["shape"]) != canon.shape):
+        return False
+    flat = canon.reshape(-1).view(np.uint8).reshape(-1, canon.dtype.itemsize)
+    start = 0
+    for chunk in table.column("values").chunks:
+        values = np.asarray(chunk.to_numpy(zero_copy_only=False), dtype=canon.dtype)
+        stop = start + len(values)
+        if stop > len(flat) or not np.array_equal(
+                values.view(np.uint8).reshape(-1, canon.dtype.itemsize), flat[start:stop]):
+            return False
+        start = stop
+    return start == len(flat)
+
+
 def check_relative_uri(uri: str) -> str:
     """Refuse an artifact URI that is not a plain ``ab/<sha>.parquet`` path under the root."""
     parts = uri.replace("\\", "/").split("/")
@@ -174,17 +250,21 @@ class ArtifactStore:
     # ------------------------------------------------------------------ writes
     def put_array(self, array: np.ndarray) -> StoredArtifact:
         """Store ``array`` (any shape, incl. 0-d and empty) bit-exactly; returns hash and URI."""
-        array = np.asarray(array)
-        canon = _canonical_array(array)
+        canon = _canonical_array(np.asarray(array))
         sha = array_sha256(canon)
-        meta = {"format": ARRAY_FORMAT, "dtype": canon.dtype.str, "shape": list(canon.shape),
-                "sha256": sha}
         uri = self.uri_for(sha)
-        if not self.exists(uri):
+
+        def holds_canon(table: pa.Table) -> bool:
+            return _holds_array(table, canon)
+
+        file_sha = self._existing(uri, holds_canon)
+        if file_sha is None:
+            meta = {"format": ARRAY_FORMAT, "dtype": canon.dtype.str,
+                    "shape": list(canon.shape), "sha256": sha}
             table = pa.table({"values": pa.array(canon.reshape(-1))})
             table = table.replace_schema_metadata({_META_KEY: json.dumps(meta)})
-            self._write(uri, table, dictionary=canon.dtype.kind != "f")
-        return StoredArtifact(sha, uri, ARRAY_FORMAT, self._size(uri), self.file_sha256(uri),
+            file_sha = self._write(uri, table, dictionary=canon.dtype.kind != "f")
+        return StoredArtifact(sha, uri, ARRAY_FORMAT, self._size(uri), file_sha,
                               canon.dtype.str, tuple(canon.shape))
 
     def put_table(self, table: pa.Table | dict[str, Any]) -> StoredArtifact:
@@ -192,69 +272,87 @@ class ArtifactStore:
         table = as_table(table)
         sha = table_sha256(table)
         uri = self.uri_for(sha)
-        if not self.exists(uri):
-            meta = {"format": TABLE_FORMAT, "sha256": sha}
-            self._write(uri, table.replace_schema_metadata({_META_KEY: json.dumps(meta)}),
-                        dictionary=True)
-        return StoredArtifact(sha, uri, TABLE_FORMAT, self._size(uri), self.file_sha256(uri),
-                              None, None)
 
-    def _write(self, uri: str, table: pa.Table, *, dictionary: bool) -> None:
+        def holds_table(decoded: pa.Table) -> bool:
+            return table_sha256(decoded.replace_schema_metadata(None)) == sha
+
+        file_sha = self._existing(uri, holds_table)
+        if file_sha is None:
+            meta = {_META_KEY: json.dumps({"format": TABLE_FORMAT, "sha256": sha})}
+            file_sha = self._write(uri, table.replace_schema_metadata(meta), dictionary=True)
+        return StoredArtifact(sha, uri, TABLE_FORMAT, self._size(uri), file_sha, None, None)
+
+    def _existing(self, uri: str, holds: Callable[[pa.Table], bool]) -> str | None:
+        """File hash of an already stored artifact whose decoded content passes ``holds``.
+
+        ``None`` if there is no such file, or if it is damaged (the caller then writes it again):
+        the file hash about to be recorded must only ever vouch for verified bytes.
+        """
+        if not self.exists(uri):
+            return None
+        try:
+            digest, table, _ = _hash_and_decode(self._read_bytes(uri))
+            return digest if table is not None and holds(table) else None
+        except (StoreError, KeyError, ValueError, TypeError, pa.ArrowException):
+            return None
+
+    def _write(self, uri: str, table: pa.Table, *, dictionary: bool) -> str:
+        """Encode ``table`` in memory and store the bytes (temporary name + rename); the file hash.
+
+        The file hash is taken of the very buffer that is written, on a second thread while the
+        bytes go to disk, so it vouches for exactly what the encoder produced from the values.
+        """
+        try:
+            sink = pa.BufferOutputStream()
+            pq.write_table(table, sink, compression="zstd", use_dictionary=dictionary,
+                           row_group_size=_ROW_GROUP)
+            encoded = sink.getvalue()
+        except (pa.ArrowException, OSError) as exc:
+            raise StoreError(f"cannot encode artifact {uri} as Parquet: {exc}") from exc
         final = self.path(uri)
         directory = final.rsplit("/", 1)[0]
         tmp = f"{directory}/{_TMP_PREFIX}{uuid.uuid4().hex}.parquet"
-        try:
-            self.fs.create_dir(directory, recursive=True)
-            with self.fs.open_output_stream(tmp) as sink:
-                pq.write_table(table, sink, compression="zstd", use_dictionary=dictionary,
-                               row_group_size=_ROW_GROUP)
-            self.fs.move(tmp, final)
-        except (pa.ArrowException, OSError) as exc:
+        with ThreadPoolExecutor(max_workers=1) as pool:
+            digest = pool.submit(lambda: hashlib.sha256(encoded).hexdigest())
             try:
-                self.fs.delete_file(tmp)
-            except (pa.ArrowException, OSError):
-                pass  # the temporary file never came into being
-            raise StoreError(f"cannot write artifact {uri} under {self.root!r}: {exc}; check the "
-                             "artifact root is writable and has space") from exc
-
-    def file_sha256(self, uri: str) -> str:
-        """SHA-256 of an artifact file's bytes, streamed in 16 MiB chunks."""
-        digest = hashlib.sha256()
-        try:
-            with self.fs.open_input_stream(self.path(uri)) as source:
-                while chunk := source.read(1 << 24):
-                    digest.update(chunk)
-        except (pa.ArrowException, OSError) as exc:
-            raise StoreError(f"cannot read artifact {uri} under {self.root!r}: {exc}") from exc
-        return digest.hexdigest()
+                self.fs.create_dir(directory, recursive=True)
+                with self.fs.open_output_stream(tmp) as out:
+                    out.write(encoded)
+                self.fs.move(tmp, final)
+            except (pa.ArrowException, OSError) as exc:
+                try:
+                    self.fs.delete_file(tmp)
+                except (pa.ArrowException, OSError):
+                    pass  # the temporary file never came into being
+                raise StoreError(f"cannot write artifact {uri} under {self.root!r}: {exc}; check "
+                                 "the artifact root is writable and has space") from exc
+            return digest.result()
 
     def _size(self, uri: str) -> int:
         return int(self.fs.get_file_info(self.path(uri)).size or 0)
 
     # ------------------------------------------------------------------ reads
-    def _read(self, sha256: str, uri: str, context: str, file_sha256: str | None) -> pa.Table:
-        label = f"artifact {sha256[:12]}" + (f" (referenced by {context})" if context else "")
+    def _read_bytes(self, uri: str, label: str = "") -> pa.Buffer:
+        """The whole file in memory (one read: the hash and the decoder see the same bytes)."""
+        label = label or f"artifact {uri}"
         path = self.path(uri)
         if self.fs.get_file_info(path).type != pafs.FileType.File:
             raise StoreError(f"{label} is missing from {self.root!r}; run `adpart kb check` "
                              "to list the damage")
         try:
             with self.fs.open_input_file(path) as source:
-                buffer = source.read_buffer()
+                return source.read_buffer()
         except (pa.ArrowException, OSError) as exc:
             raise StoreError(f"{label} cannot be read from {self.root!r} ({exc}); check the "
                              "artifact root, then run `adpart kb check`") from exc
-        # hash the file's bytes on a second thread while pyarrow decodes (both release the GIL)
-        with ThreadPoolExecutor(max_workers=1) as pool:
-            file_digest = pool.submit(lambda: hashlib.sha256(buffer).hexdigest())
-            try:
-                table = pq.read_table(pa.BufferReader(buffer))
-                problem = None
-            except (pa.ArrowException, OSError, ValueError) as exc:
-                table, problem = None, exc
-            if file_sha256 is not None and file_digest.result() != file_sha256:
-                raise StoreError(f"{label} is damaged: the file's bytes changed since it was "
-                                 "written; run `adpart kb check` and re-create the record")
+
+    def _read(self, sha256: str, uri: str, context: str, file_sha256: str | None) -> pa.Table:
+        """Decoded table of an artifact file whose bytes hash to ``file_sha256`` (if given)."""
+        label = _label(sha256, context)
+        digest, table, problem = _hash_and_decode(self._read_bytes(uri, label))
+        if file_sha256 is not None and digest != file_sha256:
+            raise StoreError(f"{label} is damaged: the file's bytes changed since it was "
+                             "written; run `adpart kb check` and re-create the record")
         if table is None:
             raise StoreError(f"{label} is damaged and cannot be decoded ({problem}); run "
                              "`adpart kb check` and re-create the record") from problem
@@ -262,48 +360,59 @@ class ArtifactStore:
 
     @staticmethod
     def _mismatch(sha256: str, actual: str, context: str) -> StoreError:
-        label = f"artifact {sha256[:12]}" + (f" (referenced by {context})" if context else "")
-        return StoreError(f"{label} is damaged: its content hashes to {actual[:12]}; run "
-                          "`adpart kb check` and re-create the record")
+        return StoreError(f"{_label(sha256, context)} is damaged: its content hashes to "
+                          f"{actual[:12]}; run `adpart kb check` and re-create the record")
 
     def get_array(self, sha256: str, uri: str, *, context: str = "",
-                  file_sha256: str | None = None) -> np.ndarray:
-        """Read an array artifact and verify it against ``sha256`` (and the file hash, if given).
+                  file_sha256: str | None = None, full: bool = False) -> np.ndarray:
+        """Read an array artifact, verified (see the module docstring for what is checked).
 
+        With ``file_sha256`` (the hash recorded at write time) a matching file hash is the proof;
+        without it, or with ``full=True``, the decoded values are hashed against ``sha256`` too.
         ``context`` names the referencing record(s) for the error message.
         """
         table = self._read(sha256, uri, context, file_sha256)
         try:
-            meta = json.loads((table.schema.metadata or {})[_META_KEY])
-            if meta.get("format") != ARRAY_FORMAT:
-                raise ValueError(f"format {meta.get('format')!r} is not an array")
-            dtype = np.dtype(meta["dtype"])
-            values = table.column("values").to_numpy(zero_copy_only=False)
-            array = np.asarray(values, dtype=dtype).reshape(tuple(meta["shape"]))
+            if _table_meta(table).get("sha256") != sha256:
+                raise ValueError("the file names another artifact")
+            array = _array_from_table(table)
         except (KeyError, ValueError, TypeError, pa.ArrowException) as exc:
             raise self._mismatch(sha256, "<undecodable>", context) from exc
-        actual = array_sha256(array)
-        if actual != sha256:
-            raise self._mismatch(sha256, actual, context)
-        return array.astype(dtype.newbyteorder("="), copy=False)
+        if full or file_sha256 is None:
+            actual = array_sha256(array)
+            if actual != sha256:
+                raise self._mismatch(sha256, actual, context)
+        return array.astype(array.dtype.newbyteorder("="), copy=False)
 
     def get_table(self, sha256: str, uri: str, *, context: str = "",
-                  file_sha256: str | None = None) -> pa.Table:
-        """Read a table artifact and verify it against ``sha256`` (and the file hash, if given)."""
-        table = self._read(sha256, uri, context, file_sha256).replace_schema_metadata(None)
+                  file_sha256: str | None = None, full: bool = False) -> pa.Table:
+        """Read a table artifact, verified like :meth:`get_array`."""
+        table = self._read(sha256, uri, context, file_sha256)
         try:
-            actual = table_sha256(table)
-        except StoreError as exc:
+            claimed = _table_meta(table).get("sha256")
+        except (KeyError, ValueError, TypeError) as exc:
             raise self._mismatch(sha256, "<undecodable>", context) from exc
-        if actual != sha256:
-            raise self._mismatch(sha256, actual, context)
+        table = table.replace_schema_metadata(None)
+        if claimed != sha256:
+            raise self._mismatch(sha256, f"<a file of artifact {claimed}>", context)
+        if full or file_sha256 is None:
+            try:
+                actual = table_sha256(table)
+            except StoreError as exc:
+                raise self._mismatch(sha256, "<undecodable>", context) from exc
+            if actual != sha256:
+                raise self._mismatch(sha256, actual, context)
         return table
 
     def verify(self, sha256: str, uri: str, fmt: str, *, context: str = "",
                file_sha256: str | None = None) -> None:
-        """Read and hash-check one artifact; raises :class:`StoreError` on any damage."""
+        """Read and check one artifact fully (file hash and content hash); raises on damage.
+
+        This is ``adpart kb check``'s audit: unlike a load it also recomputes the content hash,
+        so a recorded file hash that was itself wrong (a row edited by hand) is caught too.
+        """
         read = self.get_array if fmt == ARRAY_FORMAT else self.get_table
-        read(sha256, uri, context=context, file_sha256=file_sha256)
+        read(sha256, uri, context=context, file_sha256=file_sha256, full=True)
 
     # ------------------------------------------------------------------ listing / deletion
     def files(self) -> list[tuple[str, int, float]]:

@@ -147,9 +147,14 @@ class KnowledgeBase:
         self._read = sessionmaker(self.engine, expire_on_commit=False)
         self._write = sessionmaker(self.engine.execution_options(adpart_write=True),
                                    expire_on_commit=False)
-        self.artifacts = ArtifactStore(artifact_uri)
-        self.artifact_uri = artifact_uri
-        self.schema_version = self._init_schema(verify)
+        try:
+            self.artifacts = ArtifactStore(artifact_uri)
+            self.artifact_uri = artifact_uri
+            self.schema_version = self._init_schema(verify)
+        except BaseException:
+            # a refused KB must not leave pooled connections for the garbage collector to close
+            self.engine.dispose()
+            raise
 
     @classmethod
     def open(cls, location: str | os.PathLike[str] | KBLocation | None = None, *,

@@ -3,34 +3,64 @@
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 
 import numpy as np
 import pytest
 import scipy.sparse as sp
-from sqlalchemy import create_engine
+from sqlalchemy import create_engine, text
 
 from adpart.store import KnowledgeBase
-from adpart.store.models import Base
 
 PG_URL = os.environ.get("ADPART_TEST_PG_URL")
 
 
 def _reset_pg(url: str) -> None:
+    """Empty the scratch database: every table (adpart's and any a test made) goes."""
     engine = create_engine(url)
     with engine.begin() as conn:
-        Base.metadata.drop_all(conn)
+        conn.execute(text("DROP SCHEMA public CASCADE"))
+        conn.execute(text("CREATE SCHEMA public"))
     engine.dispose()
 
 
+@dataclass(frozen=True)
+class Where:
+    """A knowledge-base location on one backend, as the library, a subprocess and the CLI see it.
+
+    ``location``/``artifacts`` are what ``KnowledgeBase.open`` takes (``artifacts`` is ``""`` for
+    a directory, so it can be passed on a command line); ``cli`` are the ``--kb`` options.
+    """
+
+    backend: str
+    location: str
+    artifacts: str
+    db_url: str
+
+    def open(self) -> KnowledgeBase:
+        return KnowledgeBase.open(self.location, artifacts=self.artifacts or None)
+
+    @property
+    def cli(self) -> list[str]:
+        extra = ["--kb-artifacts", self.artifacts] if self.artifacts else []
+        return ["--kb", self.location, *extra]
+
+
 @pytest.fixture(params=["sqlite", "postgresql"])
-def kb(request, tmp_path):
+def where(request, tmp_path) -> Where:
+    """An empty knowledge-base location on SQLite (a directory) and on PostgreSQL (if set)."""
     if request.param == "sqlite":
-        base = KnowledgeBase.open(tmp_path / "kb")
-    else:
-        if not PG_URL:
-            pytest.skip("set ADPART_TEST_PG_URL to run the store tests against PostgreSQL")
-        _reset_pg(PG_URL)
-        base = KnowledgeBase.open(PG_URL, artifacts=str(tmp_path / "pg-artifacts"))
+        directory = str(tmp_path / "kb")
+        return Where("sqlite", directory, "", f"sqlite:///{directory}/kb.sqlite")
+    if not PG_URL:
+        pytest.skip("set ADPART_TEST_PG_URL to run the store tests against PostgreSQL")
+    _reset_pg(PG_URL)
+    return Where("postgresql", PG_URL, str(tmp_path / "pg-artifacts"), PG_URL)
+
+
+@pytest.fixture
+def kb(where):
+    base = where.open()
     yield base
     base.close()
 

@@ -1,4 +1,4 @@
-"""The ``adpart kb`` group through CliRunner on a real SQLite knowledge base."""
+"""The ``adpart kb`` group through CliRunner on SQLite (a directory) and PostgreSQL (a URL)."""
 
 from __future__ import annotations
 
@@ -13,11 +13,10 @@ from adpart.cli.kb import kb as kb_group
 
 
 @pytest.fixture
-def sqlite_kb(populated):
+def cli_kb(where, populated):
+    """The ``--kb`` options of the populated knowledge base, the KB and its records."""
     kb, rec = populated
-    if not kb.db_url.startswith("sqlite"):
-        pytest.skip("CLI tests address the KB by directory")
-    return kb.label, kb, rec
+    return where.cli, kb, rec
 
 
 def _run(*args):
@@ -25,36 +24,36 @@ def _run(*args):
     return result
 
 
-def test_info(sqlite_kb):
-    where, kb, _ = sqlite_kb
-    result = _run("info", "--kb", where, "--json")
+def test_info(cli_kb):
+    opts, kb, _ = cli_kb
+    result = _run("info", *opts, "--json")
     assert result.exit_code == 0, result.output
     data = json.loads(result.output)
     assert data["schema_version"] == 1
     assert data["counts"]["partition"] == 2 and data["artifact_bytes"] == kb.artifact_bytes() > 0
-    assert "schema version: 1" in _run("info", "--kb", where).output
+    assert "schema version: 1" in _run("info", *opts).output
 
 
-def test_ls_and_show(sqlite_kb):
-    where, _, rec = sqlite_kb
-    result = _run("ls", "partitions", "--env", "five", "--json", "--kb", where)
+def test_ls_and_show(cli_kb):
+    opts, _, rec = cli_kb
+    result = _run("ls", "partitions", "--env", "five", "--json", *opts)
     assert result.exit_code == 0, result.output
     assert [r["ref"] for r in json.loads(result.output)] == [rec["p1"].ref, rec["partition"].ref]
-    assert _run("ls", "--kb", where).output.count("\n") == 8
-    result = _run("show", rec["policy"].ref, "--json", "--kb", where)
+    assert _run("ls", *opts).output.count("\n") == 8
+    result = _run("show", rec["policy"].ref, "--json", *opts)
     data = json.loads(result.output)
     assert data["provenance"]["parameters"] == {"alpha": 0.1} and data["q"] == rec["policy"].q
-    result = _run("show", f"artifact:{rec['policy'].q[:8]}", "--json", "--kb", where)
+    result = _run("show", f"artifact:{rec['policy'].q[:8]}", "--json", *opts)
     assert json.loads(result.output)["referenced_by"] == [f"policy:{rec['policy'].id} (q)"]
-    result = _run("show", "policy:999", "--kb", where)
+    result = _run("show", "policy:999", *opts)
     assert result.exit_code == 2 and "kb ls policy" in result.output
 
 
 @pytest.mark.parametrize("suffix", [".parquet", ".csv", ".json"])
-def test_export(sqlite_kb, tmp_path, suffix):
-    where, _, rec = sqlite_kb
+def test_export(cli_kb, tmp_path, suffix):
+    opts, _, rec = cli_kb
     out = tmp_path / f"q{suffix}"
-    result = _run("export", rec["policy"].ref, "--field", "q", "--out", str(out), "--kb", where)
+    result = _run("export", rec["policy"].ref, "--field", "q", "--out", str(out), *opts)
     assert result.exit_code == 0, result.output
     q = np.arange(10.0).reshape(5, 2)
     if suffix == ".parquet":
@@ -63,24 +62,24 @@ def test_export(sqlite_kb, tmp_path, suffix):
         assert out.read_text().splitlines()[1] == "0,1"
     else:
         assert json.loads(out.read_text())["values"] == q.tolist()
-    result = _run("export", rec["run"].ref, "--out", str(tmp_path / "c.csv"), "--kb", where)
+    result = _run("export", rec["run"].ref, "--out", str(tmp_path / "c.csv"), *opts)
     assert result.exit_code == 0, result.output
     assert (tmp_path / "c.csv").read_text().splitlines()[0] == '"episode","gap"'
-    result = _run("export", rec["policy"].ref, "--out", str(tmp_path / "x.csv"), "--kb", where)
+    result = _run("export", rec["policy"].ref, "--out", str(tmp_path / "x.csv"), *opts)
     assert result.exit_code == 2 and "--field" in result.output
 
 
-def test_check_and_gc(sqlite_kb):
-    where, kb, _ = sqlite_kb
-    assert _run("check", "--kb", where).exit_code == 0
+def test_check_and_gc(cli_kb):
+    opts, kb, _ = cli_kb
+    assert _run("check", *opts).exit_code == 0
     before = kb.counts()["artifact"]
     orphan = kb.put_array(np.arange(7), kind="scratch")
-    result = _run("gc", "--kb", where)
+    result = _run("gc", *opts)
     assert result.exit_code == 0 and orphan.sha256[:16] in result.output
     assert "would delete 1 item" in result.output
     assert kb.counts()["artifact"] == before + 1
-    result = _run("gc", "--yes", "--kb", where)
+    result = _run("gc", "--yes", *opts)
     assert "deleted 1 item" in result.output
     assert kb.counts()["artifact"] == before
-    assert _run("check", "--kb", where).exit_code == 0
-    assert "already current" in _run("upgrade", "--kb", where).output
+    assert _run("check", *opts).exit_code == 0
+    assert "already current" in _run("upgrade", *opts).output

@@ -19,6 +19,7 @@ from adpart.cli.kb import kb as kb_group
 from adpart.store import KnowledgeBase, StoreError
 from adpart.store import schema as schema_mod
 from adpart.store.artifacts import ArtifactStore, check_relative_uri
+from tests.store.conftest import Where
 
 
 def _python(code: str, *args: str) -> subprocess.Popen:
@@ -30,23 +31,22 @@ def _artifact_file(kb: KnowledgeBase, sha: str) -> Path:
     return Path(kb.artifacts.base) / kb.artifacts.uri_for(sha)
 
 
-def test_sigkill_during_large_artifact_write_leaves_kb_clean(tmp_path):
-    where = tmp_path / "kb"
-    with KnowledgeBase.open(where) as kb:
+def test_sigkill_during_large_artifact_write_leaves_kb_clean(where):
+    with where.open() as kb:
         env = kb.put_environment("big", model_hash="b" * 64, n_states=4_000_000, n_actions=8)
         task = kb.put_task(env, "t", spec={}, gamma=0.9)
         small = kb.put_run(task, "x", curve={"gap": np.ones(3)})
     proc = _python("""
         import sys, numpy as np
         from adpart.store import KnowledgeBase
-        kb = KnowledgeBase.open(sys.argv[1])
+        kb = KnowledgeBase.open(sys.argv[1], artifacts=sys.argv[2] or None)
         q = np.random.default_rng(0).standard_normal((4_000_000, 8))
         print("writing", flush=True)
         kb.put_policy(1, "q", q=q)
         print("done", flush=True)
-    """, str(where))
+    """, where.location, where.artifacts)
     assert proc.stdout.readline().strip() == "writing"
-    art_dir = where / "artifacts"
+    art_dir = Path(kb.artifacts.base)
     deadline = time.monotonic() + 60
     while not any(p.name.startswith(".tmp-") for p in art_dir.rglob("*")):
         assert time.monotonic() < deadline and proc.poll() is None, "the writer never started"
@@ -55,7 +55,7 @@ def test_sigkill_during_large_artifact_write_leaves_kb_clean(tmp_path):
     proc.wait()
     proc.stdout.close()
     proc.stderr.close()
-    with KnowledgeBase.open(where) as kb:
+    with where.open() as kb:
         assert kb.counts()["policy"] == 0
         assert kb.load(kb.get("run", small.id), "curve").num_rows == 3
         report = kb.check()
@@ -63,14 +63,14 @@ def test_sigkill_during_large_artifact_write_leaves_kb_clean(tmp_path):
         assert report.temporary_files
         assert kb.gc(delete=True, temporary_age_s=0).files
         assert not kb.check().temporary_files
-    result = CliRunner().invoke(kb_group, ["check", "--kb", str(where)])
+    result = CliRunner().invoke(kb_group, ["check", *where.cli])
     assert result.exit_code == 0, result.output
 
 
 WRITER = """
     import sys, numpy as np
     from adpart.store import KnowledgeBase
-    kb = KnowledgeBase.open(sys.argv[1])
+    kb = KnowledgeBase.open(sys.argv[1], artifacts=sys.argv[3] or None)
     me = int(sys.argv[2])
     env = kb.put_environment("shared", model_hash="c" * 64, n_states=3, n_actions=2)
     task = kb.put_task(env, "shared", spec={"g": 1}, gamma=0.9)
@@ -81,15 +81,14 @@ WRITER = """
 """
 
 
-def test_two_processes_writing_at_once_lose_nothing(tmp_path):
-    where = tmp_path / "kb"
-    KnowledgeBase.open(where).close()
-    procs = [_python(WRITER, str(where), str(me)) for me in (1, 2)]
+def test_two_processes_writing_at_once_lose_nothing(where):
+    where.open().close()
+    procs = [_python(WRITER, where.location, str(me), where.artifacts) for me in (1, 2)]
     outs = [p.communicate(timeout=120) for p in procs]
     for p, (out, err) in zip(procs, outs, strict=True):
         assert p.returncode == 0, err
         assert out.strip() == "ok"
-    with KnowledgeBase.open(where) as kb:
+    with where.open() as kb:
         runs = kb.records("run")
         assert len(runs) == 400
         assert {(r.learner, r.seed) for r in runs} == {(f"w{m}", i) for m in (1, 2)
@@ -113,9 +112,8 @@ def test_flipped_byte_is_reported_by_check_and_by_read(populated):
     assert any(f"policy:{policy.id} (q)" in p and policy.q[:12] in p for p in report.problems)
 
 
-def test_flipped_byte_via_cli(tmp_path):
-    where = tmp_path / "kb"
-    with KnowledgeBase.open(where) as kb:
+def test_flipped_byte_via_cli(where, tmp_path):
+    with where.open() as kb:
         env = kb.put_environment("e", model_hash="d" * 64, n_states=1000, n_actions=4)
         task = kb.put_task(env, "t", spec={}, gamma=0.9)
         policy = kb.put_policy(task, "q", q=np.arange(4000.0).reshape(1000, 4))
@@ -123,61 +121,61 @@ def test_flipped_byte_via_cli(tmp_path):
     data = bytearray(path.read_bytes())
     data[len(data) // 2] ^= 0x01
     path.write_bytes(bytes(data))
-    result = CliRunner().invoke(kb_group, ["check", "--kb", str(where)])
+    result = CliRunner().invoke(kb_group, ["check", *where.cli])
     assert result.exit_code == 1
     assert f"policy:{policy.id} (q)" in result.output
     result = CliRunner().invoke(kb_group, ["export", f"policy:{policy.id}", "--field", "q",
-                                           "--out", str(tmp_path / "q.csv"), "--kb", str(where)])
+                                           "--out", str(tmp_path / "q.csv"), *where.cli])
     assert result.exit_code == 2
     assert "damaged" in result.output and f"policy:{policy.id}" in result.output
 
 
-def _set_version(where: Path, version: int) -> None:
-    engine = create_engine(f"sqlite:///{where / 'kb.sqlite'}")
+def _set_version(where: Where, version: int) -> None:
+    engine = create_engine(where.db_url)
     with engine.begin() as conn:
         conn.execute(text("UPDATE adpart_schema SET version = :v, written_by = '9.9'"),
                      {"v": version})
     engine.dispose()
 
 
-def test_newer_schema_is_refused(tmp_path):
-    where = tmp_path / "kb"
-    KnowledgeBase.open(where).close()
+def test_newer_schema_is_refused(where):
+    where.open().close()
     _set_version(where, schema_mod.SCHEMA_VERSION + 1)
     with pytest.raises(StoreError, match=r"written by a newer adpart \(9\.9\).*upgrade adpart"):
-        KnowledgeBase.open(where)
-    result = CliRunner().invoke(kb_group, ["info", "--kb", str(where)])
+        where.open()
+    result = CliRunner().invoke(kb_group, ["info", *where.cli])
     assert result.exit_code == 2
     assert "upgrade adpart" in result.output and len(result.output.strip().splitlines()) == 1
 
 
-def test_unknown_schema_is_refused(tmp_path):
-    where = tmp_path / "kb"
-    where.mkdir()
-    engine = create_engine(f"sqlite:///{where / 'kb.sqlite'}")
+def test_unknown_schema_is_refused(where):
+    if where.backend == "sqlite":
+        Path(where.location).mkdir()
+    engine = create_engine(where.db_url)
     with engine.begin() as conn:
         conn.execute(text("CREATE TABLE something (x INTEGER)"))
-    engine.dispose()
     with pytest.raises(StoreError, match="not an adpart knowledge base"):
-        KnowledgeBase.open(where)
-    KnowledgeBase.open(tmp_path / "ok").close()
-    _set_version(tmp_path / "ok", 0)
+        where.open()
+    with engine.begin() as conn:
+        conn.execute(text("DROP TABLE something"))
+    engine.dispose()
+    where.open().close()
+    _set_version(where, 0)
     with pytest.raises(StoreError, match="unknown adpart schema version"):
-        KnowledgeBase.open(tmp_path / "ok")
+        where.open()
 
 
-def test_older_schema_asks_for_upgrade_and_upgrade_migrates(tmp_path, monkeypatch):
-    where = tmp_path / "kb"
-    KnowledgeBase.open(where).close()
+def test_older_schema_asks_for_upgrade_and_upgrade_migrates(where, monkeypatch):
+    where.open().close()
     steps = []
     monkeypatch.setattr(schema_mod, "SCHEMA_VERSION", 2)
     monkeypatch.setitem(schema_mod.MIGRATIONS, 1, lambda conn: steps.append(1))
     with pytest.raises(StoreError, match="run `adpart kb upgrade`"):
-        KnowledgeBase.open(where)
-    result = CliRunner().invoke(kb_group, ["upgrade", "--kb", str(where)])
+        where.open()
+    result = CliRunner().invoke(kb_group, ["upgrade", *where.cli])
     assert result.exit_code == 0, result.output
     assert "1 -> 2" in result.output and steps == [1]
-    KnowledgeBase.open(where).close()
+    where.open().close()
 
 
 def test_unwritable_location_gives_a_clear_error(tmp_path):
@@ -195,21 +193,18 @@ def test_unwritable_location_gives_a_clear_error(tmp_path):
 INJECTION = "x'; DROP TABLE runs; --"
 
 
-def test_names_and_ids_are_bound_parameters(populated, tmp_path):
+def test_names_and_ids_are_bound_parameters(where, populated):
     kb, rec = populated
     env = kb.put_environment(INJECTION, model_hash="f" * 64, n_states=2, n_actions=1)
     assert kb.find_environment(INJECTION).id == env.id
-    location = kb.label if kb.db_url.startswith("sqlite") else None
-    if location is None:
-        pytest.skip("CLI injection test runs on the SQLite location")
     runner = CliRunner()
-    result = runner.invoke(kb_group, ["ls", "run", "--env", INJECTION, "--kb", location])
+    result = runner.invoke(kb_group, ["ls", "run", "--env", INJECTION, *where.cli])
     assert result.exit_code == 0, result.output
     for bad in ("run:1; DROP TABLE runs; --", INJECTION, "artifact:' OR 1=1 --", "run:1'"):
-        result = runner.invoke(kb_group, ["show", bad, "--kb", location])
+        result = runner.invoke(kb_group, ["show", bad, *where.cli])
         assert result.exit_code == 2
         assert "not a record id" in result.output
-    result = runner.invoke(kb_group, ["ls", INJECTION, "--kb", location])
+    result = runner.invoke(kb_group, ["ls", INJECTION, *where.cli])
     assert result.exit_code == 2 and "unknown record kind" in result.output
     assert kb.counts()["run"] == 1
     assert kb.runs_for(rec["task"]) == [rec["run"]]
