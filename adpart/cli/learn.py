@@ -99,6 +99,18 @@ def kb_location_options(func):  # type: ignore[no-untyped-def]
 )
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar.")
+@click.option(
+    "--options",
+    "options_ref",
+    metavar="ID",
+    help="Options for smdp-q/hierarchical: subgoal-set:N, option:1,option:2 or primitive.",
+)
+@click.option(
+    "--partition",
+    "partition_ref",
+    metavar="ID",
+    help="Decision layer for the hierarchical learner (partition:N, from the KB).",
+)
 @click.option("--no-store", is_flag=True, help="Do not record the run in the knowledge base.")
 @kb_location_options
 def learn_cmd(
@@ -114,6 +126,8 @@ def learn_cmd(
     out: Path | None,
     as_json: bool,
     quiet: bool,
+    options_ref: str | None,
+    partition_ref: str | None,
     no_store: bool,
     kb_path: str | None,
     kb_artifacts: str | None,
@@ -151,26 +165,31 @@ def learn_cmd(
         seed=seed,
         eval_every=eval_every,
         runs_per_batch=runs_per_batch,
+        options=options_ref,
+        partition=partition_ref,
     )
     executor_spec = reg.get("executor", executor)
     single = len(request.batches()) == 1
-    update, close = progress_callback(not quiet and single, episodes, f"{learner} on {env}")
-    try:
-        outcome = run_learning(request, executor=executor_spec.create(), progress=update)
-    finally:
-        close()
-    out = out or Path("adpart-learn") / (
-        f"{env.replace(':', '_')}_{outcome.task_name}_{learner}_seed{seed}"
-    )
-    summary = outcome.summary()
-    summary["files"] = write_learning_outputs(out, outcome)
-    if not no_store:
+    kb = None
+    if not no_store or options_ref or partition_ref:
         from adpart.store import KnowledgeBase
 
         kb = KnowledgeBase.open(KBLocation.resolve(kb_path, kb_artifacts))
+    try:
+        update, close = progress_callback(not quiet and single, episodes, f"{learner} on {env}")
         try:
-            summary["kb"] = record_learning(kb, outcome)
+            outcome = run_learning(request, executor=executor_spec.create(), progress=update, kb=kb)
         finally:
+            close()
+        out = out or Path("adpart-learn") / (
+            f"{env.replace(':', '_')}_{outcome.task_name}_{learner}_seed{seed}"
+        )
+        summary = outcome.summary()
+        summary["files"] = write_learning_outputs(out, outcome)
+        if not no_store and kb is not None:
+            summary["kb"] = record_learning(kb, outcome)
+    finally:
+        if kb is not None:
             kb.close()
     summary["files"]["summary"] = str(out / "summary.json")
     (out / "summary.json").write_text(dumps(summary))

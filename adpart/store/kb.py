@@ -360,11 +360,20 @@ class KnowledgeBase:
 
     def put_policy(self, task: E.Task | int, learner: str, *, q: Any = None, pi: Any = None,
                    seed: int | None = None, episodes: int | None = None, steps: int | None = None,
-                   plugin: str = "", plugin_version: str = "",
+                   q_columns: Sequence[str] | None = None, plugin: str = "",
+                   plugin_version: str = "",
                    parameters: Mapping[str, Any] | None = None) -> E.Policy:
-        """Store a learned policy: ``q`` (S, A) float64 and/or ``pi`` (S,) int64."""
+        """Store a learned policy: ``q`` (S, A) float64 and/or ``pi`` (S,) int64.
+
+        A learner over options stores ``q`` with one column per name in ``q_columns`` (e.g. the
+        primitive actions, then ``option:7``, ...); ``pi`` then indexes those columns. The names
+        are kept in the record's parameters as ``q_columns``.
+        """
         task_id = _id(task)
         S, A = self._task_shape(task_id)
+        if q_columns is not None:
+            A = len(q_columns)
+            parameters = {**dict(parameters or {}), "q_columns": list(q_columns)}
         q_art = self._array(q, "q", dtype=np.float64, shape=(S, A))
         pi_art = self._array(pi, "pi", dtype=np.int64, shape=(S,))
         with self._session(write=True) as s:

@@ -8,7 +8,7 @@ depend on the seed and the batch size, never on the executor or the number of wo
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -36,6 +36,10 @@ class LearnRequest:
         seed: root seed.
         eval_every: score greedy policies exactly every this many episodes.
         runs_per_batch: batch size for the executor (0 = all runs in one batch).
+        options: for option learners, ``subgoal-set:N``, ``option:1,option:2`` or ``primitive``
+            (read from the knowledge base).
+        partition: for the hierarchical learner, ``partition:N`` - the decision layer; its option
+            set is used when ``options`` is not given.
     """
 
     env: str
@@ -47,6 +51,8 @@ class LearnRequest:
     seed: int = 0
     eval_every: int = 10
     runs_per_batch: int = 0
+    options: str | None = None
+    partition: str | None = None
 
     def batches(self) -> list[tuple[int, int]]:
         """``(runs, seed)`` of every batch."""
@@ -78,6 +84,19 @@ class LearnOutcome:
     n_states: int
     n_actions: int
     model_hash: str
+    option_ids: tuple[int, ...] = ()
+
+    def q_columns(self, action_names: Sequence[str]) -> list[str] | None:
+        """Names of Q's columns when they are not just the primitive actions (option learners)."""
+        cols = self.Q.shape[2]
+        if not self.option_ids:
+            return None
+        names = [f"option:{i}" for i in self.option_ids]
+        if cols == len(names):
+            return names
+        if cols == self.n_actions + len(names):
+            return [*action_names, *names]
+        return None
 
     def summary(self) -> dict[str, Any]:
         gaps = self.curve.matrix("value_gap")[:, -1]
@@ -106,6 +125,11 @@ def _learn_batch(job: dict[str, Any]) -> dict[str, Any]:
     domain = resolve_domain(job["env"])
     mdp = domain.mdp(job["task"])
     learner = get_registry().get("learner", job["learner"]).create(job["params"])
+    extra = {}
+    if job.get("options") is not None:
+        extra["options"] = job["options"]
+    if job.get("partition") is not None:
+        extra["partition"] = job["partition"]
     result = learner.learn(
         mdp,
         runs=job["runs"],
@@ -113,6 +137,7 @@ def _learn_batch(job: dict[str, Any]) -> dict[str, Any]:
         seed=job["seed"],
         eval_every=job["eval_every"],
         progress=job.get("progress"),
+        **extra,
     )
     return {
         "Q": result.Q,
@@ -127,10 +152,12 @@ def run_learning(
     *,
     executor: Executor | None = None,
     progress: Callable[[int, int], object] | None = None,
+    kb: Any = None,
 ) -> LearnOutcome:
     """Validate ``request``, learn all its batches (on ``executor`` when there are several).
 
-    ``progress(done, total)`` is reported for a single batch computed in this process.
+    ``progress(done, total)`` is reported for a single batch computed in this process. ``kb`` is
+    needed when the request names options or a partition.
     """
     spec = get_registry().get("learner", request.learner)
     params = spec.resolve_params(request.params)
@@ -138,6 +165,8 @@ def run_learning(
     task = domain.task(request.task)
     mdp = domain.mdp(task)
     batches = request.batches()
+    layer = _decision_layer(kb, request)
+    option_ids = tuple(layer.pop("option_ids", ()))
     jobs = [
         {
             "env": request.env,
@@ -148,6 +177,7 @@ def run_learning(
             "episodes": request.episodes,
             "seed": seed,
             "eval_every": request.eval_every,
+            **layer,
         }
         for runs, seed in batches
     ]
@@ -169,7 +199,41 @@ def run_learning(
         n_states=mdp.n_states,
         n_actions=mdp.n_actions,
         model_hash=mdp.content_hash,
+        option_ids=option_ids,
     )
+
+
+def _decision_layer(kb: Any, request: LearnRequest) -> dict[str, Any]:
+    """Options and partition named by ``request``, loaded from the knowledge base."""
+    if request.options is None and request.partition is None:
+        return {}
+    if kb is None:
+        raise TaskError("--options/--partition are read from the knowledge base; give --kb")
+    from adpart.workflows.options import resolve_option_set
+    from adpart.workflows.refs import get_ref
+
+    layer: dict[str, Any] = {}
+    partition_rec = None
+    if request.partition is not None:
+        partition_rec = get_ref(kb, request.partition, "partition")
+    options_text = request.options
+    if options_text is None and partition_rec is not None:
+        options_text = ",".join(f"option:{i}" for i in partition_rec.option_ids) or "primitive"
+    option_set = resolve_option_set(kb, options_text, request.env)
+    layer["options"] = option_set.options
+    layer["option_ids"] = option_set.ids
+    if partition_rec is not None:
+        from adpart.partition import Partition
+
+        if list(partition_rec.option_ids) != option_set.ids:
+            raise TaskError(
+                f"{partition_rec.ref} was built over options {list(partition_rec.option_ids)}, "
+                f"not {option_set.ids}; omit --options to use the partition's own"
+            )
+        labels = kb.load(partition_rec, "labels")
+        admissible = kb.load(partition_rec, "block_actions")
+        layer["partition"] = Partition(labels, admissible.astype(bool))
+    return layer
 
 
 def _merge_curves(parts: list[dict[str, np.ndarray]], metadata: dict[str, Any]) -> LearningCurve:
@@ -237,7 +301,11 @@ def record_learning(kb: Any, outcome: LearnOutcome) -> dict[str, Any]:
     Q = outcome.Q
     steps = outcome.curve.matrix("steps").sum(axis=1)
     run_seeds = np.repeat([s for _, s in outcome.batches], [k for k, _ in outcome.batches])
-    provenance = {"plugin_version": outcome.learner_version, "parameters": outcome.params}
+    provenance = {
+        "plugin_version": outcome.learner_version,
+        "parameters": outcome.params,
+        "q_columns": outcome.q_columns(dyn.action_names),
+    }
     policies = [
         kb.put_policy(
             task_rec,
@@ -262,9 +330,15 @@ def record_learning(kb: Any, outcome: LearnOutcome) -> dict[str, Any]:
             "episodes",
         )
     }
+    partition_id = None
+    if request.partition is not None:
+        from adpart.workflows.refs import parse_ref
+
+        partition_id = parse_ref(request.partition, "partition")
     run = kb.put_run(
         task_rec,
         request.learner,
+        partition=partition_id,
         curve=outcome.curve.to_arrow(),
         metrics=metrics,
         seed=request.seed,

@@ -145,3 +145,57 @@ def load_options(kb: Any, records: list[Any]) -> tuple[list[Option], list[Option
         )
         options.append(option)
     return options, models
+
+
+@dataclass(frozen=True, eq=False)
+class OptionSet:
+    """The options a command was asked to use, with their records (empty for ``primitive``)."""
+
+    records: list[Any]
+    options: list[Option]
+    models: list[OptionModel]
+    primitive: bool
+
+    @property
+    def ids(self) -> list[int]:
+        return [r.id for r in self.records]
+
+
+def resolve_option_set(kb: Any, text: str, environment_name: str) -> OptionSet:
+    """Parse ``--options``: ``subgoal-set:N`` (its stored options), ``option:1,option:2``, or
+    ``primitive`` (the environment's primitive actions as one-step options).
+
+    Raises:
+        TaskError: malformed text, options of another environment, or a subgoal set whose options
+            were never built (the message says to run ``adpart options``).
+    """
+    from adpart.workflows.refs import parse_ref
+
+    text = text.strip()
+    if text == "primitive":
+        return OptionSet([], [], [], primitive=True)
+    if text.startswith("subgoal-set:"):
+        subgoal_set = kb.get("subgoal-set", parse_ref(text, "subgoal-set"))
+        wanted = set(subgoal_set.subgoal_ids)
+        records = [o for o in kb.options_for(subgoal_set.environment_id) if o.subgoal_id in wanted]
+        latest: dict[int, Any] = {}
+        for rec in records:  # the newest option per subgoal
+            latest[rec.subgoal_id] = rec
+        if set(latest) != wanted:
+            raise TaskError(
+                f"{subgoal_set.ref} has no stored options for every subgoal; build them with "
+                f"`adpart options {environment_name} --subgoals {subgoal_set.ref}`"
+            )
+        records = [latest[i] for i in subgoal_set.subgoal_ids]
+    else:
+        records = [kb.get("option", parse_ref(part, "option")) for part in text.split(",") if part]
+        if not records:
+            raise TaskError(f"--options {text!r} names no option; write e.g. option:1,option:2")
+    for rec in records:
+        env = kb.get("environment", rec.environment_id)
+        if env.name != environment_name:
+            raise TaskError(
+                f"{rec.ref} belongs to environment {env.name!r}, not {environment_name!r}"
+            )
+    options, models = load_options(kb, records)
+    return OptionSet(records, options, models, primitive=False)

@@ -72,3 +72,32 @@ def test_options_errors(kb_with_subgoals):
     missing = CliRunner().invoke(
         cli, ["options", "two-rooms", "--subgoals", "99", "--kb", str(kb_dir)])
     assert missing.exit_code == 2 and "no subgoal-set:99" in missing.output
+
+
+def test_learn_on_stored_options_with_smdp_q_and_hierarchical(kb_with_subgoals, tmp_path):
+    kb_dir, subgoal_set = kb_with_subgoals
+    built = CliRunner().invoke(
+        cli, ["options", "two-rooms", "--subgoals", subgoal_set.ref, "--kb", str(kb_dir)])
+    assert built.exit_code == 0, built.output
+    smdp = CliRunner().invoke(cli, [
+        "learn", "two-rooms", "--learner", "smdp-q", "--options", subgoal_set.ref,
+        "--primitives", "true", "--runs", "2", "--episodes", "30", "--out", str(tmp_path / "s"),
+        "--kb", str(kb_dir), "--json"])
+    assert smdp.exit_code == 0, smdp.output
+    summary = json.loads(smdp.output)
+    assert summary["learner"] == "smdp-q" and summary["runs"] == 2
+    import pyarrow.parquet as pq
+
+    curve = pq.read_table(tmp_path / "s" / "curve.parquet").to_pydict()
+    assert sum(curve["decisions"]) < sum(curve["steps"])  # options take several steps per decision
+
+    hier = CliRunner().invoke(cli, [
+        "learn", "two-rooms", "--learner", "hierarchical", "--options", subgoal_set.ref,
+        "--runs", "1", "--episodes", "10", "--out", str(tmp_path / "h"), "--kb", str(kb_dir),
+        "--json"])
+    assert hier.exit_code == 0, hier.output
+
+    missing = CliRunner().invoke(cli, [
+        "learn", "two-rooms", "--learner", "smdp-q", "--options", "subgoal-set:1,", "--kb",
+        str(kb_dir), "--out", str(tmp_path / "m")])
+    assert missing.exit_code == 2

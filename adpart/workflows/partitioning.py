@@ -1,0 +1,384 @@
+"""Multi-phase partitioning of an environment over stored options, every phase kept in the KB.
+
+The numeric phases are :mod:`adpart.partition.multiphase` (section 4.2.1.2); this workflow adds
+what the dissertation's "knowledge base" promises (section 4.2.1.2, chapter 6):
+
+* **Phase 1** per option is reward-independent: it is stored as a ``per-option`` partition and
+  *reused* whenever the knowledge base already holds one for the same option and delta (epsilon
+  plays no part in phase 1, so it is not part of the key). Changing the option set therefore
+  re-runs phases 2-3 only.
+* **Phase 2** (intersection + refinement for the whole set) is stored as ``intersected`` with the
+  phase-1 partitions as parents.
+* **Phase 3** (a task's rewards within epsilon, eq. 4.7) is stored as ``reward-refined`` with the
+  phase-2 partition as parent. Stored option models carry the rewards (and the terminal states)
+  of the task they were built under; for another task they are recomputed on that task's MDP
+  (:func:`adpart.options.models.option_models`) and phase 3 refines against the recomputed model,
+  so the final partition is epsilon,delta-stable for the task actually asked for.
+
+The artifact of each record is the block labels ``(S,)``; ``block_actions`` is the ``(B, K)``
+mask of the options offered per block over the record's action set (the options in order, or the
+primitive actions for ``--options primitive``). The final partition is verified by the
+independent checker (:func:`adpart.partition.check_stability`), and with a task the measured
+``||V* - V*_P||_inf`` of the point model is reported next to theorem 4.5's bound
+(:func:`adpart.partition.value_gap`).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from adpart.errors import ModelError, TaskError
+from adpart.execution import Executor
+from adpart.mdp.model import FiniteMDP, SMDPModel
+from adpart.options.models import OptionModel, option_models
+from adpart.options.smdp import stack_models
+from adpart.partition import Partition, check_stability, phase1, phase2, phase3, value_gap
+from adpart.partition._validate import check_delta, check_epsilon
+from adpart.workflows.options import OptionSet, resolve_option_set
+from adpart.workflows.resolve import resolve_domain
+
+PLUGIN = "adpart.partition"
+
+
+@dataclass(frozen=True)
+class PhaseRecord:
+    """One stored partition of a run: its record id, block count, and whether it was reused."""
+
+    kind: str
+    id: int
+    blocks: int
+    reused: bool = False
+    column: str = ""
+
+    @property
+    def ref(self) -> str:
+        return f"partition:{self.id}"
+
+
+@dataclass(frozen=True, eq=False)
+class PartitionOutcome:
+    """What :func:`partition_environment` computed and stored.
+
+    Attributes:
+        env, task: environment and task names (task None: phases 1-2 only).
+        options: the option set as given (``primitive`` or record refs).
+        columns: the action set of every stored record (option names, or primitive actions).
+        phase1: one :class:`PhaseRecord` per option.
+        phase2, phase3: the intersected and reward-refined records (phase3 None without task).
+        final: the last :class:`Partition` (over ``columns``).
+        seconds: wall time per phase (``phase1`` counts only the options computed anew).
+        check: the checker's verdict on the final partition.
+        gap: measured ``||V* - V*_P||_inf`` next to theorem 4.5 (with a task), else None.
+        recomputed_models: whether option models were recomputed for the task.
+    """
+
+    env: str
+    task: str | None
+    options: str
+    delta: float
+    epsilon: float
+    n_states: int
+    columns: list[str]
+    phase1: list[PhaseRecord]
+    phase2: PhaseRecord
+    phase3: PhaseRecord | None
+    final: Partition
+    seconds: dict[str, float]
+    check: dict[str, Any]
+    gap: dict[str, float] | None
+    recomputed_models: bool
+    environment_id: int
+    task_id: int | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def final_record(self) -> PhaseRecord:
+        return self.phase3 if self.phase3 is not None else self.phase2
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready: ids and block counts per phase, seconds, checker and value gap."""
+        p1_blocks = [p.blocks for p in self.phase1]
+        return {
+            "env": self.env,
+            "task": self.task,
+            "options": self.options,
+            "delta": self.delta,
+            "epsilon": self.epsilon,
+            "states": self.n_states,
+            "environment": f"environment:{self.environment_id}",
+            "task_id": None if self.task_id is None else f"task:{self.task_id}",
+            "phase1": {
+                "partitions": [
+                    {"id": p.ref, "column": p.column, "blocks": p.blocks, "reused": p.reused}
+                    for p in self.phase1
+                ],
+                "blocks_min": int(min(p1_blocks)),
+                "blocks_max": int(max(p1_blocks)),
+                "computed": sum(not p.reused for p in self.phase1),
+                "reused": sum(p.reused for p in self.phase1),
+            },
+            "phase2": {"id": self.phase2.ref, "blocks": self.phase2.blocks},
+            "phase3": None if self.phase3 is None else {
+                "id": self.phase3.ref, "blocks": self.phase3.blocks,
+                "recomputed_option_models": self.recomputed_models,
+            },
+            "final": {"id": self.final_record.ref, "blocks": self.final.n_blocks},
+            "seconds": {k: round(v, 4) for k, v in self.seconds.items()},
+            "check": self.check,
+            "value_gap": self.gap,
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class _Base:
+    """The model phases 1-2 run on and how each column is stored."""
+
+    smdp: SMDPModel
+    termination: np.ndarray
+    columns: list[str]
+    option_set: OptionSet
+    mdp: FiniteMDP
+
+
+def _check_settings(delta: object, epsilon: object) -> tuple[float, float]:
+    d = check_delta(delta)
+    e = check_epsilon(epsilon)
+    if e is None:
+        raise ModelError("epsilon must be a number >= 0 (the reward tolerance of eq. 4.7)")
+    return d, e
+
+
+def _environment(kb: Any, env_name: str) -> tuple[Any, Any]:
+    domain = resolve_domain(env_name)
+    dyn = domain.dynamics()
+    env = kb.put_environment(
+        env_name, model_hash=dyn.content_hash, n_states=dyn.n_states, n_actions=dyn.n_actions,
+        spec={"name": env_name, "source": domain.source, "actions": list(dyn.action_names)},
+    )
+    return domain, env
+
+
+def _source_task(records: list[Any]) -> int | None:
+    """The task the stored option models were built under, when all agree (else None)."""
+    tasks = {rec.provenance.parameters.get("task_id") for rec in records}
+    return tasks.pop() if len(tasks) == 1 else None
+
+
+def _base_model(kb: Any, domain: Any, env_name: str, options_text: str,
+                task_mdp: FiniteMDP | None) -> _Base:
+    """Phases 1-2 work on the stored option models (primitives: the task's own MDP)."""
+    option_set = resolve_option_set(kb, options_text, env_name)
+    if option_set.primitive:
+        mdp = task_mdp if task_mdp is not None else domain.mdp(None)
+        smdp = mdp.as_smdp()
+        termination = np.zeros(smdp.R.shape, dtype=bool)  # one-step: {I, outside I} start
+        return _Base(smdp, termination, list(mdp.action_names), option_set, mdp)
+    if len({rec.id for rec in option_set.records}) != len(option_set.records):
+        raise TaskError(f"--options {options_text!r} lists an option twice; name each once")
+    source = _source_task(option_set.records)
+    mdp = domain.mdp(kb.get("task", source).name if source is not None else None)
+    smdp = stack_models(mdp, option_set.models, include_primitives=False)
+    termination = np.stack([o.beta >= 1.0 for o in option_set.options], axis=1)
+    return _Base(smdp, termination, [rec.ref for rec in option_set.records], option_set, mdp)
+
+
+def _find_phase1(kb: Any, env: Any, base: _Base, column: int, delta: float) -> Any | None:
+    """A stored per-option partition of this column with this delta, or None."""
+    if base.option_set.primitive:
+        candidates = [
+            p for p in kb.records("partition", environment=env)
+            if p.kind == "per-option" and not p.option_ids
+            and p.provenance.parameters.get("action") == column
+            and p.provenance.parameters.get("model_hash") == base.mdp.content_hash
+        ]
+    else:
+        rec = base.option_set.records[column]
+        candidates = [
+            p for p in kb.partitions_using([rec], exact=True, includes_primitives=False)
+            if p.kind == "per-option"
+        ]
+    matching = [p for p in candidates if abs(p.delta - delta) <= 1e-12]
+    return matching[-1] if matching else None
+
+
+def _store(kb: Any, env: Any, base: _Base, kind: str, partition: Partition, columns: np.ndarray,
+           *, delta: float, epsilon: float, parents: list[int], task: Any = None,
+           parameters: dict[str, Any]) -> Any:
+    primitive = base.option_set.primitive
+    if primitive:
+        block_actions = np.zeros((partition.n_blocks, base.smdp.n_actions), dtype=bool)
+        block_actions[:, columns] = partition.admissible[:, columns]
+        options: list[Any] = []
+    else:
+        block_actions = partition.admissible[:, columns]
+        options = [base.option_set.records[int(c)] for c in columns]
+    return kb.put_partition(
+        env, kind, partition.labels, options=options, includes_primitives=primitive,
+        epsilon=epsilon, delta=delta, block_actions=block_actions, parents=parents, task=task,
+        plugin=PLUGIN, parameters=parameters,
+    )
+
+
+def _phase1_all(kb: Any, env: Any, base: _Base, delta: float
+                ) -> tuple[dict[int, Partition], list[PhaseRecord], float]:
+    """Phase 1 of every column: loaded when stored, else computed and stored."""
+    smdp = base.smdp
+    parts: dict[int, Partition] = {}
+    rows: list[PhaseRecord] = []
+    seconds = 0.0
+    for o in range(smdp.n_actions):  # one refinement per option (each vectorised over states)
+        found = _find_phase1(kb, env, base, o, delta)
+        if found is not None:
+            labels = kb.load(found, "labels")
+            parts[o] = Partition.from_labels(labels, _only(smdp.admissible, o))
+            rows.append(PhaseRecord("per-option", found.id, found.n_blocks, True,
+                                    base.columns[o]))
+            continue
+        t0 = time.perf_counter()
+        part = phase1(smdp, o, base.termination[:, o], delta=delta)
+        seconds += time.perf_counter() - t0
+        params: dict[str, Any] = {"phase": 1, "column": base.columns[o]}
+        if base.option_set.primitive:
+            params.update(action=o, model_hash=base.mdp.content_hash)
+        rec = _store(kb, env, base, "per-option", part, np.array([o]), delta=delta,
+                     epsilon=0.0, parents=[], parameters=params)
+        parts[o] = part
+        rows.append(PhaseRecord("per-option", rec.id, part.n_blocks, False, base.columns[o]))
+    return parts, rows, seconds
+
+
+def _only(admissible: np.ndarray, column: int) -> np.ndarray:
+    out = np.zeros_like(admissible)
+    out[:, column] = admissible[:, column]
+    return out
+
+
+def _task_model(base: _Base, task_rec: Any, task_mdp: FiniteMDP,
+                executor: Executor | None) -> tuple[SMDPModel, list[OptionModel] | None, bool]:
+    """The model phase 3 refines against: stored models if built under this very task."""
+    if base.option_set.primitive:
+        return task_mdp.as_smdp(), None, False
+    same_task = _source_task(base.option_set.records) == task_rec.id
+    same_gamma = all(
+        rec.gamma is not None and abs(rec.gamma - task_mdp.gamma) <= 1e-12
+        for rec in base.option_set.records
+    )
+    if same_task and same_gamma and base.mdp.content_hash == task_mdp.content_hash:
+        return base.smdp, list(base.option_set.models), False
+    models = option_models(task_mdp, list(base.option_set.options), executor=executor,
+                           duration=False)
+    try:
+        stacked = stack_models(task_mdp, models, include_primitives=False)
+    except ModelError as exc:
+        raise ModelError(
+            f"under task {task_rec.name!r} the option set leaves a state with no admissible "
+            f"option ({exc}); the options were built under another task, whose terminal states "
+            f"they skip - build options for task {task_rec.name!r} or use --options primitive"
+        ) from exc
+    return stacked, models, True
+
+
+def partition_environment(
+    kb: Any,
+    env_name: str,
+    options: str,
+    *,
+    delta: float = 0.3,
+    epsilon: float = 10.0,
+    task: str | None = None,
+    executor: Executor | None = None,
+    check: bool = True,
+) -> PartitionOutcome:
+    """Phases 1-3 of section 4.2.1.2 for ``env_name`` over a stored option set, stored in ``kb``.
+
+    Args:
+        options: ``subgoal-set:N`` (its options), ``option:1,option:2``, or ``primitive``.
+        delta: eq. 4.6 threshold in [0, 1]. epsilon: eq. 4.7 threshold >= 0 (phase 3 only).
+        task: a task name or ``goal:...`` spec; None stops after phase 2.
+        executor: runs the option-model computations when a task needs them recomputed.
+        check: run the independent checker on the final partition.
+
+    Raises:
+        ModelError: delta or epsilon out of range, or an option set leaving a state with no
+            admissible option. TaskError / StoreError: unknown ids, options of another
+            environment, options without stored models.
+    """
+    d, e = _check_settings(delta, epsilon)
+    domain, env = _environment(kb, env_name)
+    task_obj = task_mdp = task_rec = None
+    if task is not None:
+        task_obj = domain.task(task)
+        task_mdp = domain.mdp(task_obj)
+        task_rec = kb.put_task(
+            env, task_obj.name,
+            spec={**task_obj.spec, "name": task_obj.name, "model_hash": task_mdp.content_hash},
+            gamma=task_obj.gamma,
+        )
+    base = _base_model(kb, domain, env_name, options, task_mdp)
+    all_cols = np.arange(base.smdp.n_actions)
+    seconds: dict[str, float] = {}
+
+    p1, p1_rows, seconds["phase1"] = _phase1_all(kb, env, base, d)
+
+    t0 = time.perf_counter()
+    p2 = phase2(base.smdp, p1, all_cols, delta=d)
+    seconds["phase2"] = time.perf_counter() - t0
+    rec2 = _store(kb, env, base, "intersected", p2, all_cols, delta=d, epsilon=0.0,
+                  parents=[r.id for r in p1_rows], parameters={"phase": 2, "options": options})
+    phase2_row = PhaseRecord("intersected", rec2.id, p2.n_blocks)
+
+    final, model, phase3_row, gap, recomputed = p2, base.smdp, None, None, False
+    if task_rec is not None:
+        t0 = time.perf_counter()
+        model, _, recomputed = _task_model(base, task_rec, task_mdp, executor)
+        seconds["models"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        final = phase3(model, p2, all_cols, epsilon=e, delta=d)
+        seconds["phase3"] = time.perf_counter() - t0
+        rec3 = _store(kb, env, base, "reward-refined", final, all_cols, delta=d, epsilon=e,
+                      parents=[rec2.id], task=task_rec,
+                      parameters={"phase": 3, "options": options, "task": task_obj.name,
+                                  "recomputed_option_models": recomputed})
+        phase3_row = PhaseRecord("reward-refined", rec3.id, final.n_blocks)
+        t0 = time.perf_counter()
+        gap = value_gap(final, model, epsilon=e, delta=d, options=all_cols)
+        seconds["value_gap"] = time.perf_counter() - t0
+
+    verdict: dict[str, Any] = {"ran": False}
+    if check:
+        t0 = time.perf_counter()
+        report = check_stability(final, model, options=all_cols, delta=d,
+                                 epsilon=e if task_rec is not None else None)
+        seconds["check"] = time.perf_counter() - t0
+        verdict = {"ran": True, "ok": report.ok, "max_mass_span": report.max_mass_span,
+                   "max_reward_span": report.max_reward_span,
+                   "violations": len(report.violations)}
+    return PartitionOutcome(
+        env=env_name, task=None if task_obj is None else task_obj.name, options=options,
+        delta=d, epsilon=e, n_states=base.smdp.n_states, columns=base.columns, phase1=p1_rows,
+        phase2=phase2_row, phase3=phase3_row, final=final, seconds=seconds, check=verdict,
+        gap=gap, recomputed_models=recomputed, environment_id=env.id,
+        task_id=None if task_rec is None else task_rec.id,
+    )
+
+
+def plot_partition(env_name: str, labels: np.ndarray, path: str, *, title: str | None = None
+                   ) -> str:
+    """Draw a partition on the domain's map, a colour per block (as Fig. 4.5); return the path."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    domain = resolve_domain(env_name)
+    try:
+        fig = domain.render(path, labels=np.asarray(labels), title=title)
+    except OSError as exc:
+        raise TaskError(f"cannot write the plot to {path}: {exc.strerror}; choose another --plot"
+                        ) from exc
+    plt.close(fig)
+    return path
