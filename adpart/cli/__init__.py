@@ -6,6 +6,7 @@ import click
 
 from adpart import __version__
 from adpart.cli.common import AdpartGroup
+from adpart.cli.discover_cmd import discover_cmd
 from adpart.cli.envs import env_group, envs_cmd
 from adpart.cli.experiment import experiment_cmd
 from adpart.cli.kb import kb
@@ -35,3 +36,4 @@ cli.add_command(learn_cmd)
 cli.add_command(kb)
 cli.add_command(experiment_cmd)
 cli.add_command(options_cmd)
+cli.add_command(discover_cmd)

@@ -12,7 +12,7 @@ import click
 import numpy as np
 
 from adpart.errors import AdpartError
-from adpart.plugins import PluginWarning, Registry, get_registry
+from adpart.plugins import PluginSpec, PluginWarning, Registry, get_registry
 
 
 class CLIError(click.ClickException):
@@ -75,3 +75,69 @@ def progress_callback(
         state["done"] = done
 
     return update, lambda: bar.__exit__(None, None, None)
+
+
+def plugin_options_command(kind: str) -> type[click.Command]:
+    """A click Command class whose options include every ``kind`` plugin's declared parameters.
+
+    Parameters shared by several plugins appear once, their help naming the plugins that take
+    them; values arrive in the callback as ``plugin_<name>`` keywords (None when not given) and
+    are validated against the chosen plugin by :func:`split_plugin_options`.
+    """
+
+    class PluginOptionsCommand(click.Command):
+        def get_params(self, ctx: click.Context) -> list[click.Parameter]:
+            params = super().get_params(ctx)
+            reg = registry()
+            if getattr(self, "_options_for", None) is not reg:  # rebuilt with the registry
+                self._options_for, self._plugin_params = reg, _plugin_options(reg, kind)
+            return params[:-1] + self._plugin_params + params[-1:]  # keep --help last
+
+    return PluginOptionsCommand
+
+
+def _plugin_options(reg: Registry, kind: str) -> list[click.Option]:
+    owners: dict[str, list[str]] = {}
+    helps: dict[str, str] = {}
+    for spec in reg.all(kind):
+        for p in spec.params:
+            owners.setdefault(p.name, []).append(spec.name)
+            helps.setdefault(p.name, f"{p.help} (default {p.default})")
+    return [
+        click.Option(
+            [f"--{name}", f"plugin_{name.replace('-', '_')}"],
+            default=None,
+            help=f"{helps[name]} [{kind}: {', '.join(owners[name])}]",
+        )
+        for name in owners
+    ]
+
+
+def split_plugin_options(spec: PluginSpec, plugin_options: dict[str, Any]) -> dict[str, Any]:
+    """The ``plugin_*`` values given on the command line, checked against ``spec``'s parameters."""
+    given = {k.removeprefix("plugin_"): v for k, v in plugin_options.items() if v is not None}
+    foreign = sorted(set(given) - {p.keyword for p in spec.params})
+    if foreign:
+        raise CLIError(
+            f"--{foreign[0].replace('_', '-')} is not a parameter of {spec.kind} {spec.name!r}; "
+            f"its parameters: {', '.join('--' + p.name for p in spec.params) or 'none'}"
+        )
+    return given
+
+
+def kb_location_options(func):  # type: ignore[no-untyped-def]
+    """``--kb`` and ``--kb-artifacts``, resolved lazily by the command (nothing created early)."""
+    func = click.option(
+        "--kb-artifacts",
+        envvar="ADPART_KB_ARTIFACTS",
+        metavar="URI",
+        help="Artifact root for a database URL (any pyarrow filesystem URI)",
+    )(func)
+    return click.option(
+        "--kb",
+        "kb_path",
+        envvar="ADPART_KB",
+        metavar="PATH|URL",
+        help="Knowledge base directory or database URL [env ADPART_KB; default "
+        "$ADPART_HOME/kb or ~/.local/share/adpart/kb]",
+    )(func)

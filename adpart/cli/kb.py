@@ -25,9 +25,17 @@ from adpart.store.kb import KnowledgeBase
 from adpart.store.location import KBLocation
 
 _KIND_ALIASES = {
-    "env": "environment", "environments": "environment", "tasks": "task", "policies": "policy",
-    "subgoals": "subgoal-set", "subgoal-sets": "subgoal-set", "subgoal_set": "subgoal-set",
-    "options": "option", "partitions": "partition", "runs": "run", "artifacts": "artifact",
+    "env": "environment",
+    "environments": "environment",
+    "tasks": "task",
+    "policies": "policy",
+    "subgoals": "subgoal-set",
+    "subgoal-sets": "subgoal-set",
+    "subgoal_set": "subgoal-set",
+    "options": "option",
+    "partitions": "partition",
+    "runs": "run",
+    "artifacts": "artifact",
 }
 _REF = re.compile(r"^(?P<kind>[a-z][a-z_-]*):(?P<id>[0-9]{1,18})$")
 _ART = re.compile(r"^artifact:(?P<hex>[0-9a-f]{4,64})$")
@@ -53,11 +61,21 @@ def kb_option(func: Callable[..., Any]) -> Callable[..., Any]:
     ``KnowledgeBase.open(kb_location)`` when the command needs the knowledge base.
     """
 
-    @click.option("--kb", "kb_path", envvar="ADPART_KB", metavar="PATH|URL",
-                  help="Knowledge base directory or database URL [env ADPART_KB; default "
-                       "$ADPART_HOME/kb or ~/.local/share/adpart/kb]")
-    @click.option("--kb-artifacts", "kb_artifacts", envvar="ADPART_KB_ARTIFACTS", metavar="URI",
-                  help="Artifact root for a database URL (any pyarrow filesystem URI)")
+    @click.option(
+        "--kb",
+        "kb_path",
+        envvar="ADPART_KB",
+        metavar="PATH|URL",
+        help="Knowledge base directory or database URL [env ADPART_KB; default "
+        "$ADPART_HOME/kb or ~/.local/share/adpart/kb]",
+    )
+    @click.option(
+        "--kb-artifacts",
+        "kb_artifacts",
+        envvar="ADPART_KB_ARTIFACTS",
+        metavar="URI",
+        help="Artifact root for a database URL (any pyarrow filesystem URI)",
+    )
     @functools.wraps(func)
     def wrapper(*args: Any, kb_path: str | None, kb_artifacts: str | None, **kwargs: Any) -> Any:
         try:
@@ -111,15 +129,20 @@ def _resolve(kb: KnowledgeBase, ref: str) -> Any:
         return kb.artifact(art.group("hex"))
     match = _REF.match(ref)
     if not match:
-        raise KBError(f"{ref!r} is not a record id; write KIND:N (e.g. policy:12) or "
-                      "artifact:HEX (a hash prefix of at least 4 digits)")
+        raise KBError(
+            f"{ref!r} is not a record id; write KIND:N (e.g. policy:12) or "
+            "artifact:HEX (a hash prefix of at least 4 digits)"
+        )
     return kb.get(_kind(match.group("kind")), int(match.group("id")))
 
 
 def _summary(record: Any) -> str:
     fields = {k: v for k, v in _plain(record).items() if k not in ("ref", "id", "provenance")}
-    shown = ", ".join(f"{k}={v if not isinstance(v, str) or len(v) < 20 else v[:12]}"
-                      for k, v in fields.items() if v not in (None, {}, []))
+    shown = ", ".join(
+        f"{k}={v if not isinstance(v, str) or len(v) < 20 else v[:12]}"
+        for k, v in fields.items()
+        if v not in (None, {}, [])
+    )
     return f"{record.ref:<22} {shown}"
 
 
@@ -215,10 +238,19 @@ def _as_table(value: Any) -> pa.Table:
 
 @kb.command("export")
 @click.argument("ref")
-@click.option("--out", "out", required=True, type=click.Path(dir_okay=False, path_type=Path),
-              help="Output file: .parquet, .csv or .json")
-@click.option("--field", "field_name", default=None,
-              help="Artifact field of a record (e.g. q, pi, labels, curve)")
+@click.option(
+    "--out",
+    "out",
+    required=True,
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Output file: .parquet, .csv or .json",
+)
+@click.option(
+    "--field",
+    "field_name",
+    default=None,
+    help="Artifact field of a record (e.g. q, pi, labels, curve)",
+)
 @kb_option
 @_guard
 def export(kb_location: KBLocation, ref: str, out: Path, field_name: str | None) -> None:
@@ -235,8 +267,10 @@ def export(kb_location: KBLocation, ref: str, out: Path, field_name: str | None)
             if field_name is None and len(fields) == 1:
                 field_name = fields[0]
             if field_name not in fields:
-                raise KBError(f"{record.ref} has artifact fields {', '.join(fields) or 'none'}; "
-                              "choose one with --field")
+                raise KBError(
+                    f"{record.ref} has artifact fields {', '.join(fields) or 'none'}; "
+                    "choose one with --field"
+                )
             value = base.load(record, field_name)
             if value is None:
                 raise KBError(f"{record.ref} has no {field_name} artifact")
@@ -251,8 +285,11 @@ def export(kb_location: KBLocation, ref: str, out: Path, field_name: str | None)
                 payload: Any = table.to_pydict()
             else:
                 array = np.asarray(value)
-                payload = {"dtype": array.dtype.str, "shape": list(array.shape),
-                           "values": array.tolist()}
+                payload = {
+                    "dtype": array.dtype.str,
+                    "shape": list(array.shape),
+                    "values": array.tolist(),
+                }
             out.write_text(json.dumps(payload))
     except OSError as exc:
         raise KBError(f"cannot write {out}: {exc.strerror or exc}; choose a writable path") from exc
@@ -268,9 +305,18 @@ def check(kb_location: KBLocation, as_json: bool) -> None:
     with _open(kb_location) as base:
         report = base.check()
     if as_json:
-        click.echo(json.dumps({"ok": report.ok, "artifacts_checked": report.artifacts_checked,
-                               "problems": report.problems, "orphan_files": report.orphan_files,
-                               "temporary_files": report.temporary_files}, indent=2))
+        click.echo(
+            json.dumps(
+                {
+                    "ok": report.ok,
+                    "artifacts_checked": report.artifacts_checked,
+                    "problems": report.problems,
+                    "orphan_files": report.orphan_files,
+                    "temporary_files": report.temporary_files,
+                },
+                indent=2,
+            )
+        )
     else:
         for problem in report.problems:
             click.echo(f"DAMAGED: {problem}")
@@ -286,8 +332,12 @@ def check(kb_location: KBLocation, as_json: bool) -> None:
 
 @kb.command("gc")
 @click.option("--yes", is_flag=True, help="Delete (default: only list what would be deleted)")
-@click.option("--tmp-age", default=3600.0, show_default=True,
-              help="Seconds after which a .tmp-* file counts as abandoned")
+@click.option(
+    "--tmp-age",
+    default=3600.0,
+    show_default=True,
+    help="Seconds after which a .tmp-* file counts as abandoned",
+)
 @kb_option
 @_guard
 def gc(kb_location: KBLocation, yes: bool, tmp_age: float) -> None:
@@ -311,5 +361,8 @@ def upgrade(kb_location: KBLocation) -> None:
     """Migrate the knowledge base to this adpart's schema version."""
     with _open(kb_location, verify=False) as base:
         start, end = base.upgrade()
-    click.echo(f"schema version {start} -> {end}" if start != end
-               else f"schema version {end}: already current")
+    click.echo(
+        f"schema version {start} -> {end}"
+        if start != end
+        else f"schema version {end}: already current"
+    )

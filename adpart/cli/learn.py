@@ -11,58 +11,20 @@ from pathlib import Path
 
 import click
 
-from adpart.cli.common import CLIError, dumps, echo_json, progress_callback, registry
+from adpart.cli.common import (
+    dumps,
+    echo_json,
+    kb_location_options,
+    plugin_options_command,
+    progress_callback,
+    registry,
+    split_plugin_options,
+)
 from adpart.store.location import KBLocation
 from adpart.workflows import LearnRequest, record_learning, run_learning, write_learning_outputs
 
 
-class LearnerOptionsCommand(click.Command):
-    """A command whose options include every installed learner's declared parameters."""
-
-    def get_params(self, ctx: click.Context) -> list[click.Parameter]:
-        params = super().get_params(ctx)
-        reg = registry()
-        if getattr(self, "_options_for", None) is not reg:  # rebuilt when the registry is
-            self._options_for, self._plugin_params = reg, _learner_options()
-        return params[:-1] + self._plugin_params + params[-1:]  # keep --help last
-
-
-def _learner_options() -> list[click.Option]:
-    owners: dict[str, list[str]] = {}
-    helps: dict[str, str] = {}
-    for spec in registry().all("learner"):
-        for p in spec.params:
-            owners.setdefault(p.name, []).append(spec.name)
-            helps.setdefault(p.name, f"{p.help} (default {p.default})")
-    return [
-        click.Option(
-            [f"--{name}", f"plugin_{name.replace('-', '_')}"],
-            default=None,
-            help=f"{helps[name]} [learner: {', '.join(owners[name])}]",
-        )
-        for name in owners
-    ]
-
-
-def kb_location_options(func):  # type: ignore[no-untyped-def]
-    """``--kb`` and ``--kb-artifacts``, resolved lazily by the command (nothing created early)."""
-    func = click.option(
-        "--kb-artifacts",
-        envvar="ADPART_KB_ARTIFACTS",
-        metavar="URI",
-        help="Artifact root for a database URL (any pyarrow filesystem URI)",
-    )(func)
-    return click.option(
-        "--kb",
-        "kb_path",
-        envvar="ADPART_KB",
-        metavar="PATH|URL",
-        help="Knowledge base directory or database URL [env ADPART_KB; default "
-        "$ADPART_HOME/kb or ~/.local/share/adpart/kb]",
-    )(func)
-
-
-@click.command(name="learn", cls=LearnerOptionsCommand)
+@click.command(name="learn", cls=plugin_options_command("learner"))
 @click.argument("env")
 @click.option("--task", help="Task name (see `adpart envs`) or goal:FEATURE=VALUE,... .")
 @click.option("--learner", default="q-learning", show_default=True, help="Learner plugin.")
@@ -148,13 +110,7 @@ def learn_cmd(
     """
     reg = registry()
     spec = reg.get("learner", learner)
-    given = {k.removeprefix("plugin_"): v for k, v in plugin_options.items() if v is not None}
-    foreign = sorted(set(given) - {p.keyword for p in spec.params})
-    if foreign:
-        raise CLIError(
-            f"--{foreign[0].replace('_', '-')} is not a parameter of learner {learner!r}; its "
-            f"parameters: {', '.join('--' + p.name for p in spec.params) or 'none'}"
-        )
+    given = split_plugin_options(spec, plugin_options)
     request = LearnRequest(
         env=env,
         task=task,

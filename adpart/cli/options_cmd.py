@@ -6,8 +6,7 @@ import time
 
 import click
 
-from adpart.cli.common import echo_json, registry
-from adpart.cli.learn import kb_location_options
+from adpart.cli.common import echo_json, kb_location_options, registry
 from adpart.errors import TaskError
 from adpart.store.location import KBLocation
 from adpart.workflows.options import INITIATIONS, options_for_subgoals

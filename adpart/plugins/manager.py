@@ -28,6 +28,7 @@ BUILTIN_PLUGINS: dict[str, str] = {
     "hierarchical": "adpart.plugins.builtin.hierarchical",
     "executors": "adpart.plugins.builtin.executors",
     "criteria": "adpart.plugins.builtin.criteria",
+    "detectors": "adpart.plugins.builtin.detectors",
 }
 
 

@@ -122,8 +122,11 @@ class PartitionOutcome:
                 "reused": sum(p.reused for p in self.phase1),
             },
             "phase2": {"id": self.phase2.ref, "blocks": self.phase2.blocks},
-            "phase3": None if self.phase3 is None else {
-                "id": self.phase3.ref, "blocks": self.phase3.blocks,
+            "phase3": None
+            if self.phase3 is None
+            else {
+                "id": self.phase3.ref,
+                "blocks": self.phase3.blocks,
                 "recomputed_option_models": self.recomputed_models,
             },
             "final": {"id": self.final_record.ref, "blocks": self.final.n_blocks},
@@ -156,7 +159,10 @@ def _environment(kb: Any, env_name: str) -> tuple[Any, Any]:
     domain = resolve_domain(env_name)
     dyn = domain.dynamics()
     env = kb.put_environment(
-        env_name, model_hash=dyn.content_hash, n_states=dyn.n_states, n_actions=dyn.n_actions,
+        env_name,
+        model_hash=dyn.content_hash,
+        n_states=dyn.n_states,
+        n_actions=dyn.n_actions,
         spec={"name": env_name, "source": domain.source, "actions": list(dyn.action_names)},
     )
     return domain, env
@@ -168,8 +174,9 @@ def _source_task(records: list[Any]) -> int | None:
     return tasks.pop() if len(tasks) == 1 else None
 
 
-def _base_model(kb: Any, domain: Any, env_name: str, options_text: str,
-                task_mdp: FiniteMDP | None) -> _Base:
+def _base_model(
+    kb: Any, domain: Any, env_name: str, options_text: str, task_mdp: FiniteMDP | None
+) -> _Base:
     """Phases 1-2 work on the stored option models (primitives: the task's own MDP)."""
     option_set = resolve_option_set(kb, options_text, env_name)
     if option_set.primitive:
@@ -190,24 +197,38 @@ def _find_phase1(kb: Any, env: Any, base: _Base, column: int, delta: float) -> A
     """A stored per-option partition of this column with this delta, or None."""
     if base.option_set.primitive:
         candidates = [
-            p for p in kb.records("partition", environment=env)
-            if p.kind == "per-option" and not p.option_ids
+            p
+            for p in kb.records("partition", environment=env)
+            if p.kind == "per-option"
+            and not p.option_ids
             and p.provenance.parameters.get("action") == column
             and p.provenance.parameters.get("model_hash") == base.mdp.content_hash
         ]
     else:
         rec = base.option_set.records[column]
         candidates = [
-            p for p in kb.partitions_using([rec], exact=True, includes_primitives=False)
+            p
+            for p in kb.partitions_using([rec], exact=True, includes_primitives=False)
             if p.kind == "per-option"
         ]
     matching = [p for p in candidates if abs(p.delta - delta) <= 1e-12]
     return matching[-1] if matching else None
 
 
-def _store(kb: Any, env: Any, base: _Base, kind: str, partition: Partition, columns: np.ndarray,
-           *, delta: float, epsilon: float, parents: list[int], task: Any = None,
-           parameters: dict[str, Any]) -> Any:
+def _store(
+    kb: Any,
+    env: Any,
+    base: _Base,
+    kind: str,
+    partition: Partition,
+    columns: np.ndarray,
+    *,
+    delta: float,
+    epsilon: float,
+    parents: list[int],
+    task: Any = None,
+    parameters: dict[str, Any],
+) -> Any:
     primitive = base.option_set.primitive
     if primitive:
         block_actions = np.zeros((partition.n_blocks, base.smdp.n_actions), dtype=bool)
@@ -217,14 +238,24 @@ def _store(kb: Any, env: Any, base: _Base, kind: str, partition: Partition, colu
         block_actions = partition.admissible[:, columns]
         options = [base.option_set.records[int(c)] for c in columns]
     return kb.put_partition(
-        env, kind, partition.labels, options=options, includes_primitives=primitive,
-        epsilon=epsilon, delta=delta, block_actions=block_actions, parents=parents, task=task,
-        plugin=PLUGIN, parameters=parameters,
+        env,
+        kind,
+        partition.labels,
+        options=options,
+        includes_primitives=primitive,
+        epsilon=epsilon,
+        delta=delta,
+        block_actions=block_actions,
+        parents=parents,
+        task=task,
+        plugin=PLUGIN,
+        parameters=parameters,
     )
 
 
-def _phase1_all(kb: Any, env: Any, base: _Base, delta: float
-                ) -> tuple[dict[int, Partition], list[PhaseRecord], float]:
+def _phase1_all(
+    kb: Any, env: Any, base: _Base, delta: float
+) -> tuple[dict[int, Partition], list[PhaseRecord], float]:
     """Phase 1 of every column: loaded when stored, else computed and stored."""
     smdp = base.smdp
     parts: dict[int, Partition] = {}
@@ -235,8 +266,7 @@ def _phase1_all(kb: Any, env: Any, base: _Base, delta: float
         if found is not None:
             labels = kb.load(found, "labels")
             parts[o] = Partition.from_labels(labels, _only(smdp.admissible, o))
-            rows.append(PhaseRecord("per-option", found.id, found.n_blocks, True,
-                                    base.columns[o]))
+            rows.append(PhaseRecord("per-option", found.id, found.n_blocks, True, base.columns[o]))
             continue
         t0 = time.perf_counter()
         part = phase1(smdp, o, base.termination[:, o], delta=delta)
@@ -244,8 +274,18 @@ def _phase1_all(kb: Any, env: Any, base: _Base, delta: float
         params: dict[str, Any] = {"phase": 1, "column": base.columns[o]}
         if base.option_set.primitive:
             params.update(action=o, model_hash=base.mdp.content_hash)
-        rec = _store(kb, env, base, "per-option", part, np.array([o]), delta=delta,
-                     epsilon=0.0, parents=[], parameters=params)
+        rec = _store(
+            kb,
+            env,
+            base,
+            "per-option",
+            part,
+            np.array([o]),
+            delta=delta,
+            epsilon=0.0,
+            parents=[],
+            parameters=params,
+        )
         parts[o] = part
         rows.append(PhaseRecord("per-option", rec.id, part.n_blocks, False, base.columns[o]))
     return parts, rows, seconds
@@ -257,8 +297,9 @@ def _only(admissible: np.ndarray, column: int) -> np.ndarray:
     return out
 
 
-def _task_model(base: _Base, task_rec: Any, task_mdp: FiniteMDP,
-                executor: Executor | None) -> tuple[SMDPModel, list[OptionModel] | None, bool]:
+def _task_model(
+    base: _Base, task_rec: Any, task_mdp: FiniteMDP, executor: Executor | None
+) -> tuple[SMDPModel, list[OptionModel] | None, bool]:
     """The model phase 3 refines against: stored models if built under this very task."""
     if base.option_set.primitive:
         return task_mdp.as_smdp(), None, False
@@ -269,8 +310,9 @@ def _task_model(base: _Base, task_rec: Any, task_mdp: FiniteMDP,
     )
     if same_task and same_gamma and base.mdp.content_hash == task_mdp.content_hash:
         return base.smdp, list(base.option_set.models), False
-    models = option_models(task_mdp, list(base.option_set.options), executor=executor,
-                           duration=False)
+    models = option_models(
+        task_mdp, list(base.option_set.options), executor=executor, duration=False
+    )
     try:
         stacked = stack_models(task_mdp, models, include_primitives=False)
     except ModelError as exc:
@@ -314,7 +356,8 @@ def partition_environment(
         task_obj = domain.task(task)
         task_mdp = domain.mdp(task_obj)
         task_rec = kb.put_task(
-            env, task_obj.name,
+            env,
+            task_obj.name,
             spec={**task_obj.spec, "name": task_obj.name, "model_hash": task_mdp.content_hash},
             gamma=task_obj.gamma,
         )
@@ -327,8 +370,18 @@ def partition_environment(
     t0 = time.perf_counter()
     p2 = phase2(base.smdp, p1, all_cols, delta=d)
     seconds["phase2"] = time.perf_counter() - t0
-    rec2 = _store(kb, env, base, "intersected", p2, all_cols, delta=d, epsilon=0.0,
-                  parents=[r.id for r in p1_rows], parameters={"phase": 2, "options": options})
+    rec2 = _store(
+        kb,
+        env,
+        base,
+        "intersected",
+        p2,
+        all_cols,
+        delta=d,
+        epsilon=0.0,
+        parents=[r.id for r in p1_rows],
+        parameters={"phase": 2, "options": options},
+    )
     phase2_row = PhaseRecord("intersected", rec2.id, p2.n_blocks)
 
     final, model, phase3_row, gap, recomputed = p2, base.smdp, None, None, False
@@ -339,10 +392,24 @@ def partition_environment(
         t0 = time.perf_counter()
         final = phase3(model, p2, all_cols, epsilon=e, delta=d)
         seconds["phase3"] = time.perf_counter() - t0
-        rec3 = _store(kb, env, base, "reward-refined", final, all_cols, delta=d, epsilon=e,
-                      parents=[rec2.id], task=task_rec,
-                      parameters={"phase": 3, "options": options, "task": task_obj.name,
-                                  "recomputed_option_models": recomputed})
+        rec3 = _store(
+            kb,
+            env,
+            base,
+            "reward-refined",
+            final,
+            all_cols,
+            delta=d,
+            epsilon=e,
+            parents=[rec2.id],
+            task=task_rec,
+            parameters={
+                "phase": 3,
+                "options": options,
+                "task": task_obj.name,
+                "recomputed_option_models": recomputed,
+            },
+        )
         phase3_row = PhaseRecord("reward-refined", rec3.id, final.n_blocks)
         t0 = time.perf_counter()
         gap = value_gap(final, model, epsilon=e, delta=d, options=all_cols)
@@ -351,23 +418,41 @@ def partition_environment(
     verdict: dict[str, Any] = {"ran": False}
     if check:
         t0 = time.perf_counter()
-        report = check_stability(final, model, options=all_cols, delta=d,
-                                 epsilon=e if task_rec is not None else None)
+        report = check_stability(
+            final, model, options=all_cols, delta=d, epsilon=e if task_rec is not None else None
+        )
         seconds["check"] = time.perf_counter() - t0
-        verdict = {"ran": True, "ok": report.ok, "max_mass_span": report.max_mass_span,
-                   "max_reward_span": report.max_reward_span,
-                   "violations": len(report.violations)}
+        verdict = {
+            "ran": True,
+            "ok": report.ok,
+            "max_mass_span": report.max_mass_span,
+            "max_reward_span": report.max_reward_span,
+            "violations": len(report.violations),
+        }
     return PartitionOutcome(
-        env=env_name, task=None if task_obj is None else task_obj.name, options=options,
-        delta=d, epsilon=e, n_states=base.smdp.n_states, columns=base.columns, phase1=p1_rows,
-        phase2=phase2_row, phase3=phase3_row, final=final, seconds=seconds, check=verdict,
-        gap=gap, recomputed_models=recomputed, environment_id=env.id,
+        env=env_name,
+        task=None if task_obj is None else task_obj.name,
+        options=options,
+        delta=d,
+        epsilon=e,
+        n_states=base.smdp.n_states,
+        columns=base.columns,
+        phase1=p1_rows,
+        phase2=phase2_row,
+        phase3=phase3_row,
+        final=final,
+        seconds=seconds,
+        check=verdict,
+        gap=gap,
+        recomputed_models=recomputed,
+        environment_id=env.id,
         task_id=None if task_rec is None else task_rec.id,
     )
 
 
-def plot_partition(env_name: str, labels: np.ndarray, path: str, *, title: str | None = None
-                   ) -> str:
+def plot_partition(
+    env_name: str, labels: np.ndarray, path: str, *, title: str | None = None
+) -> str:
     """Draw a partition on the domain's map, a colour per block (as Fig. 4.5); return the path."""
     import matplotlib
 
@@ -378,7 +463,8 @@ def plot_partition(env_name: str, labels: np.ndarray, path: str, *, title: str |
     try:
         fig = domain.render(path, labels=np.asarray(labels), title=title)
     except OSError as exc:
-        raise TaskError(f"cannot write the plot to {path}: {exc.strerror}; choose another --plot"
-                        ) from exc
+        raise TaskError(
+            f"cannot write the plot to {path}: {exc.strerror}; choose another --plot"
+        ) from exc
     plt.close(fig)
     return path
