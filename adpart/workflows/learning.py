@@ -7,6 +7,7 @@ depend on the seed and the batch size, never on the executor or the number of wo
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
@@ -356,3 +357,29 @@ def record_learning(kb: Any, outcome: LearnOutcome) -> dict[str, Any]:
         "run": f"run:{run.id}",
         "policies": [f"policy:{p.id}" for p in policies],
     }
+
+
+def find_learning(kb: Any, request: LearnRequest) -> dict[str, Any] | None:
+    """The ids of a run already recorded for exactly ``request``, or None.
+
+    Runs are matched on the request as recorded by :func:`record_learning` (environment, task,
+    learner, parameters, runs, episodes, seed, batching, options, partition), so a pipeline that
+    is run again reuses what it learned before instead of learning it again.
+    """
+    wanted = json.loads(json.dumps(asdict(request)))
+    for env in kb.records("environment"):
+        if env.name != request.env:
+            continue
+        for task, runs in kb.learned_tasks(env):
+            for run in reversed(runs):
+                if run.provenance.parameters.get("request") == wanted:
+                    return {
+                        "location": kb.label,
+                        "environment": f"environment:{env.id}",
+                        "task": f"task:{task.id}",
+                        "run": f"run:{run.id}",
+                        "policies": [
+                            f"policy:{p}" for p in run.provenance.parameters.get("policies", [])
+                        ],
+                    }
+    return None
