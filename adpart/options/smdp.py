@@ -32,13 +32,25 @@ if TYPE_CHECKING:
 
 
 def stack_models(
-    mdp: FiniteMDP, models: list[OptionModel], *, include_primitives: bool = False
+    mdp: FiniteMDP, models: list[OptionModel], *, include_primitives: bool | str = False
 ) -> SMDPModel:
     """The SMDP whose actions are the primitive actions (optionally) followed by ``models``.
+
+    Args:
+        include_primitives: ``False`` (options only), ``True`` (every primitive action wherever
+            the MDP admits it) or ``"uncovered"``: primitive columns admissible only in the
+            non-terminal states that no option's initiation set covers - the decision layer's
+            fallback there (a subgoal is not in its own option's initiation set, so with few
+            subgoals some states, the subgoals themselves, have no option to start). Offering
+            primitives only there keeps them from refining the rest of the partition.
 
     Raises:
         ModelError: a model of the wrong size, or a non-terminal state with no admissible option.
     """
+    if include_primitives not in (False, True, "uncovered"):
+        raise ModelError(
+            f"include_primitives must be False, True or 'uncovered'; got {include_primitives!r}"
+        )
     S = mdp.n_states
     for m in models:
         if m.R.shape != (S,) or m.F.shape != (S, S):
@@ -48,9 +60,17 @@ def stack_models(
     R_cols, F_blocks, adm_cols = [], [], []
     if include_primitives:
         prim = mdp.as_smdp()
-        R_cols.append(prim.R)
-        F_blocks.append(prim.F)
-        adm_cols.append(prim.admissible)
+        prim_adm = prim.admissible
+        if include_primitives == "uncovered":
+            covered = (
+                np.stack([m.admissible for m in models], axis=1).any(axis=1)
+                if models
+                else np.zeros(S, dtype=bool)
+            )
+            prim_adm = prim_adm & ~(covered | mdp.terminal)[:, None]
+        R_cols.append(np.where(prim_adm, prim.R, 0.0))
+        F_blocks.append(sp.csr_array(sp.diags_array(prim_adm.T.reshape(-1).astype(float)) @ prim.F))
+        adm_cols.append(prim_adm)
     if models:
         R_cols.append(np.stack([m.R for m in models], axis=1))
         F_blocks.extend(m.F for m in models)
@@ -59,6 +79,7 @@ def stack_models(
         raise ModelError("no options to stack; give option models or include_primitives=True")
     R = np.concatenate(R_cols, axis=1)
     F = sp.vstack(F_blocks, format="csr")
+    F.eliminate_zeros()
     admissible = np.concatenate(adm_cols, axis=1)
     admissible[mdp.terminal] = True
     R[mdp.terminal] = 0.0
@@ -66,8 +87,8 @@ def stack_models(
     if uncovered.size:
         raise ModelError(
             f"state {int(uncovered[0])} ({uncovered.size} in all) is in no option's initiation "
-            "set; its value would be -inf. Add the primitive actions (include_primitives=True) "
-            "or options whose initiation sets cover it"
+            "set; its value would be -inf. Add the primitive actions (include_primitives=True "
+            "or 'uncovered') or options whose initiation sets cover it"
         )
     R.setflags(write=False)
     admissible.setflags(write=False)
