@@ -1,0 +1,42 @@
+"""Subgoal discovery (dissertation section 4.1, 4.3.1): count metric, sampling, thresholds.
+
+Library functions, usable without the plugin layer:
+
+* :func:`count_metric` - exhaustive count metric of eq. 4.1 by sparse mat-vecs;
+* :func:`sample_trajectories`, :func:`arrival_counts`, :func:`bernstein_samples` - Monte Carlo;
+* :func:`gradient_ratios`, :func:`t_test_threshold` - ratios along paths, eq. 4.2;
+* :func:`discover_exhaustive`, :func:`discover_monte_carlo` - the two pipelines;
+* :func:`reward_variation_states`, :func:`with_reward_variation` - section 4.3.1;
+* :func:`betweenness`, :func:`visit_frequency` - the literature's detectors.
+
+See ``docs/subgoals.md`` for the interpretations chosen.
+"""
+
+from adpart.subgoals.count import CountMetric, count_metric
+from adpart.subgoals.discover import discover_exhaustive, discover_monte_carlo
+from adpart.subgoals.literature import betweenness, transition_graph, visit_frequency
+from adpart.subgoals.montecarlo import (
+    Trajectories,
+    arrival_counts,
+    bernstein_epsilon,
+    bernstein_samples,
+    sample_trajectories,
+)
+from adpart.subgoals.policy import check_policy, policy_matrix, trapped_states, walker_matrix
+from adpart.subgoals.ratios import (
+    RatioSamples,
+    gradient_ratios,
+    samples_per_state,
+    t_test_threshold,
+)
+from adpart.subgoals.result import SubgoalResult
+from adpart.subgoals.reward import reward_variation_states, with_reward_variation
+
+__all__ = [
+    "CountMetric", "RatioSamples", "SubgoalResult", "Trajectories", "arrival_counts",
+    "bernstein_epsilon", "bernstein_samples", "betweenness", "check_policy", "count_metric",
+    "discover_exhaustive", "discover_monte_carlo", "gradient_ratios", "policy_matrix",
+    "reward_variation_states", "sample_trajectories", "samples_per_state", "t_test_threshold",
+    "transition_graph", "trapped_states", "visit_frequency", "walker_matrix",
+    "with_reward_variation",
+]

@@ -1,0 +1,111 @@
+"""Gradient ratios along trajectories and the t-test threshold (section 4.1.1, eq. 4.2).
+
+Along a path ``s_0, s_1, ...`` the slope of the count is ``Delta(s_t) = C*(s_t) - C*(s_{t-1})``
+and a state's gradient ratio is ``Delta(s_t) / max(1, Delta(s_{t+1}))``, computed where
+``Delta(s_t) > 0``. Interpretation (DESIGN.md): the path is the sampled trajectory with
+self-loop steps removed (a self-loop does not move along the path), ratios exist at interior
+positions only (``s_{t-1}`` and ``s_{t+1}`` both exist: the last state of an episode, the goal,
+has no ratio and is left to reward variation, section 4.3.1). The normalised form of footnote 1,
+``Delta-hat(s_t) / max(1/|S|, Delta-hat(s_{t+1}))``, is the same number (both sides scale by
+``|S|``), so only the standard form is computed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+
+from adpart.errors import TaskError
+from adpart.subgoals.montecarlo import Trajectories
+
+
+@dataclass(frozen=True, eq=False)
+class RatioSamples:
+    """Gradient ratio samples, one per (trajectory, interior position) with ``Delta(s_t) > 0``.
+
+    Attributes:
+        states: ``(K,)`` int64 the state ``s_t`` of each sample.
+        ratios: ``(K,)`` float64 ``Delta(s_t) / max(1, Delta(s_{t+1}))``.
+        next_delta: ``(K,)`` float64 ``Delta(s_{t+1})`` (theorem 4.3 raises the threshold by
+            ``2 eps / max(1, Delta(s_{t+1}))``).
+    """
+
+    states: np.ndarray
+    ratios: np.ndarray
+    next_delta: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return int(self.ratios.size)
+
+    def per_state_max(self, n_states: int, values: np.ndarray | None = None) -> np.ndarray:
+        """``(S,)`` the largest of ``values`` (default the ratios) at each state, 0 where none."""
+        out = np.zeros(n_states)
+        np.maximum.at(out, self.states, self.ratios if values is None else values)
+        return out
+
+    def samples_per_state(self, n_states: int) -> np.ndarray:
+        return np.bincount(self.states, minlength=n_states)
+
+    def summary(self) -> tuple[float, float]:
+        """Mean and sample standard deviation of all ratios (the nu, sigma of eq. 4.2)."""
+        if self.n < 2:
+            raise TaskError(
+                f"only {self.n} gradient ratio(s) were sampled; the t-test needs at least 2. "
+                "Sample more trajectories (the policy may end episodes in one step)"
+            )
+        return float(self.ratios.mean()), float(self.ratios.std(ddof=1))
+
+
+def gradient_ratios(counts: np.ndarray, traj: Trajectories) -> RatioSamples:
+    """All gradient ratio samples of ``counts`` along the sampled trajectories (vectorised)."""
+    p = traj.paths
+    keep = p >= 0
+    keep[:, 1:] &= p[:, 1:] != p[:, :-1]  # drop self-loop repeats: the path does not move
+    flat = p[keep]
+    row = np.broadcast_to(np.arange(p.shape[0])[:, None], p.shape)[keep]
+    if flat.size < 3:
+        empty = np.zeros(0)
+        return RatioSamples(np.zeros(0, dtype=np.int64), empty, empty)
+    interior = row[:-2] == row[2:]
+    prev, cur, nxt = flat[:-2][interior], flat[1:-1][interior], flat[2:][interior]
+    c = np.asarray(counts, dtype=np.float64)
+    d_t = c[cur] - c[prev]
+    d_next = c[nxt] - c[cur]
+    pos = d_t > 0
+    return RatioSamples(
+        cur[pos].astype(np.int64), d_t[pos] / np.maximum(1.0, d_next[pos]), d_next[pos]
+    )
+
+
+def check_level(p: float) -> float:
+    if isinstance(p, bool) or not isinstance(p, (int, float, np.floating)) or not 0.0 < p < 1.0:
+        raise TaskError(f"level p = {p!r} must be in (0, 1), e.g. 0.025 (section 4.1.1.1)")
+    return float(p)
+
+
+def t_test_threshold(mean: float, sd: float, n: int, p: float = 0.025) -> float:
+    """The sample mean ``rho`` a state needs to pass the one-sided t-test of eq. 4.2 at level p.
+
+    ``mu = nu + t_{1-p, N-1} * sigma / sqrt(N)`` with ``N`` the ratio samples per state.
+    """
+    p = check_level(p)
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 2:
+        raise TaskError(f"samples per state N = {n!r} must be an integer >= 2 for a t-test")
+    if not (np.isfinite(mean) and np.isfinite(sd) and sd >= 0):
+        raise TaskError(f"ratio mean {mean!r} and sd {sd!r} must be finite, sd >= 0")
+    return float(mean + stats.t.ppf(1.0 - p, int(n) - 1) * sd / np.sqrt(int(n)))
+
+
+def samples_per_state(samples: RatioSamples, n_states: int) -> int:
+    """The ``N`` of eq. 4.2 chosen automatically: mean ratio samples per state that has any.
+
+    Rounded, at least 2. (Interpretation: the seed's figures - mu = 1.8 from nu = 0.43,
+    sigma = 0.57; mu = 35 from 5.427, 18.09; mu = 30 from 8.839, 20.12 - imply N of 3 to 6,
+    the number of ratio samples a state sees over a handful of trajectories.)
+    """
+    per = samples.samples_per_state(n_states)
+    seen = per[per > 0]
+    return max(2, round(float(seen.mean()))) if seen.size else 2

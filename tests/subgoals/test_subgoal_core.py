@@ -1,0 +1,203 @@
+"""Count metric against brute-force path enumeration, MC convergence, domains, bad input."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from adpart.envs.registry import get_domain
+from adpart.errors import TaskError
+from adpart.mdp.model import FiniteMDP
+from adpart.mdp.solvers import solve
+from adpart.subgoals import (
+    arrival_counts,
+    bernstein_samples,
+    betweenness,
+    count_metric,
+    discover_exhaustive,
+    sample_trajectories,
+    t_test_threshold,
+    transition_graph,
+)
+from adpart.subgoals.detectors import Betweenness, CountExhaustive, CountMonteCarlo
+
+
+def _tiny_mdp(seed: int, S: int) -> FiniteMDP:
+    """Random dense-ish MDP with state S-1 terminal, 2 actions."""
+    rng = np.random.default_rng(seed)
+    P = rng.random((S, 2, S)) * (rng.random((S, 2, S)) < 0.6)
+    P[:, :, S - 1] += 0.2
+    P /= P.sum(axis=2, keepdims=True)
+    term = np.zeros(S, bool)
+    term[S - 1] = True
+    return FiniteMDP.from_dense(P, np.zeros((S, 2)), 0.9, terminal=term)
+
+
+def _brute_force(mdp: FiniteMDP, policy: np.ndarray) -> np.ndarray:
+    """Enumerate all paths of up to |S| steps from every start (no self-loops, stop at terminal)."""
+    S = mdp.n_states
+    P = mdp.P.toarray().reshape(mdp.n_actions, S, S)
+    C = np.zeros(S)
+    for s0 in range(S):
+        frontier = [(s0, 1.0 / S)]
+        for _ in range(S):
+            nxt = []
+            for s, w in frontier:
+                if mdp.terminal[s]:
+                    continue
+                for s2 in range(S):
+                    pr = P[policy[s], s, s2]
+                    if s2 != s and pr > 0:
+                        C[s2] += w * pr
+                        nxt.append((s2, w * pr))
+            frontier = nxt
+    return S * C
+
+
+@settings(max_examples=25)
+@given(seed=st.integers(0, 10_000), S=st.integers(2, 5), pol_seed=st.integers(0, 100))
+def test_subgoal_count_equals_path_enumeration(seed, S, pol_seed):
+    mdp = _tiny_mdp(seed, S)
+    policy = np.random.default_rng(pol_seed).integers(0, 2, S)
+    cm = count_metric(mdp, policy, tol=0.0, on_loop="truncate")
+    np.testing.assert_allclose(cm.counts, _brute_force(mdp, policy), rtol=1e-10, atol=1e-12)
+    norm = count_metric(mdp, policy, tol=0.0, normalised=True, on_loop="truncate")
+    np.testing.assert_allclose(norm.counts * S, cm.counts, rtol=1e-12)
+
+
+def test_subgoal_mc_converges_to_exhaustive():
+    """Fixed seed 7, 20,000 trajectories: every |C_H(s) - C*(s)| <= 0.05 (counts are O(1))."""
+    mdp = _tiny_mdp(3, 5)
+    policy = np.array([0, 1, 0, 1, 0])
+    exact = count_metric(mdp, policy).counts
+    # the horizon defaults to |S|, the cap of eq. 4.1, as in the exhaustive sum
+    traj = sample_trajectories(mdp, policy, 20_000, np.random.default_rng(7))
+    est = mdp.n_states * arrival_counts(traj, mdp.n_states) / traj.n
+    assert np.max(np.abs(est - exact)) <= 0.05
+
+
+def test_subgoal_two_rooms_doorway_only_optimal_policy():
+    domain = get_domain("two-rooms")
+    mdp = domain.mdp("reach-goal")
+    door = int(np.flatnonzero(domain.dynamics().features["door"])[0])
+    policy = solve(mdp).policy
+    for seed in range(5):
+        res = CountExhaustive().detect(mdp, policy, np.random.default_rng(seed))
+        assert res.subgoals.tolist() == [door]
+        assert res.scores.argmax() == door
+
+
+def test_subgoal_two_rooms_doorway_only_q_learned_policy():
+    from adpart.learning import q_learning
+
+    domain = get_domain("two-rooms")
+    mdp = domain.mdp("reach-goal")
+    door = int(np.flatnonzero(domain.dynamics().features["door"])[0])
+    learn_on = mdp.with_rewards(mdp.R, initial=np.full(mdp.n_states, 1 / mdp.n_states))
+    q = q_learning(learn_on, runs=1, episodes=3000, seed=1, epsilon=0.2)
+    policy = q.greedy_policies()[0]
+    res = CountExhaustive().detect(mdp, policy, np.random.default_rng(0))
+    assert res.subgoals.tolist() == [door]
+
+
+def test_subgoal_four_rooms_count_regression():
+    """Pinned: four-rooms G1, optimal policy, seed 0 (see docs/subgoals.md for the figure)."""
+    mdp = get_domain("four-rooms").mdp("G1")
+    policy = solve(mdp).policy
+    res = CountExhaustive().detect(mdp, policy, np.random.default_rng(0))
+    assert res.subgoals.tolist() == [24, 47, 53, 54, 55, 70, 77, 79, 87, 89]
+    mc = CountMonteCarlo().detect(mdp, policy, np.random.default_rng(0))
+    assert set(mc.subgoals.tolist()) <= set(res.subgoals.tolist())
+    assert mc.stats["history"][-1]["samples"] == mc.stats["samples"]
+
+
+def test_subgoal_four_rooms_betweenness():
+    """Plain shortest-path betweenness puts the hallway-adjacent cells first (see docs)."""
+    mdp = get_domain("four-rooms").mdp("G1")
+    res = Betweenness(top=12).detect(mdp, None, np.random.default_rng(0))
+    assert {25, 51, 62, 88} <= set(res.subgoals.tolist())
+    assert Betweenness().detect(mdp, None, None).subgoals.tolist() == [24, 25, 26, 54]
+
+
+def _brandes_oracle(adj: np.ndarray) -> np.ndarray:
+    """Betweenness by enumerating all shortest paths explicitly (tiny graphs)."""
+    S = adj.shape[0]
+    bc = np.zeros(S)
+    for s, t in itertools.permutations(range(S), 2):
+        paths, layer = [], [[s]]
+        while layer and not paths:
+            nxt = []
+            for p in layer:
+                for w in np.flatnonzero(adj[p[-1]]):
+                    if w not in p:
+                        (paths if w == t else nxt).append([*p, int(w)])
+            layer = nxt
+        for p in paths:
+            for v in p[1:-1]:
+                bc[v] += 1.0 / len(paths)
+    return bc
+
+
+@settings(max_examples=20)
+@given(seed=st.integers(0, 10_000), S=st.integers(2, 7))
+def test_subgoal_betweenness_matches_oracle(seed, S):
+    import scipy.sparse as sp
+
+    adj = np.random.default_rng(seed).random((S, S)) < 0.35
+    np.fill_diagonal(adj, False)
+    got = betweenness(sp.csr_array(adj.astype(float)), chunk=3)
+    np.testing.assert_allclose(got, _brandes_oracle(adj), atol=1e-9)
+
+
+def test_subgoal_bad_inputs():
+    mdp = get_domain("two-rooms").mdp("reach-goal")
+    good = solve(mdp).policy
+    rng = np.random.default_rng(0)
+    with pytest.raises(TaskError, match="entries"):
+        count_metric(mdp, good[:-1])
+    with pytest.raises(TaskError, match="not an action id"):
+        count_metric(mdp, np.full(mdp.n_states, 99))
+    with pytest.raises(TaskError, match="level p"):
+        discover_exhaustive(mdp, good, rng, p=1.5)
+    with pytest.raises(TaskError, match="level p"):
+        t_test_threshold(0.0, 1.0, 5, 0.0)
+    with pytest.raises(TaskError, match="integer action"):
+        count_metric(mdp, good.astype(float))
+
+
+def test_subgoal_inadmissible_action():
+    mdp = get_domain("four-rooms").mdp("G1")
+    adm = mdp.admissible.copy()
+    adm[0, 0] = False
+    m2 = FiniteMDP(mdp.P, mdp.R, mdp.gamma, terminal=mdp.terminal, admissible=adm)
+    pol = solve(m2).policy
+    pol[0] = 0
+    with pytest.raises(TaskError, match="inadmissible"):
+        count_metric(m2, pol)
+
+
+def test_subgoal_looping_policy():
+    """A deterministic 2-cycle never terminates: error by default, truncation on request."""
+    P = np.zeros((3, 1, 3))
+    P[0, 0, 1] = P[1, 0, 0] = P[2, 0, 2] = 1.0
+    mdp = FiniteMDP.from_dense(P, np.zeros((3, 1)), 0.9, terminal=np.array([False, False, True]))
+    pol = np.zeros(3, dtype=np.int64)
+    with pytest.raises(TaskError, match="never terminates"):
+        count_metric(mdp, pol)
+    with pytest.raises(TaskError, match="never terminates"):
+        CountMonteCarlo().detect(mdp, pol, np.random.default_rng(0))
+    cm = count_metric(mdp, pol, on_loop="truncate")
+    assert cm.iterations == 3 and cm.trapped.tolist() == [0, 1]
+
+
+def test_subgoal_bernstein_seed_example():
+    assert bernstein_samples(3600, 5.0, 0.9) == 5177  # the seed prints 5176 (rounded down)
+
+
+def test_subgoal_transition_graph_no_self_loops():
+    g = transition_graph(get_domain("four-rooms").mdp("G1"))
+    assert g.diagonal().sum() == 0
