@@ -12,7 +12,10 @@ from adpart.cli.experiment import experiment_cmd
 from adpart.cli.kb import kb
 from adpart.cli.learn import learn_cmd
 from adpart.cli.options_cmd import options_cmd
+from adpart.cli.partition_cmd import partition_cmd
+from adpart.cli.pipeline_cmd import pipeline_cmd, transfer_cmd
 from adpart.cli.plugins_cmd import plugins_cmd
+from adpart.cli.sweep import sweep_cmd
 
 
 @click.group(cls=AdpartGroup, context_settings={"help_option_names": ["-h", "--help"]})
@@ -37,3 +40,7 @@ cli.add_command(kb)
 cli.add_command(experiment_cmd)
 cli.add_command(options_cmd)
 cli.add_command(discover_cmd)
+cli.add_command(pipeline_cmd)
+cli.add_command(transfer_cmd)
+cli.add_command(partition_cmd)
+cli.add_command(sweep_cmd)

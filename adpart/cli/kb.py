@@ -231,8 +231,15 @@ def _as_table(value: Any) -> pa.Table:
     if isinstance(value, pa.Table):
         return value
     array = np.asarray(value)
-    if array.ndim == 2:
-        return pa.table({f"c{j}": array[:, j] for j in range(array.shape[1])})
+    if array.ndim == 2:  # one row per state: the state id, then a column per action/option
+        return pa.table(
+            {
+                "state": np.arange(array.shape[0], dtype=np.int64),
+                **{f"c{j}": array[:, j] for j in range(array.shape[1])},
+            }
+        )
+    if array.ndim == 1:  # e.g. partition labels: a column indexed by state
+        return pa.table({"state": np.arange(array.size, dtype=np.int64), "value": array})
     return pa.table({"value": array.reshape(-1)})
 
 

@@ -14,7 +14,9 @@ import click
 from adpart.cli.common import (
     dumps,
     echo_json,
+    executor_options,
     kb_location_options,
+    make_executor,
     plugin_options_command,
     progress_callback,
     registry,
@@ -46,7 +48,7 @@ from adpart.workflows import LearnRequest, record_learning, run_learning, write_
     show_default=True,
     help="Score the greedy policy exactly every N episodes.",
 )
-@click.option("--executor", default="local", show_default=True, help="Executor plugin for batches.")
+@executor_options()
 @click.option(
     "--runs-per-batch",
     type=click.IntRange(min=0),
@@ -84,6 +86,8 @@ def learn_cmd(
     seed: int,
     eval_every: int,
     executor: str,
+    executor_opts: tuple[str, ...],
+    ray_address: str | None,
     runs_per_batch: int,
     out: Path | None,
     as_json: bool,
@@ -124,7 +128,6 @@ def learn_cmd(
         options=options_ref,
         partition=partition_ref,
     )
-    executor_spec = reg.get("executor", executor)
     single = len(request.batches()) == 1
     kb = None
     if not no_store or options_ref or partition_ref:
@@ -134,7 +137,12 @@ def learn_cmd(
     try:
         update, close = progress_callback(not quiet and single, episodes, f"{learner} on {env}")
         try:
-            outcome = run_learning(request, executor=executor_spec.create(), progress=update, kb=kb)
+            outcome = run_learning(
+                request,
+                executor=make_executor(executor, executor_opts, ray_address),
+                progress=update,
+                kb=kb,
+            )
         finally:
             close()
         out = out or Path("adpart-learn") / (

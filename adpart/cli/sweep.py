@@ -13,60 +13,14 @@ from typing import Any
 
 import click
 
-from adpart.cli.common import CLIError, echo_json, progress_callback, registry
-from adpart.cli.learn import kb_location_options
-from adpart.execution import Executor
+from adpart.cli.common import (
+    echo_json,
+    executor_options,
+    kb_location_options,
+    make_executor,
+    progress_callback,
+)
 from adpart.store.location import KBLocation
-
-
-def executor_options(default: str = "local"):  # type: ignore[no-untyped-def]
-    """Decorator adding ``--executor``, ``--executor-opt`` and ``--ray-address`` to a command."""
-
-    def decorate(func):  # type: ignore[no-untyped-def]
-        func = click.option(
-            "--ray-address",
-            envvar="RAY_ADDRESS",
-            metavar="ADDRESS",
-            help="Ray cluster to use with --executor ray: host:port or ray://host:port "
-            "[env RAY_ADDRESS; default: start a local Ray].",
-        )(func)
-        func = click.option(
-            "--executor-opt",
-            "executor_opts",
-            multiple=True,
-            metavar="KEY=VALUE",
-            help="A parameter of the executor plugin, e.g. workers=2 or max-retries=5 "
-            "(repeatable; see `adpart plugins --kind executor`).",
-        )(func)
-        return click.option(
-            "--executor",
-            default=default,
-            show_default=True,
-            help="Executor plugin: local (process pool), ray (Ray cluster) or serial.",
-        )(func)
-
-    return decorate
-
-
-def make_executor(
-    name: str, opts: tuple[str, ...] = (), ray_address: str | None = None
-) -> Executor:
-    """The executor plugin ``name`` built from ``KEY=VALUE`` options and the Ray address."""
-    spec = registry().get("executor", name)
-    given: dict[str, Any] = {}
-    for opt in opts:
-        key, sep, value = opt.partition("=")
-        if not sep or not key.strip():
-            raise CLIError(f"--executor-opt expects KEY=VALUE, got {opt!r}")
-        given[key.strip()] = value.strip()
-    if ray_address:
-        if "address" not in {p.name for p in spec.params}:
-            raise CLIError(
-                f"--ray-address applies to executors with an address (--executor ray); "
-                f"executor {name!r} has none"
-            )
-        given["address"] = ray_address
-    return spec.create(given)
 
 
 def _table(rows: list[dict[str, Any]]) -> str:

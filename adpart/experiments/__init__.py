@@ -15,7 +15,7 @@ from adpart.experiments.base import (
 )
 
 #: Modules that define experiments (imported on first lookup).
-EXPERIMENT_MODULES: tuple[str, ...] = ()
+EXPERIMENT_MODULES: tuple[str, ...] = ("adpart.experiments.partition_three_floor",)
 
 
 def load_all() -> None:

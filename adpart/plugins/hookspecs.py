@@ -84,6 +84,7 @@ def register_partition_criteria(register: Registrar) -> None:
 def register_hierarchy_estimators(register: Registrar) -> None:
     """Register hierarchy estimator classes with ``register(cls)``.
 
-    Call signature: ``cls(**params).build(knowledge_base, environment)`` returning the decision
-    layer for the next task (section 4.4 of the dissertation).
+    Call signature: ``cls(**params).build(knowledge_base, environment, *, tasks=None,
+    store=True)`` returning an :class:`adpart.hierarchy.HierarchyResult` - the decision layer for
+    the next task built from the tasks learned so far (section 4.4 of the dissertation).
     """

@@ -155,7 +155,8 @@ def _check_settings(delta: object, epsilon: object) -> tuple[float, float]:
     return d, e
 
 
-def _environment(kb: Any, env_name: str) -> tuple[Any, Any]:
+def environment_record(kb: Any, env_name: str) -> tuple[Any, Any]:
+    """The domain and its get-or-put environment record (keyed by the dynamics' hash)."""
     domain = resolve_domain(env_name)
     dyn = domain.dynamics()
     env = kb.put_environment(
@@ -166,6 +167,18 @@ def _environment(kb: Any, env_name: str) -> tuple[Any, Any]:
         spec={"name": env_name, "source": domain.source, "actions": list(dyn.action_names)},
     )
     return domain, env
+
+
+def task_record(kb: Any, domain: Any, env: Any, task: str) -> tuple[Any, FiniteMDP, Any]:
+    """The task, its MDP and its get-or-put record (the same record ``adpart learn`` makes)."""
+    task_obj = domain.task(task)
+    task_mdp = domain.mdp(task_obj)
+    task_rec = kb.put_task(
+        env, task_obj.name,
+        spec={**task_obj.spec, "name": task_obj.name, "model_hash": task_mdp.content_hash},
+        gamma=task_obj.gamma,
+    )
+    return task_obj, task_mdp, task_rec
 
 
 def _source_task(records: list[Any]) -> int | None:
@@ -350,7 +363,7 @@ def partition_environment(
             environment, options without stored models.
     """
     d, e = _check_settings(delta, epsilon)
-    domain, env = _environment(kb, env_name)
+    domain, env = environment_record(kb, env_name)
     task_obj = task_mdp = task_rec = None
     if task is not None:
         task_obj = domain.task(task)

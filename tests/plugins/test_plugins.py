@@ -100,7 +100,7 @@ def test_failing_registration_hook_is_contained():
 
 
 def test_disable_plugins_env_var(monkeypatch):
-    monkeypatch.setenv("ADPART_DISABLE_PLUGINS", "executors")
+    monkeypatch.setenv("ADPART_DISABLE_PLUGINS", "executors,ray")
     reg = build_registry(make_plugin_manager())
     assert reg.names("executor") == []
     assert "two-rooms" in reg.names("environment")

@@ -57,9 +57,11 @@ def test_export(cli_kb, tmp_path, suffix):
     assert result.exit_code == 0, result.output
     q = np.arange(10.0).reshape(5, 2)
     if suffix == ".parquet":
-        assert pq.read_table(out).column("c1").to_pylist() == q[:, 1].tolist()
+        table = pq.read_table(out)
+        assert table.column("state").to_pylist() == list(range(5))  # rows indexed by state
+        assert table.column("c1").to_pylist() == q[:, 1].tolist()
     elif suffix == ".csv":
-        assert out.read_text().splitlines()[1] == "0,1"
+        assert out.read_text().splitlines()[1] == "0,0,1"  # state, c0, c1
     else:
         assert json.loads(out.read_text())["values"] == q.tolist()
     result = _run("export", rec["run"].ref, "--out", str(tmp_path / "c.csv"), *opts)

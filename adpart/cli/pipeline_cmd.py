@@ -1,0 +1,311 @@
+"""``adpart pipeline`` and ``adpart transfer``: the mission in one command, and its last step."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Any
+
+import click
+
+from adpart.cli.common import CLIError, dumps, echo_json, kb_location_options
+from adpart.store.location import KBLocation
+
+
+def _key_values(pairs: tuple[str, ...], option: str) -> dict[str, str]:
+    out: dict[str, str] = {}
+    for pair in pairs:
+        key, eq, value = pair.partition("=")
+        if not eq or not key:
+            raise CLIError(f"{option} takes KEY=VALUE (e.g. {option} alpha=1); got {pair!r}")
+        out[key.strip()] = value.strip()
+    return out
+
+
+def _table(rows: list[dict[str, Any]]) -> list[str]:
+    header = (
+        f"{'task':<22} {'learner':<13} {'blocks':>6} {'within':>7} {'episodes':>9} "
+        f"{'final gap':>10}"
+    )
+    lines = [header, "-" * len(header)]
+    for r in rows:
+        blocks = str(r.get("initial_blocks", "-"))
+        episodes = r["episodes_to_bound_median"]
+        ep = "never" if episodes == float("inf") else f"{episodes:.0f}"
+        lines.append(
+            f"{r['task'][:22]:<22} {r['learner']:<13} {blocks:>6} "
+            f"{r['runs_within_bound']:>3}/{r['runs']:<3} {ep:>9} {r['final_gap_mean']:>10.4g}"
+        )
+    return lines
+
+
+def _say(quiet: bool):  # type: ignore[no-untyped-def]
+    if quiet or not sys.stderr.isatty():
+        return lambda message: None
+    return lambda message: click.echo(f"... {message}", err=True)
+
+
+@click.command(name="pipeline")
+@click.argument("env")
+@click.option(
+    "--tasks", required=True, help="Comma-separated task sequence; the first is learned flat."
+)
+@click.option(
+    "--detector", default="count-exhaustive", show_default=True, help="Subgoal detector plugin."
+)
+@click.option(
+    "--detector-opt",
+    multiple=True,
+    metavar="KEY=VALUE",
+    help="A detector parameter (repeatable), e.g. --detector-opt p=0.025.",
+)
+@click.option(
+    "--initiation",
+    type=click.Choice(["basin", "reachable"]),
+    default="basin",
+    show_default=True,
+    help="Initiation sets of the subgoal options.",
+)
+@click.option(
+    "--delta",
+    type=float,
+    default=0.3,
+    show_default=True,
+    help="delta of eq. 4.6 (transition homogeneity) in [0, 1].",
+)
+@click.option(
+    "--epsilon",
+    type=float,
+    default=10.0,
+    show_default=True,
+    help="epsilon of eq. 4.7 (reward homogeneity) >= 0.",
+)
+@click.option(
+    "--runs", type=click.IntRange(min=1), default=10, show_default=True, help="Runs per learner."
+)
+@click.option(
+    "--episodes",
+    type=click.IntRange(min=1),
+    default=300,
+    show_default=True,
+    help="Episodes per later task.",
+)
+@click.option(
+    "--first-episodes",
+    type=click.IntRange(min=1),
+    default=500,
+    show_default=True,
+    help="Episodes of the first (flat) task.",
+)
+@click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True, help="Root seed.")
+@click.option(
+    "--eval-every",
+    type=click.IntRange(min=1),
+    default=10,
+    show_default=True,
+    help="Score greedy policies exactly every N episodes.",
+)
+@click.option(
+    "--flat-opt",
+    multiple=True,
+    metavar="KEY=VALUE",
+    help="A q-learning parameter for the flat learners, e.g. --flat-opt alpha=1.",
+)
+@click.option(
+    "--hier-opt",
+    multiple=True,
+    metavar="KEY=VALUE",
+    help="A hierarchical-learner parameter, e.g. --hier-opt mode=inconsistency.",
+)
+@click.option("--no-baseline", is_flag=True, help="Skip learning later tasks flat for comparison.")
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Folder for figures and summary.json [default: adpart-pipeline/ENV].",
+)
+@click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
+@click.option("-q", "--quiet", is_flag=True, help="No progress lines.")
+@kb_location_options
+def pipeline_cmd(
+    env: str,
+    tasks: str,
+    detector: str,
+    detector_opt: tuple[str, ...],
+    initiation: str,
+    delta: float,
+    epsilon: float,
+    runs: int,
+    episodes: int,
+    first_episodes: int,
+    seed: int,
+    eval_every: int,
+    flat_opt: tuple[str, ...],
+    hier_opt: tuple[str, ...],
+    no_baseline: bool,
+    out: Path | None,
+    as_json: bool,
+    quiet: bool,
+    kb_path: str | None,
+    kb_artifacts: str | None,
+) -> None:
+    """Learn the first task, discover subgoals, learn options, partition, transfer to the rest.
+
+    \b
+    Every step is stored in the knowledge base and reused when the same step is asked again,
+    so a second run (or one resumed after a crash) recomputes nothing it already has. Ends with
+    a table (runs within the bound, median episodes to reach it, final value gap) and one figure
+    per task comparing the decision layer with flat learning.
+    """
+    from adpart.store import KnowledgeBase
+    from adpart.workflows.pipeline import PipelineConfig, run_pipeline
+
+    config = PipelineConfig(
+        env=env,
+        tasks=tuple(t.strip() for t in tasks.split(",") if t.strip()),
+        detector=detector,
+        detector_params=_key_values(detector_opt, "--detector-opt"),
+        initiation=initiation,
+        delta=delta,
+        epsilon=epsilon,
+        runs=runs,
+        episodes=episodes,
+        first_episodes=first_episodes,
+        seed=seed,
+        eval_every=eval_every,
+        flat_params=_key_values(flat_opt, "--flat-opt"),
+        hierarchical_params=_key_values(hier_opt, "--hier-opt"),
+        baseline=not no_baseline,
+    )
+    out = out or Path("adpart-pipeline") / env.replace(":", "_")
+    kb = KnowledgeBase.open(KBLocation.resolve(kb_path, kb_artifacts))
+    try:
+        report = run_pipeline(kb, config, out=out, progress=_say(quiet))
+    finally:
+        kb.close()
+    summary = report.to_json()
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "summary.json").write_text(dumps(summary))
+    if as_json:
+        echo_json(summary)
+        return
+    for stage in report.stages:
+        click.echo(
+            f"{stage.stage:<20} {stage.task or '':<20} {stage.result:<28} "
+            f"{'reused' if stage.reused else f'{stage.seconds:.2f} s'}"
+        )
+    click.echo("")
+    for line in _table(report.rows):
+        click.echo(line)
+    click.echo(f"\nwrote {out}/: summary.json " + " ".join(Path(f).name for f in report.figures))
+
+
+@click.command(name="transfer")
+@click.argument("env")
+@click.option("--task", required=True, help="The new task to learn on the decision layer.")
+@click.option(
+    "--partition",
+    "partition_ref",
+    required=True,
+    metavar="ID",
+    help="The decision layer (partition:N), e.g. from `adpart partition` or a pipeline.",
+)
+@click.option("--runs", type=click.IntRange(min=1), default=10, show_default=True)
+@click.option("--episodes", type=click.IntRange(min=1), default=300, show_default=True)
+@click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True)
+@click.option("--eval-every", type=click.IntRange(min=1), default=10, show_default=True)
+@click.option(
+    "--hier-opt",
+    multiple=True,
+    metavar="KEY=VALUE",
+    help="A hierarchical-learner parameter, e.g. --hier-opt mode=action-refinement.",
+)
+@click.option("--baseline", is_flag=True, help="Also learn the task flat for comparison.")
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Folder for the figure and summary.json [default: adpart-transfer/ENV_TASK].",
+)
+@click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
+@kb_location_options
+def transfer_cmd(
+    env: str,
+    task: str,
+    partition_ref: str,
+    runs: int,
+    episodes: int,
+    seed: int,
+    eval_every: int,
+    hier_opt: tuple[str, ...],
+    baseline: bool,
+    out: Path | None,
+    as_json: bool,
+    kb_path: str | None,
+    kb_artifacts: str | None,
+) -> None:
+    """Learn TASK of ENV on a stored decision layer with the hierarchical learner (last step)."""
+    from adpart.learning.curves import LearningCurve, plot_curves
+    from adpart.store import KnowledgeBase
+    from adpart.workflows.learning import (
+        LearnRequest,
+        find_learning,
+        record_learning,
+        run_learning,
+    )
+    from adpart.workflows.pipeline import task_row
+    from adpart.workflows.refs import parse_ref
+
+    out = out or Path("adpart-transfer") / f"{env.replace(':', '_')}_{task}"
+    requests = {
+        "hierarchical": LearnRequest(
+            env=env,
+            task=task,
+            learner="hierarchical",
+            params=_key_values(hier_opt, "--hier-opt"),
+            runs=runs,
+            episodes=episodes,
+            seed=seed,
+            eval_every=eval_every,
+            partition=partition_ref,
+        )
+    }
+    if baseline:
+        requests["flat"] = LearnRequest(
+            env=env,
+            task=task,
+            learner="q-learning",
+            runs=runs,
+            episodes=episodes,
+            seed=seed,
+            eval_every=eval_every,
+        )
+    kb = KnowledgeBase.open(KBLocation.resolve(kb_path, kb_artifacts))
+    rows, curves, ids = [], {}, {}
+    try:
+        blocks = int(kb.get("partition", parse_ref(partition_ref, "partition")).n_blocks)
+        for label, request in requests.items():
+            found = find_learning(kb, request) or record_learning(kb, run_learning(request, kb=kb))
+            run = kb.get("run", parse_ref(found["run"], "run"))
+            curves[label] = LearningCurve.from_arrow(kb.load(run, "curve"))
+            ids[label] = found["run"]
+            extra = {"initial_blocks": blocks} if label == "hierarchical" else {}
+            rows.append(task_row(task, label, curves[label], 0.05, extra))
+    finally:
+        kb.close()
+    figure = plot_curves(
+        curves, out / "transfer.png", metric="value_gap", title=f"{env}/{task} on {partition_ref}"
+    )
+    summary = {
+        "env": env,
+        "task": task,
+        "partition": partition_ref,
+        "runs": ids,
+        "rows": rows,
+        "figure": str(figure),
+    }
+    (out / "summary.json").write_text(dumps(summary))
+    if as_json:
+        echo_json(summary)
+        return
+    for line in _table(rows):
+        click.echo(line)
+    click.echo(f"\nstored {', '.join(ids.values())}; wrote {out}/transfer.png summary.json")

@@ -1,0 +1,285 @@
+"""The Ray executor: the executor contract of :mod:`adpart.execution` on a Ray cluster.
+
+``with RayExecutor(address) as ex: ex.map(fn, items)`` runs every item as a Ray task and returns
+the results in the order of ``items``, like every executor. What Ray adds:
+
+* **Scale-out.** ``address=None`` starts a private local Ray (shut down again on :meth:`close`);
+  ``"host:port"`` or ``"ray://host:port"`` joins an existing cluster, whose nodes must have the
+  same adpart installed (docs/scale-out.md).
+* **Bounded retries.** A task whose worker process dies (killed, out of memory, node lost) is
+  re-run up to ``max_retries`` times by Ray; an exception raised *by* ``fn`` is re-run only when
+  ``retry_exceptions`` is true, since a deterministic error would fail the same way again.
+* **Shared arrays through the object store.** A numpy array of at least :data:`SHARE_MIN_BYTES`
+  that appears in the items (at any depth of dicts, lists and tuples) is ``ray.put`` once per
+  ``map`` call - however many items refer to the same array object - and the workers read it
+  zero-copy (read-only) from the object store instead of receiving a copy per task.
+
+Ray is an optional dependency (``pip install 'adpart[ray]'``): this module imports it only
+inside methods, so the plugin registers, and adpart works, without it.
+"""
+
+from __future__ import annotations
+
+import logging
+import socket
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass
+from typing import Any, TypeVar
+
+import numpy as np
+
+from adpart.errors import AdpartError
+from adpart.execution import Executor
+from adpart.plugins.registry import Param
+
+T = TypeVar("T")
+R = TypeVar("R")
+
+#: Arrays at least this large are put in the object store once instead of travelling per task.
+SHARE_MIN_BYTES = 64 * 1024
+#: Seconds to wait for a TCP connection to a cluster address before calling it unreachable.
+CONNECT_TIMEOUT_S = 5.0
+INSTALL_HINT = "pip install 'adpart[ray]'"
+
+
+class ClusterError(AdpartError, RuntimeError):
+    """Ray is missing, a cluster cannot be reached, or a task was lost after its retries."""
+
+
+def import_ray() -> Any:
+    """The ``ray`` module, or a :class:`ClusterError` naming the install command."""
+    try:
+        import ray
+    except ImportError as exc:
+        raise ClusterError(
+            f"the ray executor needs Ray, which is not installed ({exc}); install it with "
+            f"{INSTALL_HINT}, or choose another executor (--executor local)"
+        ) from None
+    return ray
+
+
+@dataclass(frozen=True)
+class _Shared:
+    """Placeholder for an array in the object store; replaced by the array inside the worker."""
+
+    ref: Any
+
+
+def _externalize(value: Any, put: Callable[[Any], Any], cache: dict[int, _Shared]) -> Any:
+    """``value`` with every large array replaced by a :class:`_Shared` (one ``put`` per array)."""
+    if isinstance(value, np.ndarray) and value.nbytes >= SHARE_MIN_BYTES:
+        shared = cache.get(id(value))
+        if shared is None:
+            shared = cache[id(value)] = _Shared(put(value))
+        return shared
+    if isinstance(value, dict):
+        return {k: _externalize(v, put, cache) for k, v in value.items()}
+    if isinstance(value, list | tuple) and not hasattr(value, "_fields"):
+        return type(value)(_externalize(v, put, cache) for v in value)
+    return value
+
+
+def _internalize(value: Any, get: Callable[[Any], Any]) -> Any:
+    """Inverse of :func:`_externalize`, run in the worker."""
+    if isinstance(value, _Shared):
+        return get(value.ref)
+    if isinstance(value, dict):
+        return {k: _internalize(v, get) for k, v in value.items()}
+    if isinstance(value, list | tuple) and not hasattr(value, "_fields"):
+        return type(value)(_internalize(v, get) for v in value)
+    return value
+
+
+def _apply(fn: Callable[[Any], Any], item: Any) -> Any:
+    """The Ray task body: resolve shared arrays, then ``fn(item)``."""
+    import ray
+
+    return fn(_internalize(item, ray.get))
+
+
+def _split_address(address: str) -> tuple[str, int] | None:
+    """``(host, port)`` of ``host:port`` / ``ray://host:port``; None for ``auto``/``local``."""
+    if address in {"auto", "local"}:
+        return None
+    bare = address.removeprefix("ray://")
+    host, sep, port = bare.rpartition(":")
+    if not sep or not host or not port.isdigit():
+        raise ClusterError(
+            f"Ray address {address!r} is not host:port or ray://host:port; give the address "
+            "`ray start --head` printed (e.g. 10.0.0.5:6379), or omit --ray-address to start a "
+            "local Ray"
+        )
+    return host.strip("[]"), int(port)
+
+
+class RayExecutor(Executor):
+    """Ray tasks on a local or remote Ray cluster; see the module docstring."""
+
+    name = "ray"
+    description = f"Ray tasks on a local or remote Ray cluster ({INSTALL_HINT})"
+    params = (
+        Param(
+            "address",
+            "str",
+            None,
+            "Ray cluster address host:port or ray://host:port (default: start a local Ray)",
+        ),
+        Param("num-cpus", "int", 0, "CPUs of a local Ray started here (0 = all cores)", min=0),
+        Param("max-retries", "int", 3, "re-runs of a task whose worker died", min=0),
+        Param("retry-exceptions", "bool", False, "also re-run tasks that raised an exception"),
+    )
+
+    def __init__(
+        self,
+        address: str | None = None,
+        num_cpus: int = 0,
+        max_retries: int = 3,
+        retry_exceptions: bool = False,
+    ) -> None:
+        self.address = address or None
+        self.num_cpus = num_cpus
+        self.max_retries = max_retries
+        self.retry_exceptions = retry_exceptions
+        self._started = False
+        self._connected = False
+        self._task: Any = None
+
+    # ------------------------------------------------------------------ connection
+    def connect(self) -> RayExecutor:
+        """Join the cluster (or start a local one) now; later calls do nothing.
+
+        ``map`` connects on first use; call this to fail early on a bad address.
+        """
+        if self._connected:
+            return self
+        ray = import_ray()
+        if self.address is not None:
+            self._check_reachable(self.address)
+        if ray.is_initialized():
+            # a Ray the caller (or a test fixture) initialised: use it, leave it running
+            self._connected = True
+            return self
+        try:
+            if self.address is None:
+                ray.init(
+                    address="local",
+                    num_cpus=self.num_cpus or None,
+                    include_dashboard=False,
+                    logging_level=logging.WARNING,
+                )
+                self._started = True
+            else:
+                ray.init(address=self.address, logging_level=logging.WARNING)
+        except (ConnectionError, RuntimeError, TimeoutError, ValueError) as exc:
+            where = (
+                "a local Ray" if self.address is None else f"the Ray cluster at {self.address!r}"
+            )
+            raise ClusterError(
+                f"cannot connect to {where}: {type(exc).__name__}: {exc}. Check that the cluster "
+                "is running (`ray status`) with the same Ray and Python versions, or omit "
+                "--ray-address to start a local Ray"
+            ) from exc
+        self._connected = True
+        return self
+
+    @staticmethod
+    def _check_reachable(address: str) -> None:
+        """Fail fast, naming the address, instead of waiting out Ray's own long timeouts."""
+        target = _split_address(address)
+        if target is None:
+            return
+        try:
+            with socket.create_connection(target, timeout=CONNECT_TIMEOUT_S):
+                pass
+        except OSError as exc:
+            raise ClusterError(
+                f"cannot reach the Ray cluster at {address!r} ({exc.strerror or exc}); start one "
+                f"there with `ray start --head --port={target[1]}`, correct --ray-address, or "
+                "omit --ray-address to start a local Ray"
+            ) from None
+
+    def _remote(self) -> Any:
+        ray = import_ray()
+        if self._task is None:
+            self._task = ray.remote(_apply).options(
+                max_retries=self.max_retries, retry_exceptions=self.retry_exceptions
+            )
+        return self._task
+
+    def _submit(self, fn: Callable[[Any], Any], items: Iterable[Any]) -> list[Any]:
+        """Object refs of ``fn(item)`` for every item; shared arrays ``ray.put`` once."""
+        self.connect()
+        ray = import_ray()
+        cache: dict[int, _Shared] = {}
+        task = self._remote()
+        refs = [task.remote(fn, _externalize(item, ray.put, cache)) for item in items]
+        return refs
+
+    def _lost(self, exc: Exception) -> ClusterError:
+        return ClusterError(
+            f"a Ray task was lost after {self.max_retries} retries ({type(exc).__name__}: "
+            f"{str(exc).splitlines()[0] if str(exc) else ''}); raise --executor-opt "
+            "max-retries=N, or check the cluster's nodes (`ray status`)"
+        )
+
+    def _get(self, ref: Any) -> Any:
+        ray = import_ray()
+        try:
+            return ray.get(ref)
+        except ray.exceptions.RayTaskError as exc:
+            # the exception fn raised, re-raised as its own type
+            raise exc.as_instanceof_cause() from None
+        except ray.exceptions.RayError as exc:
+            # worker crashed / node died / object lost, after Ray's retries
+            raise self._lost(exc) from exc
+
+    # ------------------------------------------------------------------ executor contract
+    def map(self, fn: Callable[[T], R], items: Iterable[T]) -> list[R]:
+        refs = self._submit(fn, items)
+        try:
+            return [self._get(ref) for ref in refs]
+        except BaseException:
+            self._cancel(refs)
+            raise
+
+    def imap_unordered(self, fn: Callable[[T], R], items: Iterable[T]) -> Iterator[tuple[int, R]]:
+        """``(index, fn(items[index]))`` pairs as tasks finish, for streaming consumers.
+
+        Unfinished tasks are cancelled if the consumer stops early or a task fails.
+        """
+        ray = import_ray()
+        refs = self._submit(fn, items)
+        index = {ref: i for i, ref in enumerate(refs)}
+        waiting = list(refs)
+        try:
+            while waiting:
+                ready, waiting = ray.wait(waiting, num_returns=1)
+                for ref in ready:
+                    yield index[ref], self._get(ref)
+        finally:
+            self._cancel(waiting)
+
+    @staticmethod
+    def _cancel(refs: list[Any]) -> None:
+        if not refs:
+            return
+        ray = import_ray()
+        for ref in refs:
+            try:
+                ray.cancel(ref, force=True)
+            except (ValueError, TypeError, ray.exceptions.RayError):
+                continue  # finished meanwhile, or already cancelled
+
+    @property
+    def parallelism(self) -> int:
+        """CPUs of the cluster (connecting if needed): how many tasks run at once."""
+        self.connect()
+        return max(1, int(import_ray().cluster_resources().get("CPU", 1)))
+
+    def close(self) -> None:
+        """Shut down the local Ray if this executor started it (idempotent)."""
+        if self._started:
+            import_ray().shutdown()
+        self._started = False
+        self._connected = False
+        self._task = None

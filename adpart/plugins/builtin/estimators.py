@@ -1,0 +1,100 @@
+"""Built-in hierarchy estimators ``expected-learning-time`` and ``all-subgoals`` (section 4.4).
+
+Call signature (``register_hierarchy_estimators``): ``cls(**params).build(knowledge_base,
+environment, *, tasks=None, store=True) -> HierarchyResult`` - the decision layer for the next task
+of ``environment`` (its name in the knowledge base) from the tasks learned there so far (``tasks``
+restricts them: names, ``task:N`` refs or ids), stored as a ``hierarchy`` partition unless
+``store=False``. Both are thin layers over :mod:`adpart.hierarchy.kb`; docs/hierarchy.md has the
+formulas and interpretations.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from typing import Any
+
+from adpart.hierarchy.kb import (
+    DEFAULT_THRESHOLD_SCALE,
+    HierarchyResult,
+    all_subgoals_layer,
+    expected_time_layer,
+    finish,
+    load_inputs,
+)
+from adpart.plugins.hookspecs import hookimpl
+from adpart.plugins.registry import Param, Registrar
+
+_COMMON = (
+    Param("c", "float", 1.0, "constant c of T_conv = c |P|^2 |O|", min=0.0),
+    Param("threshold", "float", -1.0,
+          "significance margin L of P_refine; < 0 = threshold-scale x each task's value range"),
+    Param("threshold-scale", "float", DEFAULT_THRESHOLD_SCALE,
+          "default L as a fraction of each task's value range", min=0.0),
+)
+
+
+class ExpectedLearningTime:
+    """Algorithm 3: greedy (block, option) refinements minimising E[t_learn | P]."""
+
+    name = "expected-learning-time"
+    description = "greedy layer minimising the expected learning time over learned tasks (4.4)"
+    params = (*_COMMON,
+              Param("max-steps", "int", 0, "cap on accepted refinements (0 = no cap)", min=0))
+
+    def __init__(self, c: float = 1.0, threshold: float = -1.0,
+                 threshold_scale: float = DEFAULT_THRESHOLD_SCALE, max_steps: int = 0) -> None:
+        self.c, self.threshold, self.threshold_scale = c, threshold, threshold_scale
+        self.max_steps = max_steps
+
+    def build(self, knowledge_base: Any, environment: str, *,
+              tasks: Sequence[str | int] | None = None, store: bool = True) -> HierarchyResult:
+        t0 = time.perf_counter()
+        inputs = load_inputs(knowledge_base, environment, tasks=tasks,
+                             threshold=None if self.threshold < 0 else self.threshold,
+                             threshold_scale=self.threshold_scale)
+        t1 = time.perf_counter()
+        layer, trace, steps, estimate = expected_time_layer(
+            inputs, c=self.c, max_steps=self.max_steps or None)
+        t2 = time.perf_counter()
+        params = {"c": self.c, "threshold": self.threshold,
+                  "threshold_scale": self.threshold_scale, "max_steps": self.max_steps}
+        return finish(knowledge_base, inputs, layer, estimator=self.name, trace=trace,
+                      steps=steps, estimate=estimate, parameters=params, store=store,
+                      seconds={"inputs": t1 - t0, "construction": t2 - t1})
+
+
+class AllSubgoals:
+    """The seed's heuristic: every subgoal option where admissible, multi-phase partition."""
+
+    name = "all-subgoals"
+    description = "every stored subgoal option in every block where admissible (phases 1-2)"
+    params = (*_COMMON,
+              Param("delta", "float", 0.3, "delta of eq. 4.6 for the multi-phase partition",
+                    min=0.0))
+
+    def __init__(self, c: float = 1.0, threshold: float = -1.0,
+                 threshold_scale: float = DEFAULT_THRESHOLD_SCALE, delta: float = 0.3) -> None:
+        self.c, self.threshold, self.threshold_scale = c, threshold, threshold_scale
+        self.delta = delta
+
+    def build(self, knowledge_base: Any, environment: str, *,
+              tasks: Sequence[str | int] | None = None, store: bool = True) -> HierarchyResult:
+        t0 = time.perf_counter()
+        inputs = load_inputs(knowledge_base, environment, tasks=tasks,
+                             threshold=None if self.threshold < 0 else self.threshold,
+                             threshold_scale=self.threshold_scale, subgoal_options_only=True)
+        t1 = time.perf_counter()
+        layer, estimate = all_subgoals_layer(inputs, delta=self.delta, c=self.c)
+        t2 = time.perf_counter()
+        params = {"c": self.c, "threshold": self.threshold,
+                  "threshold_scale": self.threshold_scale, "delta": self.delta}
+        return finish(knowledge_base, inputs, layer, estimator=self.name, trace=[estimate],
+                      steps=[], estimate=estimate, parameters=params, store=store,
+                      seconds={"inputs": t1 - t0, "construction": t2 - t1})
+
+
+@hookimpl
+def register_hierarchy_estimators(register: Registrar) -> None:
+    register(ExpectedLearningTime)
+    register(AllSubgoals)

@@ -1,0 +1,198 @@
+"""`adpart partition`: every phase stored, phase 1 reused, checker and value gap, bad input."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+from click.testing import CliRunner
+
+from adpart.cli import cli
+from adpart.cli.common import AdpartGroup
+from adpart.cli.partition_cmd import partition_cmd
+from adpart.options.smdp import stack_models
+from adpart.partition import Partition, check_stability, exact_lumping
+from adpart.store import KnowledgeBase
+from adpart.workflows.options import load_options, options_for_subgoals
+from adpart.workflows.resolve import resolve_domain
+
+#: The main group with `partition` attached (the lead wires it into adpart.cli itself).
+GROUP = AdpartGroup(commands={**cli.commands, "partition": partition_cmd})
+
+
+def run(*args: str) -> object:
+    return CliRunner().invoke(GROUP, list(args))
+
+
+def run_json(*args: str) -> dict:
+    result = run(*args, "--json")
+    assert result.exit_code == 0, result.output
+    return json.loads(result.output)
+
+
+def ref_id(ref: str) -> int:
+    return int(ref.split(":")[1])
+
+
+@pytest.fixture
+def kb_with_options(tmp_path):
+    """two-rooms with a learned policy, subgoal set {27, 40} and its two stored options."""
+    kb_dir = tmp_path / "kb"
+    learned = run("learn", "two-rooms", "--runs", "1", "--episodes", "5", "--out",
+                  str(tmp_path / "o"), "--kb", str(kb_dir), "--json", "-q")
+    assert learned.exit_code == 0, learned.output
+    ids = json.loads(learned.output)["kb"]
+    kb = KnowledgeBase.open(str(kb_dir))
+    try:
+        policy = kb.get("policy", ref_id(ids["policies"][0]))
+        env = kb.get("environment", kb.get("task", policy.task_id).environment_id)
+        subgoal_set = kb.put_subgoal_set(env, "hand", [27, 40], policy=policy)
+        stored = options_for_subgoals(kb, subgoal_set)
+    finally:
+        kb.close()
+    return kb_dir, subgoal_set.ref, [r.ref for r in stored.records]
+
+
+def test_primitive_exact_partition_matches_exact_lumping_and_is_exported(tmp_path):
+    kb_dir = str(tmp_path / "kb")
+    plot = tmp_path / "blocks.png"
+    out = run_json("partition", "two-rooms", "--options", "primitive", "--delta", "0",
+                   "--epsilon", "0", "--task", "reach-goal", "--kb", kb_dir, "--plot", str(plot))
+    mdp = resolve_domain("two-rooms").mdp("reach-goal")
+    assert out["states"] == mdp.n_states
+    assert len(out["phase1"]["partitions"]) == mdp.n_actions
+    assert out["phase1"]["computed"] == mdp.n_actions and out["phase1"]["reused"] == 0
+    assert out["check"] == {"ran": True, "ok": True, "max_mass_span": 0.0,
+                            "max_reward_span": 0.0, "violations": 0}
+    # oracle: the worklist lumping (another code path) of the primitive SMDP with rewards
+    oracle = exact_lumping(mdp.as_smdp(), use_rewards=True)
+    assert out["phase3"]["blocks"] == oracle.n_blocks == out["final"]["blocks"]
+    assert out["value_gap"]["measured"] == pytest.approx(0.0, abs=1e-6)
+    assert out["value_gap"]["bound"] == pytest.approx(2.0)
+    assert plot.stat().st_size > 1000
+
+    exported = tmp_path / "labels.parquet"
+    result = run("kb", "export", out["phase3"]["id"], "--field", "labels", "--out",
+                 str(exported), "--kb", kb_dir)
+    assert result.exit_code == 0, result.output
+    table = pq.read_table(exported)
+    assert table.num_rows == mdp.n_states
+    labels = table.column(table.column_names[-1]).to_numpy()
+    np.testing.assert_array_equal(labels, oracle.labels)
+
+    kb = KnowledgeBase.open(kb_dir)
+    try:
+        p3 = kb.get("partition", ref_id(out["phase3"]["id"]))
+        p2 = kb.get("partition", ref_id(out["phase2"]["id"]))
+        assert p3.kind == "reward-refined" and p3.parent_ids == (p2.id,)
+        assert p2.kind == "intersected"
+        assert set(p2.parent_ids) == {ref_id(p["id"]) for p in out["phase1"]["partitions"]}
+        assert p3.includes_primitives and p3.option_ids == ()
+        assert kb.load(p3, "block_actions").shape == (p3.n_blocks, mdp.n_actions)
+    finally:
+        kb.close()
+    # the same request again reuses every phase-1 partition
+    again = run_json("partition", "two-rooms", "--options", "primitive", "--delta", "0",
+                     "--epsilon", "0", "--task", "reach-goal", "--kb", kb_dir)
+    assert again["phase1"]["reused"] == mdp.n_actions and again["phase1"]["computed"] == 0
+    assert [p["id"] for p in again["phase1"]["partitions"]] == [
+        p["id"] for p in out["phase1"]["partitions"]]
+    assert again["phase3"]["blocks"] == out["phase3"]["blocks"]
+
+
+def test_options_phases_stored_phase1_reused_and_checked(kb_with_options):
+    kb_dir, subgoal_set, option_refs = kb_with_options
+    first = run_json("partition", "two-rooms", "--options", subgoal_set, "--delta", "0.3",
+                     "--epsilon", "10", "--task", "reach-goal", "--kb", str(kb_dir))
+    assert first["phase1"]["computed"] == 2 and first["check"]["ok"]
+    assert not first["phase3"]["recomputed_option_models"]  # built under this very task
+    assert first["value_gap"]["inside_interval"] == 1.0
+    assert first["value_gap"]["measured"] <= first["value_gap"]["bound"]
+    # a different option set: phase 1 of option 1 is reused, only phases 2-3 run
+    single_set = run_json("partition", "two-rooms", "--options", ",".join(option_refs),
+                          "--kb", str(kb_dir))
+    assert single_set["phase1"]["computed"] == 0 and single_set["phase1"]["reused"] == 2
+    assert single_set["phase3"] is None and single_set["final"]["id"] == single_set["phase2"]["id"]
+    other_delta = run_json("partition", "two-rooms", "--options", subgoal_set, "--delta", "0",
+                           "--kb", str(kb_dir))
+    assert other_delta["phase1"]["computed"] == 2  # delta is part of the phase-1 key
+
+    kb = KnowledgeBase.open(str(kb_dir))
+    try:
+        p3 = kb.get("partition", ref_id(first["phase3"]["id"]))
+        records = [kb.get("option", i) for i in p3.option_ids]
+        assert [r.ref for r in records] == option_refs and not p3.includes_primitives
+        _, models = load_options(kb, records)
+        labels = kb.load(p3, "labels")
+        block_actions = kb.load(p3, "block_actions").astype(bool)
+    finally:
+        kb.close()
+    # independent re-check of the stored partition against the options' model
+    mdp = resolve_domain("two-rooms").mdp("reach-goal")
+    smdp = stack_models(mdp, models)
+    stored = Partition(labels, block_actions)
+    assert check_stability(stored, smdp, delta=0.3, epsilon=10.0).ok
+    assert stored.admissible.sum() > 0 and stored.admissible.any(axis=1).all()
+
+
+def test_stored_models_are_recomputed_for_a_task_they_were_not_built_for(kb_with_options):
+    kb_dir, _, _ = kb_with_options
+    mdp = resolve_domain("two-rooms").mdp("reach-goal")
+    kb = KnowledgeBase.open(str(kb_dir))
+    try:
+        env = kb.find_environment("two-rooms")
+        rec = kb.records("option", environment=env)
+        options, models = load_options(kb, rec)
+        copies = [  # the same options, stored without a source task
+            kb.put_option(env, f"copy-{o.name}", initiation=o.initiation, policy=o.policy,
+                          termination=o.beta, reward=m.R, transitions=m.F, gamma=mdp.gamma)
+            for o, m in zip(options, models, strict=True)
+        ]
+    finally:
+        kb.close()
+    refs = ",".join(c.ref for c in copies)
+    args = ("--delta", "0", "--epsilon", "0", "--task", "reach-goal", "--kb", str(kb_dir))
+    copied = run_json("partition", "two-rooms", "--options", refs, *args)
+    original = run_json("partition", "two-rooms", "--options", ",".join(r.ref for r in rec), *args)
+    assert copied["phase3"]["recomputed_option_models"]
+    assert not original["phase3"]["recomputed_option_models"]
+    assert copied["phase3"]["blocks"] == original["phase3"]["blocks"]
+    assert copied["value_gap"]["measured"] == pytest.approx(original["value_gap"]["measured"])
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--delta", "1.5"], "is outside [0, 1]"),
+        (["--delta", "-0.1"], "is outside [0, 1]"),
+        (["--epsilon", "-1"], "must be >= 0"),
+        (["--options", "option:99"], "option:99"),
+        (["--options", "subgoal-set:99"], "subgoal-set:99"),
+        (["--options", "policy:1"], "a option is needed"),
+        (["--task", "no-such-task"], "no-such-task"),
+    ],
+)
+def test_bad_input_is_one_line(kb_with_options, extra, message):
+    kb_dir, subgoal_set, _ = kb_with_options
+    args = ["partition", "two-rooms", "--options", subgoal_set, "--kb", str(kb_dir)]
+    result = run(*args, *extra)
+    assert result.exit_code == 2, result.output
+    assert message in result.output
+    assert "Traceback" not in result.output and len(result.output.strip().splitlines()) == 1
+
+
+def test_options_of_another_environment_and_uncovered_states(kb_with_options):
+    kb_dir, _, option_refs = kb_with_options
+    other = run("partition", "four-rooms", "--options", option_refs[0], "--kb", str(kb_dir))
+    assert other.exit_code == 2
+    assert "belongs to environment 'two-rooms'" in other.output
+    alone = run("partition", "two-rooms", "--options", option_refs[0], "--kb", str(kb_dir))
+    assert alone.exit_code == 2
+    assert "initiation set" in alone.output and len(alone.output.strip().splitlines()) == 1
+    # options built under reach-goal skip its goal cell, which another task makes non-terminal
+    moved = run("partition", "two-rooms", "--options", ",".join(option_refs), "--task",
+                "goal:x=1,y=1", "--kb", str(kb_dir))
+    assert moved.exit_code == 2, moved.output
+    assert "no admissible option" in moved.output

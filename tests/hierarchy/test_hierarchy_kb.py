@@ -1,0 +1,141 @@
+"""End to end: learned tasks in a real SQLite knowledge base -> stored hierarchy partitions."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from adpart.errors import TaskError
+from adpart.hierarchy import discounted_occupancy, expected_time, option_values
+from adpart.hierarchy.kb import build_hierarchy, load_inputs
+from adpart.mdp.solvers import q_from_v, solve
+from adpart.options import doorway_options, option_model
+from adpart.partition import Partition
+from adpart.partition.partition import block_all
+from adpart.store import KnowledgeBase
+from tests.hierarchy.conftest import store_domain
+
+
+def test_option_values_agree_with_the_exact_option_model(four_rooms_kb):
+    _, data = four_rooms_kb
+    mdp = data["domain"].mdp("G2")
+    V = solve(mdp).V
+    options = doorway_options(data["domain"].mdp("G1"))
+    got = option_values(mdp, options, V)
+    for j, opt in enumerate(options):  # oracle: R_o + F_o V from the options module
+        model = option_model(mdp, opt, duration=False)
+        rows = model.admissible
+        np.testing.assert_allclose(got[rows, j], (model.R + model.F @ V)[rows], atol=1e-9)
+        assert np.all(got[opt.initiation & mdp.terminal, j] == -np.inf)
+    assert np.all(got <= V[:, None] + 1e-9)  # no option beats the optimal value
+
+
+def test_occupancy_agrees_with_power_iteration(four_rooms_kb):
+    _, data = four_rooms_kb
+    mdp = data["domain"].mdp("G1")
+    pi = solve(mdp).policy
+    d = discounted_occupancy(mdp, pi)
+    S = mdp.n_states
+    P = mdp.P[pi * S + np.arange(S)].toarray()
+    P[mdp.terminal] = 0.0
+    mu = np.where(mdp.terminal, 0.0, mdp.initial)
+    mu = mu / mu.sum()
+    x, acc = mu.copy(), mu.copy()
+    for _ in range(2000):  # sum_t gamma^t mu P^t, terminal states absorb nothing
+        x = mdp.gamma * (x @ P)
+        x[mdp.terminal] = 0.0
+        acc += x
+    np.testing.assert_allclose(d, acc / acc.sum(), atol=1e-9)
+
+
+def test_expected_learning_time_layer_is_stored_with_lineage(four_rooms_kb, estimator_registry):
+    kb, data = four_rooms_kb
+    g1 = data["tasks"]["G1"]
+    labels = np.arange(kb.get("environment", data["env"].id).n_states) % 3
+    learned_on = kb.put_partition(data["env"], "learned", labels, task=g1,
+                                  block_actions=np.ones((3, 4), dtype=bool))
+    res = build_hierarchy(kb, "four-rooms")
+    assert res.partition_id is not None
+    rec = kb.get("partition", res.partition_id)
+    assert rec.kind == "hierarchy" and rec.n_blocks == res.n_blocks
+    assert learned_on.id in rec.parent_ids
+    assert [p.id for p in kb.lineage(rec)] == [learned_on.id]
+    assert list(rec.option_ids) == res.option_ids
+    stored = Partition(kb.load(rec, "labels"), kb.load(rec, "block_actions").astype(bool))
+    assert stored == res.partition
+    # every block offers a column every state of it may start (what the learner checks)
+    inputs = load_inputs(kb, "four-rooms")
+    cols = list(range(4)) + [4 + [r.id for r in inputs.option_records].index(i)
+                              for i in res.option_ids]
+    allowed = block_all(stored.labels, stored.n_blocks, inputs.admissible[:, cols])
+    assert stored.admissible.any(axis=1).all()
+    assert not (stored.admissible & ~allowed).any()
+    trace = np.asarray(res.trace)
+    assert np.all(np.diff(trace) < 0) and res.estimate <= trace[0]
+    assert 1 < res.n_blocks < inputs.mdp.n_states
+    assert res.summary()["partition"] == f"partition:{rec.id}"
+
+
+def test_all_subgoals_layer_and_comparison(four_rooms_kb, estimator_registry):
+    kb, _ = four_rooms_kb
+    auto = build_hierarchy(kb, "four-rooms", store=False)
+    subgoals = build_hierarchy(kb, "four-rooms", estimator="all-subgoals",
+                               params={"delta": 0.3})
+    assert auto.partition_id is None
+    assert kb.get("partition", subgoals.partition_id).kind == "hierarchy"
+    assert len(subgoals.option_ids) == 4  # every doorway option is offered somewhere
+    assert subgoals.partition.admissible.any(axis=1).all()
+    assert auto.estimate <= subgoals.estimate  # Algorithm 3 optimises the estimate it reports
+
+
+def test_task_selection_weights_and_errors(four_rooms_kb, estimator_registry):
+    kb, data = four_rooms_kb
+    one = load_inputs(kb, "four-rooms", tasks=["G1"])
+    assert [t.name for t in one.tasks] == ["G1"]
+    both = load_inputs(kb, "four-rooms", weights={"G1": 3.0})
+    assert [t.weight for t in both.tasks] == [3.0, 1.0]
+    res = build_hierarchy(kb, "four-rooms", tasks=["task:1"], store=False)
+    assert res.task_ids == [data["tasks"]["G1"].id]
+    assert res.estimate == pytest.approx(expected_time(one.tasks, _full(res, one)).total)
+    with pytest.raises(TaskError, match="no learned task"):
+        load_inputs(kb, "four-rooms", tasks=["nope"])
+    with pytest.raises(TaskError, match="one per task"):
+        load_inputs(kb, "four-rooms", weights=[1.0])
+
+
+def _full(res, inputs) -> Partition:
+    """The result's layer over all input columns (pruned option columns put back as False)."""
+    A = inputs.mdp.n_actions
+    adm = np.zeros((res.n_blocks, inputs.admissible.shape[1]), dtype=bool)
+    ids = [r.id for r in inputs.option_records]
+    adm[:, :A] = res.partition.admissible[:, :A]
+    for k, oid in enumerate(res.option_ids):
+        adm[:, A + ids.index(oid)] = res.partition.admissible[:, A + k]
+    return Partition(res.partition.labels, adm)
+
+
+def test_two_rooms_and_an_empty_environment(tmp_path, estimator_registry):
+    kb = KnowledgeBase.open(tmp_path / "kb")
+    try:
+        store_domain(kb, "two-rooms", ["reach-goal"])
+        res = build_hierarchy(kb, "two-rooms")
+        assert res.n_blocks >= 1 and res.estimate <= res.trace[0]
+        from adpart.envs.registry import get_domain
+
+        dyn = get_domain("four-rooms").dynamics()
+        kb.put_environment("four-rooms", model_hash=dyn.content_hash, n_states=dyn.n_states,
+                           n_actions=dyn.n_actions)
+        with pytest.raises(TaskError, match="no learned task"):
+            build_hierarchy(kb, "four-rooms")
+    finally:
+        kb.close()
+
+
+def test_q_from_stored_policy_is_used(four_rooms_kb):
+    kb, data = four_rooms_kb
+    mdp = data["domain"].mdp("G1")
+    inputs = load_inputs(kb, "four-rooms", tasks=["G1"])
+    Q = q_from_v(mdp, solve(mdp).V)
+    live = ~mdp.terminal
+    np.testing.assert_allclose(inputs.tasks[0].Q[live, :4], np.where(
+        mdp.admissible, Q, -np.inf)[live])

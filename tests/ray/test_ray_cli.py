@@ -1,0 +1,51 @@
+"""``adpart sweep --executor ray``: the plugin as registered by its entry point."""
+
+from __future__ import annotations
+
+import json
+
+import click
+import pytest
+from click.testing import CliRunner
+
+pytest.importorskip("ray")
+
+from adpart.cli.common import AdpartGroup
+from adpart.cli.sweep import sweep_cmd
+from adpart.plugins import manager, reset_registry
+
+
+@click.group(cls=AdpartGroup)
+def group() -> None:
+    """The main group, as far as this command is concerned."""
+
+
+group.add_command(sweep_cmd)
+
+
+@pytest.fixture(autouse=True)
+def ray_plugin(monkeypatch):
+    """Register the ray executor as the ``ray`` entry point of pyproject.toml does."""
+    monkeypatch.setitem(manager.BUILTIN_PLUGINS, "ray", "adpart.plugins.builtin.ray_executor")
+    reset_registry()
+    yield
+    reset_registry()
+
+
+def test_ray_cli_unreachable_address_is_one_clear_line(small_sweep, tmp_path):
+    result = CliRunner().invoke(group, ["sweep", str(small_sweep), "--kb", str(tmp_path / "kb"),
+                                        "--executor", "ray", "--ray-address", "127.0.0.1:1"])
+    assert result.exit_code == 2
+    assert "cannot reach the Ray cluster at '127.0.0.1:1'" in result.output
+    assert "ray start --head --port=1" in result.output
+    assert "Traceback" not in result.output
+
+
+def test_ray_cli_sweep_runs_on_the_cluster(ray_cluster, small_sweep, tmp_path):
+    kb = str(tmp_path / "kb")
+    args = ["sweep", str(small_sweep), "--kb", kb, "--executor", "ray", "--json"]
+    first = CliRunner().invoke(group, args, catch_exceptions=False)
+    assert first.exit_code == 0, first.output
+    assert json.loads(first.output)["stored"] == 8
+    again = json.loads(CliRunner().invoke(group, args, catch_exceptions=False).output)
+    assert (again["stored"], again["skipped"]) == (0, 8)
