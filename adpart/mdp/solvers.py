@@ -467,6 +467,34 @@ def _policy_matrix(smdp: SMDPModel, policy: np.ndarray) -> tuple[sp.csr_array, n
     return sp.csr_array(gather @ stacked), R_pi
 
 
+def never_terminating_states(F_pi: sp.csr_array, atol: float = 1e-12) -> np.ndarray:
+    """States from which the discounted chain ``F_pi`` never loses mass (``I - F_pi`` singular).
+
+    A state "leaks" when its row mass is below ``1 - atol`` (discount, or termination). ``V^pi``
+    is finite exactly when every state can reach a leaking state along ``F_pi``'s nonzeros, so a
+    backward search from the leaking states finds the trapped rest without any factorisation
+    (and without handing LAPACK a singular matrix).
+
+    Returns:
+        int64 ids of the trapped states (empty for every discounted model).
+    """
+    S = F_pi.shape[0]
+    mass = np.asarray(F_pi.sum(axis=1)).ravel()
+    leaking = np.flatnonzero(mass < 1.0 - atol)
+    if leaking.size == S:
+        return np.empty(0, dtype=np.int64)
+    reach = np.zeros(S, dtype=bool)
+    reach[leaking] = True
+    backward = sp.csr_array(F_pi.T)
+    frontier = leaking
+    while frontier.size:
+        preds = backward[frontier].indices if frontier.size else np.empty(0, dtype=np.int64)
+        new = np.unique(preds[~reach[preds]])
+        reach[new] = True
+        frontier = new
+    return np.flatnonzero(~reach).astype(np.int64)
+
+
 def policy_evaluation(model: HasSMDP, policy: np.ndarray) -> np.ndarray:
     """Exact ``V^pi`` by one sparse direct solve of ``(I - F_pi) V = R_pi``.
 
@@ -478,6 +506,13 @@ def policy_evaluation(model: HasSMDP, policy: np.ndarray) -> np.ndarray:
     """
     smdp = model.as_smdp()
     F_pi, R_pi = _policy_matrix(smdp, policy)
+    trapped = never_terminating_states(F_pi)
+    if trapped.size:
+        raise ModelError(
+            f"policy evaluation: the policy never terminates from {trapped.size} state(s) (first: "
+            f"state {int(trapped[0])}); with gamma = 1 every state must reach a terminal state "
+            "(or a discounted row) under the policy"
+        )
     A = sp.csc_array(sp.eye_array(smdp.n_states) - F_pi)
     with warnings.catch_warnings():
         warnings.simplefilter("error", spla.MatrixRankWarning)

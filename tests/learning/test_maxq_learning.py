@@ -84,6 +84,7 @@ def oracle(mdp: FiniteMDP, g) -> tuple[dict[int, np.ndarray], dict[int, np.ndarr
         j = node - A
         T = g.terminal[j]
         kids = g.children[j]
+        assert np.all(kids >= 0)  # static children only in this small graph
         V = np.zeros(S)
         for _ in range(5000):
             q = np.stack([Vn[c] + F[c] @ V for c in kids])
@@ -101,7 +102,7 @@ def oracle(mdp: FiniteMDP, g) -> tuple[dict[int, np.ndarray], dict[int, np.ndarr
         DN, DT = np.diag((~T).astype(float)), np.diag(T.astype(float))
         F[node] = np.linalg.solve(np.eye(S) - M @ DN, M @ DT)
         Vn[node] = V
-        C[node] = np.stack([F[c] @ V for c in kids])
+        C[node] = np.stack([F[c] @ V for c in kids])[:, g.rows[j]]
         Vs[node] = V
     return C, Vs
 
@@ -119,9 +120,10 @@ def greedy_errors(mdp, g, tables) -> list[float]:
     for node, c_star in C_star.items():
         j = node - g.n_primitives
         s = np.flatnonzero(~g.terminal[j])
-        k = greedy[j][s]
+        k = greedy[j]
+        cols = np.arange(s.size)
         c = tables.completion(g, node)
-        errs.append(float(np.abs(c[k, s] - c_star[k, s]).max()))
+        errs.append(float(np.abs(c[k, cols] - c_star[k, cols]).max()))
         errs.append(float(np.abs(V[node][s] - V_star[node][s]).max()))
     return errs
 

@@ -1,17 +1,18 @@
 """MAXQ-Q (Dietterich 2000): declarative task graphs, the learner, and the built-in graphs.
 
 See ``docs/maxq.md``. :class:`TaskGraph` / :class:`Subtask` describe a hierarchy,
-:func:`maxq_q` learns it, :func:`get_graph` returns the built-in ``taxi`` graph.
+:func:`maxq_q` learns it, :func:`get_graph` returns the built-in ``taxi`` and ``parr-maze`` graphs.
 """
 
 from __future__ import annotations
 
-from adpart.learning.maxq.graphs import GRAPHS, get_graph, graph_for, taxi_graph
+from adpart.learning.maxq.graphs import GRAPHS, get_graph, graph_for, parr_graph, taxi_graph
 from adpart.learning.maxq.maxq_q import (
     MaxQResult,
     MaxQTables,
     decomposed_values,
     greedy_hierarchical_policy,
+    hierarchical_rollouts,
     maxq_q,
 )
 from adpart.learning.maxq.taskgraph import CompiledGraph, Subtask, TaskGraph
@@ -27,6 +28,8 @@ __all__ = [
     "get_graph",
     "graph_for",
     "greedy_hierarchical_policy",
+    "hierarchical_rollouts",
     "maxq_q",
+    "parr_graph",
     "taxi_graph",
 ]

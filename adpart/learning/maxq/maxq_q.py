@@ -35,6 +35,7 @@ from its own ``np.random.default_rng(seed).spawn(runs)[k]`` stream.
 from __future__ import annotations
 
 import math
+import weakref
 from bisect import bisect_right
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -53,7 +54,7 @@ from adpart.learning.schedules import Schedule, parse_schedule
 from adpart.mdp.model import FiniteMDP
 
 __all__ = ["MaxQResult", "MaxQTables", "decomposed_values", "greedy_hierarchical_policy",
-           "maxq_q"]
+           "hierarchical_rollouts", "maxq_q"]
 
 
 @dataclass(eq=False)
@@ -61,7 +62,8 @@ class MaxQTables:
     """The learned tables of one run.
 
     Attributes:
-        C: per composite, per child, the completion values ``C(i, ., a)`` (abstract index).
+        C: per composite, per child slot, the completion values ``C(i, ., a)`` (abstract index
+            over the composite's rows, see :class:`CompiledGraph`).
         Ct: the same for ``C~`` (the very same arrays where a node has no pseudo-reward).
         V: per primitive, the one-step expected reward table ``V(a, .)``.
         nC: update counts of the ``C`` entries (the step-size visit counts).
@@ -85,37 +87,52 @@ class MaxQTables:
         return cls(C=C, Ct=Ct, V=V, nC=nC, nV=nV)
 
     def completion(self, g: CompiledGraph, node: int, tilde: bool = False) -> np.ndarray:
-        """``(n_children, S)`` ``C(i, s, a)`` (or ``C~``) of composite ``node`` over all states."""
+        """``(n_slots, n_rows)`` ``C(i, s, a)`` (or ``C~``) of composite ``node`` over the states
+        where it runs (``g.rows[node - A]``)."""
         j = node - g.n_primitives
         tables = self.Ct[j] if tilde else self.C[j]
-        return np.stack([t[idx] for t, idx in zip(tables, g.c_index[j], strict=True)])
+        n = g.rows[j].size
+        if not tables:
+            return np.zeros((0, n))
+        return np.stack([t[idx] for t, idx in zip(tables, g.c_index[j], strict=True)]).reshape(
+            len(tables), n)
 
 
-def decomposed_values(g: CompiledGraph, tables: MaxQTables) -> tuple[np.ndarray, np.ndarray]:
-    """Bottom-up, all states at once: ``V(i, s)`` of every node and the greedy child positions.
+def _gather(V: np.ndarray, nodes: np.ndarray, states: np.ndarray) -> np.ndarray:
+    """``V[nodes, states]`` with ``-inf`` where ``nodes < 0`` (slot unavailable)."""
+    return np.where(nodes >= 0, V[np.maximum(nodes, 0), states[None, :]], -np.inf)
+
+
+def decomposed_values(g: CompiledGraph, tables: MaxQTables) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Bottom-up, all states at once: ``V(i, s)`` of every node and the greedy child slots.
 
     Returns:
         ``(V, greedy)``: ``V`` is ``(n_nodes, S)`` (0 where a composite node has terminated,
-        ``-inf`` where it is running but no child is available); ``greedy`` is
-        ``(n_composite, S)`` int, the position in ``children[j]`` of the ``C~ + V``-greedy child
-        (first in graph order on ties).
+        ``-inf`` where it is running but no child is available); ``greedy[j]`` is the
+        ``(n_rows,)`` position of the ``C~ + V``-greedy slot of composite ``j`` in each of its
+        row states (first in graph order on ties).
     """
     A, S = g.n_primitives, g.n_states
     V = np.zeros((A + g.n_composite, S))
     for a in range(A):
         V[a] = tables.V[a][g.v_index[a]]
-    greedy = np.zeros((g.n_composite, S), dtype=np.int64)
+    greedy: list[np.ndarray] = []
     for node in g.postorder():
         j = node - A
-        kids = g.children[j]
-        base = V[kids]
-        qt = np.where(g.available[j], base + tables.completion(g, node, tilde=True), -np.inf)
-        best = np.argmax(qt, axis=0)
-        greedy[j] = best
-        q = base + tables.completion(g, node)
-        chosen = q[best, np.arange(S)]
-        none = ~g.available[j].any(axis=0)
-        V[node] = np.where(g.terminal[j], 0.0, np.where(none, -np.inf, chosen))
+        rows, sn = g.rows[j], g.slot_node[j]
+        base = _gather(V, sn, rows)
+        qt = np.where(sn >= 0, base + tables.completion(g, node, tilde=True), -np.inf)
+        best = np.argmax(qt, axis=0) if sn.shape[0] else np.zeros(rows.size, dtype=np.int64)
+        greedy.append(best.astype(np.int64))
+        cols = np.arange(rows.size)
+        if sn.shape[0]:
+            chosen = (base + tables.completion(g, node))[best, cols]
+            none = ~(sn >= 0).any(axis=0)
+        else:
+            chosen = np.full(rows.size, -np.inf)
+            none = np.ones(rows.size, dtype=bool)
+        V[node] = 0.0
+        V[node, rows] = np.where(none, -np.inf, chosen)
     return V, greedy
 
 
@@ -131,15 +148,25 @@ def greedy_hierarchical_policy(
     """
     A, S = g.n_primitives, g.n_states
     _, greedy = decomposed_values(g, tables)
-    nxt = np.empty((A + g.n_composite, S), dtype=np.int64)
-    nxt[:A] = np.arange(A)[:, None]
-    for j in range(g.n_composite):
-        nxt[A + j] = g.children[j][greedy[j]]
     cur = np.full(S, g.root, dtype=np.int64)
-    cols = np.arange(S)
     for _ in range(g.n_composite + 1):
-        cur = nxt[cur, cols]
-    ok = (cur < A) & admissible[cols, np.minimum(cur, A - 1)]
+        comp = cur >= A
+        if not comp.any():
+            break
+        nxt = np.full(S, -1, dtype=np.int64)
+        for node in np.unique(cur[comp]):
+            j = int(node) - A
+            states = np.flatnonzero(cur == node)
+            pos = np.searchsorted(g.rows[j], states)
+            pos_c = np.minimum(pos, max(g.rows[j].size - 1, 0))
+            running = (g.rows[j].size > 0) & (g.rows[j][pos_c] == states) if g.rows[j].size \
+                else np.zeros(states.size, dtype=bool)
+            if g.slot_node[j].shape[0] and running.any():
+                picked = g.slot_node[j][greedy[j][pos_c], pos_c]
+                nxt[states] = np.where(running, picked, -1)
+        cur = np.where(comp, nxt, cur)
+    cols = np.arange(S)
+    ok = (cur >= 0) & (cur < A) & admissible[cols, np.clip(cur, 0, A - 1)]
     return np.where(ok, cur, np.argmax(admissible, axis=1)).astype(np.int64)
 
 
@@ -148,24 +175,40 @@ def root_q(g: CompiledGraph, tables: MaxQTables) -> np.ndarray:
 
     This flattens the decomposition into one action value per state and primitive (``-inf``
     where no path through available children reaches ``a``); with no pseudo-rewards its greedy
-    action is the polled policy's (up to ties).
+    action is the polled policy's (up to ties). Path values of a composite are kept over its
+    rows only (the states where it can run).
     """
     A, S = g.n_primitives, g.n_states
     V, _ = decomposed_values(g, tables)
+    all_states = np.arange(S)
     paths: dict[int, np.ndarray] = {}
     for a in range(A):
         p = np.full((A, S), -np.inf)
         p[a] = V[a]
         paths[a] = p
+
+    def rows_of(node: int) -> np.ndarray:
+        return all_states if node < A else g.rows[node - A]
+
     for node in g.postorder():
         j = node - A
+        rows, sn = g.rows[j], g.slot_node[j]
         Cn = tables.completion(g, node)
-        best = np.full((A, S), -np.inf)
-        for k, child in enumerate(g.children[j]):
-            cand = np.where(g.available[j][k], paths[int(child)] + Cn[k], -np.inf)
-            best = np.maximum(best, cand)
+        best = np.full((A, rows.size), -np.inf)
+        for k in range(sn.shape[0]):
+            for child in np.unique(sn[k][sn[k] >= 0]):
+                sel = np.flatnonzero(sn[k] == child)
+                crow = rows_of(int(child))
+                pos = np.searchsorted(crow, rows[sel])
+                ok = pos < crow.size
+                ok[ok] = crow[pos[ok]] == rows[sel][ok]
+                vals = np.full((A, sel.size), -np.inf)
+                vals[:, ok] = paths[int(child)][:, pos[ok]] + Cn[k, sel[ok]]
+                best[:, sel] = np.maximum(best[:, sel], vals)
         paths[node] = best
-    return paths[g.root].T.copy()
+    out = np.full((S, A), -np.inf)
+    out[g.rows[g.root - A]] = paths[g.root].T
+    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -200,6 +243,33 @@ class MaxQResult:
         return self.policies
 
 
+class _Static:
+    """The compiled graph as Python lists and dicts, built once and shared by all runs.
+
+    Per composite ``j``: ``pos[j]`` maps a running state to its row position (a state not in it
+    has terminated ``j``), ``slots[j][k]`` and ``cidx[j][k]`` are lists over row positions, and
+    ``pseudo[j]`` maps termination states with a non-zero pseudo-reward to it.
+    """
+
+    def __init__(self, g: CompiledGraph) -> None:
+        self.pos = [dict(zip(r.tolist(), range(r.size), strict=True)) for r in g.rows]
+        self.slots = [[row.tolist() for row in sn] for sn in g.slot_node]
+        self.cidx = [[idx.tolist() for idx in row] for row in g.c_index]
+        self.vidx = [idx.tolist() for idx in g.v_index]
+        self.pseudo = [{int(s): float(g.pseudo[j, s]) for s in np.flatnonzero(g.pseudo[j])}
+                       for j in range(g.n_composite)]
+        self.tilde = g.has_pseudo.tolist()
+
+
+_STATIC: weakref.WeakKeyDictionary[CompiledGraph, _Static] = weakref.WeakKeyDictionary()
+
+
+def _static(g: CompiledGraph) -> _Static:
+    if g not in _STATIC:
+        _STATIC[g] = _Static(g)
+    return _STATIC[g]
+
+
 class _Run:
     """One MAXQ-Q agent: the recursive procedure of Dietterich's Table 4.
 
@@ -219,13 +289,9 @@ class _Run:
         self.R = mdp.R.tolist()
         self.gamma = mdp.gamma
         self.root = g.root
-        self.children = [ch.tolist() for ch in g.children]
-        self.cidx = [[idx.tolist() for idx in row] for row in g.c_index]
-        self.vidx = [idx.tolist() for idx in g.v_index]
-        self.term = g.terminal.tolist()
-        self.pseudo = g.pseudo.tolist()
-        self.tilde = g.has_pseudo.tolist()
-        self.avail = [[np.flatnonzero(row).tolist() for row in av.T] for av in g.available]
+        st = _static(g)
+        self.pos, self.slots, self.cidx, self.vidx = st.pos, st.slots, st.cidx, st.vidx
+        self.pseudo, self.tilde = st.pseudo, st.tilde
         zeros = MaxQTables.zeros(g)
         self.C = [[c.tolist() for c in row] for row in zeros.C]
         self.Ct = [[c.tolist() for c in row] if self.tilde[j] else self.C[j]
@@ -233,7 +299,7 @@ class _Run:
         self.nC = [[c.tolist() for c in row] for row in zeros.nC]
         self.V = [v.tolist() for v in zeros.V]
         self.nV = [v.tolist() for v in zeros.nV]
-        self.n_decide = [[0] * g.n_states for _ in range(g.n_composite)]
+        self.n_decide = [[0] * r.size for r in g.rows]
         self.keys = mdp.sampler_keys.tolist()
         self.indptr = mdp.P.indptr.tolist()
         self.indices = mdp.P.indices.tolist()
@@ -270,36 +336,40 @@ class _Run:
         if node < self.A:
             return self.V[node][self.vidx[node][s]]
         j = node - self.A
-        if self.term[j][s]:
+        p = self.pos[j].get(s)
+        if p is None:
             return 0.0
-        k, v_child = self._best(j, s)
+        k, v_child = self._best(j, p, s)
         if k < 0:
             return -math.inf
-        return v_child + self.C[j][k][self.cidx[j][k][s]]
+        return v_child + self.C[j][k][self.cidx[j][k][p]]
 
-    def _best(self, j: int, s: int) -> tuple[int, float]:
-        """The ``C~ + V``-greedy child position of composite ``j`` in ``s`` and its ``V``
-        (first in graph order on ties: the ordered greedy policy)."""
+    def _best(self, j: int, p: int, s: int) -> tuple[int, float]:
+        """The ``C~ + V``-greedy slot of composite ``j`` in state ``s`` (row position ``p``)
+        and its child's ``V`` (first in graph order on ties: the ordered greedy policy)."""
         best_k, best_q, best_v = -1, -math.inf, 0.0
-        children, Ct, cidx = self.children[j], self.Ct[j], self.cidx[j]
-        for k in self.avail[j][s]:
-            v = self.value(children[k], s)
-            q = v + Ct[k][cidx[k][s]]
+        Ct, cidx = self.Ct[j], self.cidx[j]
+        for k, slot in enumerate(self.slots[j]):
+            child = slot[p]
+            if child < 0:
+                continue
+            v = self.value(child, s)
+            q = v + Ct[k][cidx[k][p]]
             if q > best_q or best_k < 0:
                 best_k, best_q, best_v = k, q, v
         return best_k, best_v
 
-    def _choose(self, j: int, s: int) -> int:
-        av = self.avail[j][s]
+    def _choose(self, j: int, p: int, s: int) -> int:
+        av = [k for k, slot in enumerate(self.slots[j]) if slot[p] >= 0]
         if not av:
             raise TaskError(
                 f"subtask {self.g.names[self.A + j]!r} is running in state {s} but none of its "
                 "children is available there; extend its children or its termination predicate"
             )
-        self.n_decide[j][s] += 1
-        if self.rng.random() < self._rate(self.eps, self.n_decide[j][s]):
+        self.n_decide[j][p] += 1
+        if self.rng.random() < self._rate(self.eps, self.n_decide[j][p]):
             return av[int(self.rng.integers(len(av)))]
-        return self._best(j, s)[0]
+        return self._best(j, p, s)[0]
 
     # ------------------------------------------------------------------------ learning
     def _maxq(self, node: int, s: int) -> tuple[list[int], int]:
@@ -317,21 +387,25 @@ class _Run:
             self.steps += 1
             return [s], s2
         j = node - self.A
-        term, gamma = self.term[j], self.gamma
+        pos, gamma = self.pos[j], self.gamma
         seq: list[int] = []
-        while not term[s] and self.steps < self.horizon:
-            k = self._choose(j, s)
+        p = pos.get(s)
+        while p is not None and self.steps < self.horizon:
+            k = self._choose(j, p, s)
             if node == self.root:
                 self.decisions += 1
-            child_seq, s2 = self._maxq(self.children[j][k], s)
-            if term[s2]:
-                base_t, base = self.pseudo[j][s2], 0.0
+            slot = self.slots[j][k]
+            child = slot[p]
+            child_seq, s2 = self._maxq(child, s)
+            p2 = pos.get(s2)
+            if p2 is None:
+                base_t, base = self.pseudo[j].get(s2, 0.0), 0.0
             else:
-                kb, v = self._best(j, s2)
+                kb, v = self._best(j, p2, s2)
                 if kb < 0:
                     base_t = base = -math.inf
                 else:
-                    ci = self.cidx[j][kb][s2]
+                    ci = self.cidx[j][kb][p2]
                     base_t = self.Ct[j][kb][ci] + v
                     base = self.C[j][kb][ci] + v
             if math.isfinite(base) and math.isfinite(base_t):
@@ -339,15 +413,19 @@ class _Run:
                 tilde = self.tilde[j]
                 discount = gamma
                 for x in reversed(child_seq):
-                    ci = idx[x]
-                    n = cnt[ci] = cnt[ci] + 1
-                    a = self._rate(self.alpha, n)
-                    if tilde:
-                        Ct[ci] += a * (discount * base_t - Ct[ci])
-                    C[ci] += a * (discount * base - C[ci])
+                    # all-states updating: x must be a state where j runs and where this slot
+                    # invokes the very instance that ran (call-time bindings may differ)
+                    px = pos.get(x)
+                    if px is not None and slot[px] == child:
+                        ci = idx[px]
+                        n = cnt[ci] = cnt[ci] + 1
+                        a = self._rate(self.alpha, n)
+                        if tilde:
+                            Ct[ci] += a * (discount * base_t - Ct[ci])
+                        C[ci] += a * (discount * base - C[ci])
                     discount *= gamma
             seq.extend(child_seq)
-            s = s2
+            s, p = s2, p2
         return seq, s
 
     def episode_run(self, s0: int) -> tuple[int, int, float, float]:
@@ -355,9 +433,42 @@ class _Run:
         self.steps = self.decisions = 0
         self.ret = self.dret = 0.0
         self.disc = 1.0
-        self._maxq(self.root, s0)
+        self.last_state = self._maxq(self.root, s0)[1]
         self.episode += 1
         return self.steps, self.decisions, self.ret, self.dret
+
+def hierarchical_rollouts(
+    mdp: FiniteMDP, graph: CompiledGraph, tables: MaxQTables, episodes: int, *,
+    seed: int = 0, max_steps: int = 10_000, start: int | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Execute the learned **hierarchical** greedy policy (with its call stack) ``episodes``
+    times: ``(discounted returns, steps, reached a terminal state)``, each ``(episodes,)``.
+
+    Unlike the polled policy (:func:`greedy_hierarchical_policy`), a subtask runs until its own
+    termination predicate holds, with the call-time parameters bound when it was called - the
+    policy MAXQ-Q actually learns (Dietterich 2000 sec. 3.2). With call-time parameters this
+    policy is not a function of the state alone, so it is scored by Monte Carlo rollouts:
+    episodes start from ``start`` or from the start distribution, children are chosen greedily
+    on ``C~ + V`` (ties to the first), and the tables are not changed.
+    """
+    n = _count(episodes, "episodes")
+    H = _count(max_steps, "max_steps")
+    rng = np.random.default_rng(seed)
+    agent = _Run(mdp, graph, rng, parse_schedule(0.0), parse_schedule(0.0), H)
+    agent.C = [[t.tolist() for t in row] for row in tables.C]
+    agent.Ct = [[t.tolist() for t in row] if agent.tilde[j] else agent.C[j]
+                for j, row in enumerate(tables.Ct)]
+    agent.V = [t.tolist() for t in tables.V]
+    cdf = np.cumsum(start_distribution(mdp))
+    rets, steps, done = np.zeros(n), np.zeros(n, dtype=np.int64), np.zeros(n, dtype=bool)
+    for e in range(n):
+        s0 = start if start is not None else int(
+            min(np.searchsorted(cdf, rng.random(), side="right"), mdp.n_states - 1))
+        agent.last_state = s0
+        k, _, _, dret = agent.episode_run(s0)
+        rets[e], steps[e] = dret, k
+        done[e] = bool(mdp.terminal[agent.last_state])
+    return rets, steps, done
 
 
 def _count(value: object, what: str) -> int:
