@@ -22,6 +22,19 @@ def _key_values(pairs: tuple[str, ...], option: str) -> dict[str, str]:
     return out
 
 
+def split_tasks(text: str) -> tuple[str, ...]:
+    """Split ``--tasks`` on commas, keeping a goal spec's own commas (``goal:x=9,y=5``) whole."""
+    tasks: list[str] = []
+    for token in (t.strip() for t in text.split(",")):
+        if not token:
+            continue
+        if tasks and "=" in token and ":" not in token and tasks[-1].startswith("goal:"):
+            tasks[-1] += "," + token
+        else:
+            tasks.append(token)
+    return tuple(tasks)
+
+
 def _table(rows: list[dict[str, Any]]) -> list[str]:
     header = (
         f"{'task':<22} {'learner':<13} {'blocks':>6} {'within':>7} {'episodes':>9} "
@@ -161,7 +174,7 @@ def pipeline_cmd(
 
     config = PipelineConfig(
         env=env,
-        tasks=tuple(t.strip() for t in tasks.split(",") if t.strip()),
+        tasks=split_tasks(tasks),
         detector=detector,
         detector_params=_key_values(detector_opt, "--detector-opt"),
         initiation=initiation,

@@ -145,6 +145,14 @@ class _Base:
     columns: list[str]
     option_set: OptionSet
     mdp: FiniteMDP
+    #: number of leading primitive columns offered only where no option can start (0 or A)
+    fallback: int = 0
+
+    def is_primitive(self, column: int) -> bool:
+        return self.option_set.primitive or column < self.fallback
+
+    def record_of(self, column: int) -> Any:
+        return self.option_set.records[column - self.fallback]
 
 
 def _check_settings(delta: object, epsilon: object) -> tuple[float, float]:
@@ -174,7 +182,8 @@ def task_record(kb: Any, domain: Any, env: Any, task: str) -> tuple[Any, FiniteM
     task_obj = domain.task(task)
     task_mdp = domain.mdp(task_obj)
     task_rec = kb.put_task(
-        env, task_obj.name,
+        env,
+        task_obj.name,
         spec={**task_obj.spec, "name": task_obj.name, "model_hash": task_mdp.content_hash},
         gamma=task_obj.gamma,
     )
@@ -201,14 +210,40 @@ def _base_model(
         raise TaskError(f"--options {options_text!r} lists an option twice; name each once")
     source = _source_task(option_set.records)
     mdp = domain.mdp(kb.get("task", source).name if source is not None else None)
-    smdp = stack_models(mdp, option_set.models, include_primitives=False)
-    termination = np.stack([o.beta >= 1.0 for o in option_set.options], axis=1)
-    return _Base(smdp, termination, [rec.ref for rec in option_set.records], option_set, mdp)
+    # Primitive actions are offered only where no option can start (a subgoal is not in its own
+    # option's initiation set): the layer stays over the options everywhere else.
+    covered = np.stack([m.admissible for m in option_set.models], axis=1).any(axis=1)
+    complete = np.all(covered | mdp.terminal)
+    if task_mdp is not None:  # the task may make a state live that the options never start in
+        starts = np.stack([o.initiation for o in option_set.options], axis=1).any(axis=1)
+        complete = complete and np.all(starts | task_mdp.terminal)
+    if complete:
+        smdp = stack_models(mdp, option_set.models, include_primitives=False)
+        termination = np.stack([o.beta >= 1.0 for o in option_set.options], axis=1)
+        return _Base(smdp, termination, [rec.ref for rec in option_set.records], option_set, mdp)
+    smdp = stack_models(mdp, option_set.models, include_primitives="uncovered")
+    A = mdp.n_actions
+    termination = np.concatenate(
+        [
+            np.ones((mdp.n_states, A), dtype=bool),
+            np.stack([o.beta >= 1.0 for o in option_set.options], axis=1),
+        ],
+        axis=1,
+    )
+    columns = [*mdp.action_names, *(rec.ref for rec in option_set.records)]
+    return _Base(smdp, termination, columns, option_set, mdp, fallback=A)
+
+
+def _mask_key(column: np.ndarray) -> str:
+    import hashlib
+
+    return hashlib.sha256(np.ascontiguousarray(column, dtype=bool).tobytes()).hexdigest()
 
 
 def _find_phase1(kb: Any, env: Any, base: _Base, column: int, delta: float) -> Any | None:
     """A stored per-option partition of this column with this delta, or None."""
-    if base.option_set.primitive:
+    if base.is_primitive(column):
+        mask = _mask_key(base.smdp.admissible[:, column])
         candidates = [
             p
             for p in kb.records("partition", environment=env)
@@ -216,9 +251,10 @@ def _find_phase1(kb: Any, env: Any, base: _Base, column: int, delta: float) -> A
             and not p.option_ids
             and p.provenance.parameters.get("action") == column
             and p.provenance.parameters.get("model_hash") == base.mdp.content_hash
+            and p.provenance.parameters.get("admissible", mask) == mask
         ]
     else:
-        rec = base.option_set.records[column]
+        rec = base.record_of(column)
         candidates = [
             p
             for p in kb.partitions_using([rec], exact=True, includes_primitives=False)
@@ -226,6 +262,37 @@ def _find_phase1(kb: Any, env: Any, base: _Base, column: int, delta: float) -> A
         ]
     matching = [p for p in candidates if abs(p.delta - delta) <= 1e-12]
     return matching[-1] if matching else None
+
+
+def _find_later_phase(
+    kb: Any,
+    env: Any,
+    base: _Base,
+    kind: str,
+    *,
+    parents: list[int],
+    delta: float,
+    epsilon: float | None = None,
+    task_id: int | None = None,
+) -> Any | None:
+    """A stored phase-2/3 partition built from exactly these parents and settings, or None."""
+    records = base.option_set.records
+    candidates = (
+        kb.partitions_using(records, exact=True)
+        if records
+        else [p for p in kb.records("partition", environment=env) if not p.option_ids]
+    )
+    for p in reversed(candidates):
+        if (
+            p.kind == kind
+            and p.environment_id == env.id
+            and sorted(p.parent_ids) == sorted(parents)
+            and abs(p.delta - delta) <= 1e-12
+            and (epsilon is None or abs(p.epsilon - epsilon) <= 1e-12)
+            and (task_id is None or p.task_id == task_id)
+        ):
+            return p
+    return None
 
 
 def _store(
@@ -242,14 +309,17 @@ def _store(
     task: Any = None,
     parameters: dict[str, Any],
 ) -> Any:
-    primitive = base.option_set.primitive
-    if primitive:
-        block_actions = np.zeros((partition.n_blocks, base.smdp.n_actions), dtype=bool)
-        block_actions[:, columns] = partition.admissible[:, columns]
-        options: list[Any] = []
+    prim_cols = [int(c) for c in columns if base.is_primitive(int(c))]
+    opt_cols = [int(c) for c in columns if not base.is_primitive(int(c))]
+    primitive = bool(prim_cols)
+    A = base.mdp.n_actions
+    options: list[Any] = [base.record_of(c) for c in opt_cols]
+    if primitive:  # stored layout: all primitive actions first, then the options
+        block_actions = np.zeros((partition.n_blocks, A + len(opt_cols)), dtype=bool)
+        block_actions[:, prim_cols] = partition.admissible[:, prim_cols]
+        block_actions[:, A:] = partition.admissible[:, opt_cols]
     else:
-        block_actions = partition.admissible[:, columns]
-        options = [base.option_set.records[int(c)] for c in columns]
+        block_actions = partition.admissible[:, opt_cols]
     return kb.put_partition(
         env,
         kind,
@@ -285,8 +355,12 @@ def _phase1_all(
         part = phase1(smdp, o, base.termination[:, o], delta=delta)
         seconds += time.perf_counter() - t0
         params: dict[str, Any] = {"phase": 1, "column": base.columns[o]}
-        if base.option_set.primitive:
-            params.update(action=o, model_hash=base.mdp.content_hash)
+        if base.is_primitive(o):
+            params.update(
+                action=o,
+                model_hash=base.mdp.content_hash,
+                admissible=_mask_key(smdp.admissible[:, o]),
+            )
         rec = _store(
             kb,
             env,
@@ -327,7 +401,9 @@ def _task_model(
         task_mdp, list(base.option_set.options), executor=executor, duration=False
     )
     try:
-        stacked = stack_models(task_mdp, models, include_primitives=False)
+        stacked = stack_models(
+            task_mdp, models, include_primitives="uncovered" if base.fallback else False
+        )
     except ModelError as exc:
         raise ModelError(
             f"under task {task_rec.name!r} the option set leaves a state with no admissible "
@@ -380,32 +456,52 @@ def partition_environment(
 
     p1, p1_rows, seconds["phase1"] = _phase1_all(kb, env, base, d)
 
-    t0 = time.perf_counter()
-    p2 = phase2(base.smdp, p1, all_cols, delta=d)
-    seconds["phase2"] = time.perf_counter() - t0
-    rec2 = _store(
-        kb,
-        env,
-        base,
-        "intersected",
-        p2,
-        all_cols,
-        delta=d,
-        epsilon=0.0,
-        parents=[r.id for r in p1_rows],
-        parameters={"phase": 2, "options": options},
-    )
-    phase2_row = PhaseRecord("intersected", rec2.id, p2.n_blocks)
+    parent_ids = [r.id for r in p1_rows]
+    rec2 = _find_later_phase(kb, env, base, "intersected", parents=parent_ids, delta=d)
+    if rec2 is not None:  # the same phase-1 partitions and delta: phase 2 is already stored
+        p2 = Partition.from_labels(kb.load(rec2, "labels"), base.smdp.admissible)
+        seconds["phase2"] = 0.0
+    else:
+        t0 = time.perf_counter()
+        p2 = phase2(base.smdp, p1, all_cols, delta=d)
+        seconds["phase2"] = time.perf_counter() - t0
+        rec2 = _store(
+            kb,
+            env,
+            base,
+            "intersected",
+            p2,
+            all_cols,
+            delta=d,
+            epsilon=0.0,
+            parents=parent_ids,
+            parameters={"phase": 2, "options": options},
+        )
+    phase2_row = PhaseRecord("intersected", rec2.id, p2.n_blocks, reused=seconds["phase2"] == 0.0)
 
     final, model, phase3_row, gap, recomputed = p2, base.smdp, None, None, False
     if task_rec is not None:
         t0 = time.perf_counter()
         model, _, recomputed = _task_model(base, task_rec, task_mdp, executor)
         seconds["models"] = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        final = phase3(model, p2, all_cols, epsilon=e, delta=d)
-        seconds["phase3"] = time.perf_counter() - t0
-        rec3 = _store(
+        rec3 = _find_later_phase(
+            kb,
+            env,
+            base,
+            "reward-refined",
+            parents=[rec2.id],
+            delta=d,
+            epsilon=e,
+            task_id=task_rec.id,
+        )
+        if rec3 is not None:
+            final = Partition.from_labels(kb.load(rec3, "labels"), model.admissible)
+            seconds["phase3"] = 0.0
+        else:
+            t0 = time.perf_counter()
+            final = phase3(model, p2, all_cols, epsilon=e, delta=d)
+            seconds["phase3"] = time.perf_counter() - t0
+        rec3 = rec3 or _store(
             kb,
             env,
             base,
@@ -423,7 +519,9 @@ def partition_environment(
                 "recomputed_option_models": recomputed,
             },
         )
-        phase3_row = PhaseRecord("reward-refined", rec3.id, final.n_blocks)
+        phase3_row = PhaseRecord(
+            "reward-refined", rec3.id, final.n_blocks, reused=seconds["phase3"] == 0.0
+        )
         t0 = time.perf_counter()
         gap = value_gap(final, model, epsilon=e, delta=d, options=all_cols)
         seconds["value_gap"] = time.perf_counter() - t0

@@ -221,7 +221,9 @@ def run_pipeline(
                 "partition",
                 task,
                 part.final_record.ref,
-                all(p.reused for p in part.phase1) and part.phase2.reused,
+                all(p.reused for p in part.phase1)
+                and part.phase2.reused
+                and (part.phase3 is None or part.phase3.reused),
                 sum(part.seconds.values()),
                 {
                     "phase1_blocks": [p.blocks for p in part.phase1],

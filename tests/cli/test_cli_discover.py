@@ -14,9 +14,26 @@ DOORWAY = 23  # two-rooms: the only gap in the wall (x = 5, y = 2)
 
 def learned_kb(tmp_path):
     kb_dir = tmp_path / "kb"
-    result = CliRunner().invoke(cli, [
-        "learn", "two-rooms", "--runs", "1", "--episodes", "500", "--alpha", "1", "--epsilon", "0.5",
-        "--kb", str(kb_dir), "--out", str(tmp_path / "o"), "--json"])
+    result = CliRunner().invoke(
+        cli,
+        [
+            "learn",
+            "two-rooms",
+            "--runs",
+            "1",
+            "--episodes",
+            "500",
+            "--alpha",
+            "1",
+            "--epsilon",
+            "0.5",
+            "--kb",
+            str(kb_dir),
+            "--out",
+            str(tmp_path / "o"),
+            "--json",
+        ],
+    )
     assert result.exit_code == 0, result.output
     assert json.loads(result.output)["optimal_runs"] == 1
     return kb_dir
@@ -24,8 +41,17 @@ def learned_kb(tmp_path):
 
 def test_discover_finds_the_doorway_stores_and_reuses(tmp_path):
     kb_dir = learned_kb(tmp_path)
-    args = ["discover", "two-rooms", "--policy", "policy:1", "--kb", str(kb_dir), "--json",
-            "--plot", str(tmp_path / "d.png")]
+    args = [
+        "discover",
+        "two-rooms",
+        "--policy",
+        "policy:1",
+        "--kb",
+        str(kb_dir),
+        "--json",
+        "--plot",
+        str(tmp_path / "d.png"),
+    ]
     first = json.loads(CliRunner().invoke(cli, args).output)
     assert first["subgoals"] == [DOORWAY]
     assert first["threshold"] > first["stats"]["ratio_mean"]
@@ -44,8 +70,22 @@ def test_discover_finds_the_doorway_stores_and_reuses(tmp_path):
 
 def test_discover_with_another_detector_and_errors(tmp_path):
     kb_dir = learned_kb(tmp_path)
-    top = CliRunner().invoke(cli, ["discover", "two-rooms", "--policy", "1", "--kb", str(kb_dir),
-                                   "--detector", "betweenness", "--top", "1", "--json"])
+    top = CliRunner().invoke(
+        cli,
+        [
+            "discover",
+            "two-rooms",
+            "--policy",
+            "1",
+            "--kb",
+            str(kb_dir),
+            "--detector",
+            "betweenness",
+            "--top",
+            "1",
+            "--json",
+        ],
+    )
     assert top.exit_code == 0, top.output
     assert json.loads(top.output)["subgoals"] == [DOORWAY]
     for args, message in [
@@ -53,9 +93,12 @@ def test_discover_with_another_detector_and_errors(tmp_path):
         (["--p", "1.5"], "p"),
         (["--detector", "count"], "no subgoal-detector named 'count'"),
     ]:
-        bad = CliRunner().invoke(cli, ["discover", "two-rooms", "--policy", "1", "--kb",
-                                       str(kb_dir), *args])
+        bad = CliRunner().invoke(
+            cli, ["discover", "two-rooms", "--policy", "1", "--kb", str(kb_dir), *args]
+        )
         assert bad.exit_code == 2, bad.output
         assert message in bad.output
-    other = CliRunner().invoke(cli, ["discover", "four-rooms", "--policy", "1", "--kb", str(kb_dir)])
+    other = CliRunner().invoke(
+        cli, ["discover", "four-rooms", "--policy", "1", "--kb", str(kb_dir)]
+    )
     assert other.exit_code == 2 and "belongs to environment 'two-rooms'" in other.output

@@ -40,8 +40,20 @@ def ref_id(ref: str) -> int:
 def kb_with_options(tmp_path):
     """two-rooms with a learned policy, subgoal set {27, 40} and its two stored options."""
     kb_dir = tmp_path / "kb"
-    learned = run("learn", "two-rooms", "--runs", "1", "--episodes", "5", "--out",
-                  str(tmp_path / "o"), "--kb", str(kb_dir), "--json", "-q")
+    learned = run(
+        "learn",
+        "two-rooms",
+        "--runs",
+        "1",
+        "--episodes",
+        "5",
+        "--out",
+        str(tmp_path / "o"),
+        "--kb",
+        str(kb_dir),
+        "--json",
+        "-q",
+    )
     assert learned.exit_code == 0, learned.output
     ids = json.loads(learned.output)["kb"]
     kb = KnowledgeBase.open(str(kb_dir))
@@ -58,14 +70,33 @@ def kb_with_options(tmp_path):
 def test_primitive_exact_partition_matches_exact_lumping_and_is_exported(tmp_path):
     kb_dir = str(tmp_path / "kb")
     plot = tmp_path / "blocks.png"
-    out = run_json("partition", "two-rooms", "--options", "primitive", "--delta", "0",
-                   "--epsilon", "0", "--task", "reach-goal", "--kb", kb_dir, "--plot", str(plot))
+    out = run_json(
+        "partition",
+        "two-rooms",
+        "--options",
+        "primitive",
+        "--delta",
+        "0",
+        "--epsilon",
+        "0",
+        "--task",
+        "reach-goal",
+        "--kb",
+        kb_dir,
+        "--plot",
+        str(plot),
+    )
     mdp = resolve_domain("two-rooms").mdp("reach-goal")
     assert out["states"] == mdp.n_states
     assert len(out["phase1"]["partitions"]) == mdp.n_actions
     assert out["phase1"]["computed"] == mdp.n_actions and out["phase1"]["reused"] == 0
-    assert out["check"] == {"ran": True, "ok": True, "max_mass_span": 0.0,
-                            "max_reward_span": 0.0, "violations": 0}
+    assert out["check"] == {
+        "ran": True,
+        "ok": True,
+        "max_mass_span": 0.0,
+        "max_reward_span": 0.0,
+        "violations": 0,
+    }
     # oracle: the worklist lumping (another code path) of the primitive SMDP with rewards
     oracle = exact_lumping(mdp.as_smdp(), use_rewards=True)
     assert out["phase3"]["blocks"] == oracle.n_blocks == out["final"]["blocks"]
@@ -74,8 +105,17 @@ def test_primitive_exact_partition_matches_exact_lumping_and_is_exported(tmp_pat
     assert plot.stat().st_size > 1000
 
     exported = tmp_path / "labels.parquet"
-    result = run("kb", "export", out["phase3"]["id"], "--field", "labels", "--out",
-                 str(exported), "--kb", kb_dir)
+    result = run(
+        "kb",
+        "export",
+        out["phase3"]["id"],
+        "--field",
+        "labels",
+        "--out",
+        str(exported),
+        "--kb",
+        kb_dir,
+    )
     assert result.exit_code == 0, result.output
     table = pq.read_table(exported)
     assert table.num_rows == mdp.n_states
@@ -94,29 +134,56 @@ def test_primitive_exact_partition_matches_exact_lumping_and_is_exported(tmp_pat
     finally:
         kb.close()
     # the same request again reuses every phase-1 partition
-    again = run_json("partition", "two-rooms", "--options", "primitive", "--delta", "0",
-                     "--epsilon", "0", "--task", "reach-goal", "--kb", kb_dir)
+    again = run_json(
+        "partition",
+        "two-rooms",
+        "--options",
+        "primitive",
+        "--delta",
+        "0",
+        "--epsilon",
+        "0",
+        "--task",
+        "reach-goal",
+        "--kb",
+        kb_dir,
+    )
     assert again["phase1"]["reused"] == mdp.n_actions and again["phase1"]["computed"] == 0
     assert [p["id"] for p in again["phase1"]["partitions"]] == [
-        p["id"] for p in out["phase1"]["partitions"]]
+        p["id"] for p in out["phase1"]["partitions"]
+    ]
     assert again["phase3"]["blocks"] == out["phase3"]["blocks"]
 
 
 def test_options_phases_stored_phase1_reused_and_checked(kb_with_options):
     kb_dir, subgoal_set, option_refs = kb_with_options
-    first = run_json("partition", "two-rooms", "--options", subgoal_set, "--delta", "0.3",
-                     "--epsilon", "10", "--task", "reach-goal", "--kb", str(kb_dir))
+    first = run_json(
+        "partition",
+        "two-rooms",
+        "--options",
+        subgoal_set,
+        "--delta",
+        "0.3",
+        "--epsilon",
+        "10",
+        "--task",
+        "reach-goal",
+        "--kb",
+        str(kb_dir),
+    )
     assert first["phase1"]["computed"] == 2 and first["check"]["ok"]
     assert not first["phase3"]["recomputed_option_models"]  # built under this very task
     assert first["value_gap"]["inside_interval"] == 1.0
     assert first["value_gap"]["measured"] <= first["value_gap"]["bound"]
     # a different option set: phase 1 of option 1 is reused, only phases 2-3 run
-    single_set = run_json("partition", "two-rooms", "--options", ",".join(option_refs),
-                          "--kb", str(kb_dir))
+    single_set = run_json(
+        "partition", "two-rooms", "--options", ",".join(option_refs), "--kb", str(kb_dir)
+    )
     assert single_set["phase1"]["computed"] == 0 and single_set["phase1"]["reused"] == 2
     assert single_set["phase3"] is None and single_set["final"]["id"] == single_set["phase2"]["id"]
-    other_delta = run_json("partition", "two-rooms", "--options", subgoal_set, "--delta", "0",
-                           "--kb", str(kb_dir))
+    other_delta = run_json(
+        "partition", "two-rooms", "--options", subgoal_set, "--delta", "0", "--kb", str(kb_dir)
+    )
     assert other_delta["phase1"]["computed"] == 2  # delta is part of the phase-1 key
 
     kb = KnowledgeBase.open(str(kb_dir))
@@ -146,8 +213,16 @@ def test_stored_models_are_recomputed_for_a_task_they_were_not_built_for(kb_with
         rec = kb.records("option", environment=env)
         options, models = load_options(kb, rec)
         copies = [  # the same options, stored without a source task
-            kb.put_option(env, f"copy-{o.name}", initiation=o.initiation, policy=o.policy,
-                          termination=o.beta, reward=m.R, transitions=m.F, gamma=mdp.gamma)
+            kb.put_option(
+                env,
+                f"copy-{o.name}",
+                initiation=o.initiation,
+                policy=o.policy,
+                termination=o.beta,
+                reward=m.R,
+                transitions=m.F,
+                gamma=mdp.gamma,
+            )
             for o, m in zip(options, models, strict=True)
         ]
     finally:
@@ -188,11 +263,45 @@ def test_options_of_another_environment_and_uncovered_states(kb_with_options):
     other = run("partition", "four-rooms", "--options", option_refs[0], "--kb", str(kb_dir))
     assert other.exit_code == 2
     assert "belongs to environment 'two-rooms'" in other.output
-    alone = run("partition", "two-rooms", "--options", option_refs[0], "--kb", str(kb_dir))
-    assert alone.exit_code == 2
-    assert "initiation set" in alone.output and len(alone.output.strip().splitlines()) == 1
-    # options built under reach-goal skip its goal cell, which another task makes non-terminal
-    moved = run("partition", "two-rooms", "--options", ",".join(option_refs), "--task",
-                "goal:x=1,y=1", "--kb", str(kb_dir))
-    assert moved.exit_code == 2, moved.output
-    assert "no admissible option" in moved.output
+    # one option leaves states (its own subgoal) that it cannot start from: the primitive
+    # actions are offered there, and only there, as the layer's fallback
+    alone = run(
+        "partition", "two-rooms", "--options", option_refs[0], "--kb", str(kb_dir), "--json"
+    )
+    assert alone.exit_code == 0, alone.output
+    summary = json.loads(alone.output)
+    assert summary["check"]["ok"]
+    kb = KnowledgeBase.open(str(kb_dir))
+    try:
+        rec = kb.get("partition", int(summary["final"]["id"].split(":")[1]))
+        assert rec.includes_primitives and list(rec.option_ids) == [
+            int(option_refs[0].split(":")[1])
+        ]
+        labels = kb.load(rec, "labels")
+        actions = kb.load(rec, "block_actions")
+    finally:
+        kb.close()
+    A = 8
+    from adpart.workflows.resolve import resolve_domain
+
+    terminal = resolve_domain("two-rooms").mdp("reach-goal").terminal
+    live_blocks = np.unique(labels[~terminal])  # terminal states admit every column by convention
+    with_primitives = live_blocks[actions[live_blocks, :A].any(axis=1)]
+    assert with_primitives.size >= 1
+    assert not actions[with_primitives, A:].any()  # fallback blocks: no option starts there
+    assert np.isin(labels, with_primitives).sum() < labels.size // 4  # only a few states
+    # options built under reach-goal skip its goal cell, which another task makes non-terminal:
+    # it gets the fallback too
+    moved = run(
+        "partition",
+        "two-rooms",
+        "--options",
+        ",".join(option_refs),
+        "--task",
+        "goal:x=1,y=1",
+        "--kb",
+        str(kb_dir),
+        "--json",
+    )
+    assert moved.exit_code == 0, moved.output
+    assert json.loads(moved.output)["check"]["ok"]

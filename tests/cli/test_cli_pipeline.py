@@ -1,0 +1,160 @@
+"""`adpart pipeline` and `adpart transfer`: end to end, reuse on a second run, resume after SIGKILL."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+from click.testing import CliRunner
+
+from adpart.cli import cli
+from adpart.store import KnowledgeBase
+
+PIPELINE = [
+    "pipeline",
+    "two-rooms",
+    "--tasks",
+    "reach-goal,goal:x=9,y=5",
+    "--runs",
+    "3",
+    "--episodes",
+    "200",
+    "--first-episodes",
+    "500",
+    "--epsilon",
+    "1",
+    "--flat-opt",
+    "alpha=1",
+    "--flat-opt",
+    "epsilon=0.5",
+    "--hier-opt",
+    "alpha=1",
+    "--hier-opt",
+    "epsilon=0.3",
+]
+
+
+def counts(kb_dir):
+    kb = KnowledgeBase.open(str(kb_dir))
+    try:
+        return kb.counts()
+    finally:
+        kb.close()
+
+
+def test_pipeline_runs_stores_everything_and_a_second_run_recomputes_nothing(tmp_path):
+    kb_dir, out = tmp_path / "kb", tmp_path / "out"
+    first = CliRunner().invoke(cli, [*PIPELINE, "--kb", str(kb_dir), "--out", str(out), "--json"])
+    assert first.exit_code == 0, first.output
+    summary = json.loads(first.output)
+    stages = [s["stage"] for s in summary["stages"]]
+    assert stages == [
+        "learn-flat",
+        "discover",
+        "options",
+        "partition",
+        "learn-hierarchical",
+        "learn-flat",
+    ]
+    assert summary["stages"][1]["detail"]["subgoals"] == [23]  # the doorway
+    assert not any(s["reused"] for s in summary["stages"])
+    rows = {(r["task"], r["learner"]): r for r in summary["tasks"]}
+    assert rows[("goal:x=9,y=5", "hierarchical")]["initial_blocks"] < 55
+    assert (out / "summary.json").exists() and (out / "goal:x=9,y=5.png").exists()
+    before = counts(kb_dir)
+
+    again = CliRunner().invoke(cli, [*PIPELINE, "--kb", str(kb_dir), "--out", str(out)])
+    assert again.exit_code == 0, again.output
+    assert again.output.count("reused") == 6
+    assert "episodes" in again.output and "hierarchical" in again.output  # the final table
+    assert counts(kb_dir) == before  # nothing stored twice
+
+
+def test_killed_pipeline_resumes_from_the_knowledge_base(tmp_path):
+    kb_dir = tmp_path / "kb"
+    slow = [*PIPELINE[:-2], "--episodes", "4000"]  # a long transfer step to kill it in
+    env = {**os.environ, "ADPART_KB": str(kb_dir)}
+    log = tmp_path / "stderr.txt"
+    with log.open("wb") as err:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "adpart.cli", *slow, "--out", str(tmp_path / "o"), "-q"],
+            env=env,
+            stdout=subprocess.DEVNULL,
+            stderr=err,
+        )
+    deadline = time.time() + 120
+    try:
+        while time.time() < deadline:
+            if (kb_dir / "kb.sqlite").exists() and counts(kb_dir).get("option", 0) >= 1:
+                break
+            if proc.poll() is not None:
+                raise AssertionError(f"pipeline ended before it could be killed: {log.read_text()}")
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == -signal.SIGKILL
+    resumed = CliRunner().invoke(
+        cli, [*slow, "--kb", str(kb_dir), "--out", str(tmp_path / "o"), "--json"]
+    )
+    assert resumed.exit_code == 0, resumed.output
+    reused = {s["stage"]: s["reused"] for s in json.loads(resumed.output)["stages"][:3]}
+    assert reused == {"learn-flat": True, "discover": True, "options": True}
+    assert counts(kb_dir)["subgoal-set"] == 1 and counts(kb_dir)["option"] == 1
+
+
+def test_transfer_runs_the_last_step_alone(tmp_path):
+    kb_dir = tmp_path / "kb"
+    first = CliRunner().invoke(
+        cli,
+        [*PIPELINE, "--kb", str(kb_dir), "--out", str(tmp_path / "p"), "--json", "--no-baseline"],
+    )
+    assert first.exit_code == 0, first.output
+    partition = next(
+        s["result"] for s in json.loads(first.output)["stages"] if s["stage"] == "partition"
+    )
+    result = CliRunner().invoke(
+        cli,
+        [
+            "transfer",
+            "two-rooms",
+            "--task",
+            "goal:x=9,y=5",
+            "--partition",
+            partition,
+            "--runs",
+            "2",
+            "--episodes",
+            "50",
+            "--baseline",
+            "--kb",
+            str(kb_dir),
+            "--out",
+            str(tmp_path / "t"),
+            "--json",
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    summary = json.loads(result.output)
+    assert {r["learner"] for r in summary["rows"]} == {"hierarchical", "flat"}
+    assert (tmp_path / "t" / "transfer.png").exists()
+    bad = CliRunner().invoke(
+        cli,
+        [
+            "transfer",
+            "two-rooms",
+            "--task",
+            "reach-goal",
+            "--partition",
+            "partition:999",
+            "--kb",
+            str(kb_dir),
+        ],
+    )
+    assert bad.exit_code == 2 and "partition:999" in bad.output
