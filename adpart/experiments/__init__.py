@@ -15,7 +15,11 @@ from adpart.experiments.base import (
 )
 
 #: Modules that define experiments (imported on first lookup).
-EXPERIMENT_MODULES: tuple[str, ...] = ("adpart.experiments.partition_three_floor",)
+EXPERIMENT_MODULES: tuple[str, ...] = (
+    "adpart.experiments.subgoals",
+    "adpart.experiments.options_three_floor",
+    "adpart.experiments.partition_three_floor",
+)
 
 
 def load_all() -> None:

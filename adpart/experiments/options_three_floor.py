@@ -121,6 +121,11 @@ def options_three_floor(config: ExperimentConfig) -> ExperimentReport:
     }
     built = {name: (*_options(mdp, np.unique(states)), prims)
              for name, (states, prims) in sets.items()}
+    flat_pairs = int(mdp.admissible[~mdp.terminal].sum())
+    pairs = {FLAT: flat_pairs}
+    for name, (options, _, prims) in built.items():
+        pairs[f"SMDP Q, {name}"] = (int(sum(int(o.initiation.sum()) for o in options))
+                                    + (flat_pairs if prims else 0))
     v_star = solve(mdp).V
     mu0 = mdp.initial
     start = np.flatnonzero(mu0 > 0)
@@ -188,6 +193,7 @@ def options_three_floor(config: ExperimentConfig) -> ExperimentReport:
         "options": {name: len(o) for name, (o, _, _) in built.items()},
         "goal_option_initiation_size": goal_basin,
         "start_in_goal_option_basin": start_in_goal_basin,
+        "state_action_pairs": pairs,
         "v_star_start": v_start,
         "v_options_start": v_opt,
         "threshold": threshold,
@@ -213,6 +219,10 @@ def options_three_floor(config: ExperimentConfig) -> ExperimentReport:
          + " (seed: about 300 SMDP, 500 flat); runs never reaching it (counted as episodes + 1): "
          + ", ".join(f"{k} {n}" for k, n in censored.items()) + "."),
     ]
+    report.findings.append(
+        "state-action (state-option) pairs the learner may try, each optimistic (Q = 0 against "
+        "-1 a step) until tried: " + ", ".join(f"{k} {v:,}" for k, v in pairs.items()) + "."
+    )
     report.findings.append(
         "the goal option's basin (states that reach the goal without passing another subgoal): "
         + ", ".join(f"{k} {goal_basin[k]} states, start "

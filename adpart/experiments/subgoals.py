@@ -220,16 +220,21 @@ def _plot_sampling(curves: np.ndarray, jac: np.ndarray, samples: np.ndarray, n_e
 
 def _plot_times(times: dict[str, np.ndarray], path: Path) -> str:
     plt = _plt()
-    fig, ax = plt.subplots(figsize=(6, 4))
+    fig, ax = plt.subplots(figsize=(6.5, 4))
     try:
         names = list(times)
-        means = [1000 * float(np.mean(times[n])) for n in names]
-        sds = [1000 * float(np.std(times[n])) for n in names]
-        ax.bar(names, means, yerr=sds, color=["tab:blue", "tab:orange", "tab:gray"][: len(names)],
+        ms = [1000 * np.asarray(times[n]) for n in names]
+        means = np.array([m.mean() for m in ms])
+        err = np.array([[mean - m.min(), m.max() - mean] for mean, m in zip(means, ms,
+                                                                          strict=True)]).T
+        x = np.arange(len(names))
+        ax.bar(x, means, yerr=err, color=["tab:blue", "tab:orange", "tab:gray"][: len(names)],
                capsize=4)
         for i, m in enumerate(means):
-            ax.text(i, m, f"{m:.0f} ms", ha="center", va="bottom", fontsize="small")
-        ax.set_ylabel("wall-clock time per discovery (ms, mean +- sd)")
+            ax.text(i, m * 1.08, f"{m:.0f} ms", ha="center", va="bottom", fontsize="small")
+        ax.set_xticks(x, [n.replace(" (", "\n(") for n in names])
+        ax.set_yscale("log")
+        ax.set_ylabel("time per discovery (ms; mean, bar = min-max)")
         ax.set_title("three-floor-arm: time of subgoal discovery (Fig. 5.8)")
         fig.tight_layout()
         fig.savefig(path, dpi=110)

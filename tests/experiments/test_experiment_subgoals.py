@@ -51,7 +51,7 @@ def test_quick_sampling_curve_times_and_agreement(tmp_path):
     assert len(report.figures) == 2
     curve = report.data["curve"]
     samples = np.array(curve["samples"])
-    assert samples[-1] == 200 and np.all(np.diff(samples) == 20)
+    assert samples[0] == 30 + 20 and samples[-1] == 200 and np.all(np.diff(samples) <= 20)
     assert len(curve["n_subgoals_mean"]) == samples.size == len(curve["jaccard_mean"])
     assert all(0.0 <= j <= 1.0 for j in curve["jaccard_mean"])
     for row in report.data["runs"]:
