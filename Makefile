@@ -22,14 +22,15 @@ ADPART := $(VENV)/bin/adpart
 DEMO   := demo-output
 
 # The main job on the embedded default knowledge base ($$ADPART_KB, else ~/.local/share/adpart/kb):
-# exact solutions rendered as maps, then Q-learning on two-rooms and three-floor, recorded in the KB.
+# the transfer pipeline on three-floor - learn reach-goal flat, discover subgoals, learn options,
+# partition, learn reach-top-west on the decision layer vs flat - with figures in demo-output/.
+# A second `make demo` reuses everything the knowledge base already holds.
 demo: $(STAMP)
-	$(ADPART) env show two-rooms --task reach-goal --out $(DEMO)/two-rooms-vstar.png --json
 	$(ADPART) env show three-floor --task reach-goal --out $(DEMO)/three-floor-vstar.png --json
-	$(ADPART) learn two-rooms --task reach-goal --runs 10 --episodes 500 --alpha 1 --epsilon 0.5 \
-		--out $(DEMO)/two-rooms --json
-	$(ADPART) learn three-floor --task reach-goal --runs 10 --episodes 500 --eval-every 25 \
-		--alpha 1 --max-steps 5000 --out $(DEMO)/three-floor --json
+	$(ADPART) pipeline three-floor --tasks reach-goal,reach-top-west --runs 10 --episodes 500 \
+		--first-episodes 500 --eval-every 25 --flat-opt alpha=1 --flat-opt max-steps=5000 \
+		--hier-opt alpha=1 --hier-opt max-steps=5000 --detector-opt on-loop=truncate \
+		--out $(DEMO)/pipeline
 	$(ADPART) kb info
 
 # One BLAS thread per test worker: two workers already fill the two cores, and threaded BLAS

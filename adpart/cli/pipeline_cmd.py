@@ -256,11 +256,12 @@ def transfer_cmd(
     kb_artifacts: str | None,
 ) -> None:
     """Learn TASK of ENV on a stored decision layer with the hierarchical learner (last step)."""
-    from adpart.learning.curves import LearningCurve, plot_curves
+    from adpart.learning.curves import plot_curves
     from adpart.store import KnowledgeBase
     from adpart.workflows.learning import (
         LearnRequest,
         find_learning,
+        load_curve,
         record_learning,
         run_learning,
     )
@@ -298,7 +299,7 @@ def transfer_cmd(
         for label, request in requests.items():
             found = find_learning(kb, request) or record_learning(kb, run_learning(request, kb=kb))
             run = kb.get("run", parse_ref(found["run"], "run"))
-            curves[label] = LearningCurve.from_arrow(kb.load(run, "curve"))
+            curves[label] = load_curve(kb, run)
             ids[label] = found["run"]
             extra = {"initial_blocks": blocks} if label == "hierarchical" else {}
             rows.append(task_row(task, label, curves[label], 0.05, extra))

@@ -383,3 +383,18 @@ def find_learning(kb: Any, request: LearnRequest) -> dict[str, Any] | None:
                         ],
                     }
     return None
+
+
+def load_curve(kb: Any, run: Any) -> LearningCurve:
+    """A stored run's learning curve, with ``v_star_start`` and the learner restored from the run.
+
+    The knowledge base keeps a curve's columns; what is needed to read them (V* at the start
+    distribution) is kept in the run's metrics.
+    """
+    curve = LearningCurve.from_arrow(kb.load(run, "curve"))
+    metadata = {
+        **curve.metadata,
+        "learner": run.learner,
+        "v_star_start": run.metrics.get("v_star_start", curve.metadata.get("v_star_start")),
+    }
+    return LearningCurve(dict(curve.columns), metadata)

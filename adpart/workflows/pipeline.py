@@ -29,6 +29,7 @@ from adpart.workflows.discovery import discover_subgoals
 from adpart.workflows.learning import (
     LearnRequest,
     find_learning,
+    load_curve,
     record_learning,
     run_learning,
 )
@@ -117,7 +118,7 @@ def _learn(kb: Any, request: LearnRequest, report: PipelineReport, stage: str) -
     if ids is None:
         ids = record_learning(kb, run_learning(request, kb=kb))
     run = kb.get("run", parse_ref(ids["run"], "run"))
-    curve = LearningCurve.from_arrow(kb.load(run, "curve"))
+    curve = load_curve(kb, run)
     report.stages.append(
         Stage(stage, request.task, ids["run"], reused, time.perf_counter() - start)
     )
