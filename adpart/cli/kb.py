@@ -19,6 +19,7 @@ import pyarrow as pa
 import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
 
+from adpart.cli.common import kb_location_options
 from adpart.errors import AdpartError
 from adpart.store.entities import RECORD_TYPES
 from adpart.store.kb import KnowledgeBase
@@ -55,27 +56,13 @@ def _kind(name: str) -> str:
 
 
 def kb_option(func: Callable[..., Any]) -> Callable[..., Any]:
-    """Add ``--kb PATH|URL`` (env ADPART_KB) and ``--kb-artifacts URI`` (env ADPART_KB_ARTIFACTS).
+    """``--kb``/``--kb-artifacts`` (shared with every command) resolved before the command runs.
 
     The decorated command receives ``kb_location``, a :class:`~adpart.store.KBLocation`; call
     ``KnowledgeBase.open(kb_location)`` when the command needs the knowledge base.
     """
 
-    @click.option(
-        "--kb",
-        "kb_path",
-        envvar="ADPART_KB",
-        metavar="PATH|URL",
-        help="Knowledge base directory or database URL [env ADPART_KB; default "
-        "$ADPART_HOME/kb or ~/.local/share/adpart/kb]",
-    )
-    @click.option(
-        "--kb-artifacts",
-        "kb_artifacts",
-        envvar="ADPART_KB_ARTIFACTS",
-        metavar="URI",
-        help="Artifact root for a database URL (any pyarrow filesystem URI)",
-    )
+    @kb_location_options
     @functools.wraps(func)
     def wrapper(*args: Any, kb_path: str | None, kb_artifacts: str | None, **kwargs: Any) -> Any:
         try:

@@ -7,6 +7,7 @@ from collections.abc import Callable
 from adpart.learning.maxq.graphs import GRAPHS, get_graph, graph_for
 from adpart.learning.maxq.maxq_q import MaxQResult, maxq_q
 from adpart.mdp.model import FiniteMDP
+from adpart.plugins.builtin.learners import MAX_STEPS
 from adpart.plugins.registry import Param
 
 
@@ -21,7 +22,7 @@ class MaxQLearner:
         Param("abstraction", "bool", True, "use the graph's state abstractions"),
         Param("alpha", "str", "0.5", "step-size schedule: 0.5 | 1/n^0.8 | exp:0.5,0.99"),
         Param("epsilon", "str", "0.1", "exploration schedule at every node, same forms"),
-        Param("max-steps", "int", 1000, "primitive-step limit of one episode", min=1),
+        MAX_STEPS,
     )
 
     def __init__(

@@ -14,6 +14,7 @@ from collections.abc import Callable, Sequence
 
 from adpart.errors import TaskError
 from adpart.mdp.model import FiniteMDP
+from adpart.plugins.builtin.learners import ALPHA, EPSILON, MAX_STEPS, kernel, q_init
 from adpart.plugins.hookspecs import hookimpl
 from adpart.plugins.registry import Param, Registrar
 
@@ -24,12 +25,12 @@ class SMDPQLearner:
     name = "smdp-q"
     description = "SMDP Q-learning over options (plus primitive actions), runs in lock-step"
     params = (
-        Param("alpha", "str", "1/n^0.8", "step-size schedule: 0.1 | 1/n^0.8 | exp:0.5,0.99"),
-        Param("epsilon", "str", "0.1", "exploration schedule, same forms as --alpha"),
+        ALPHA,
+        EPSILON,
         Param("primitives", "bool", False, "offer the primitive actions beside the options"),
-        Param("max-steps", "int", 1000, "primitive-step limit of one episode", min=1),
-        Param("q-init", "float", 0.0, "initial value of every Q(s, o)"),
-        Param("kernel", "str", "auto", "step kernel", choices=("auto", "numba", "python")),
+        MAX_STEPS,
+        q_init("Q(s, o)"),
+        kernel("numba", "python"),
     )
 
     def __init__(self, alpha: str = "1/n^0.8", epsilon: str = "0.1", primitives: bool = False,
@@ -69,10 +70,10 @@ class HierarchicalLearner:
               min=0.0),
         Param("min-visits", "int", 2, "visits of the flat pair and block before a test fires",
               min=0),
-        Param("alpha", "str", "1/n^0.8", "step-size schedule"),
-        Param("epsilon", "str", "0.1", "exploration schedule"),
-        Param("max-steps", "int", 1000, "primitive-step limit of one episode", min=1),
-        Param("kernel", "str", "auto", "step kernel", choices=("auto", "numba", "python")),
+        ALPHA,
+        EPSILON,
+        MAX_STEPS,
+        kernel("numba", "python"),
     )
 
     def __init__(self, mode: str = "inconsistency", delta: float = 0.0,

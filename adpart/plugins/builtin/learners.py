@@ -8,6 +8,19 @@ from adpart.mdp.model import FiniteMDP
 from adpart.plugins.hookspecs import hookimpl
 from adpart.plugins.registry import Param, Registrar
 
+#: Parameters every sample-based learner declares alike (one declaration, one --help text).
+ALPHA = Param("alpha", "str", "1/n^0.8", "step-size schedule: 0.1 | 1/n^0.8 | exp:0.5,0.99")
+EPSILON = Param("epsilon", "str", "0.1", "exploration schedule, same forms as --alpha")
+MAX_STEPS = Param("max-steps", "int", 1000, "primitive-step limit of one episode", min=1)
+
+
+def q_init(what: str) -> Param:
+    return Param("q-init", "float", 0.0, f"initial value of every {what}")
+
+
+def kernel(*choices: str) -> Param:
+    return Param("kernel", "str", "auto", "step kernel", choices=("auto", *choices))
+
 
 class QLearner:
     """Flat epsilon-greedy Q-learning, K runs advanced together (see docs/learning.md)."""
@@ -15,11 +28,11 @@ class QLearner:
     name = "q-learning"
     description = "flat epsilon-greedy Q-learning, all runs advanced in lock-step"
     params = (
-        Param("alpha", "str", "1/n^0.8", "step-size schedule: 0.1 | 1/n^0.8 | exp:0.5,0.99"),
-        Param("epsilon", "str", "0.1", "exploration schedule, same forms as --alpha"),
-        Param("max-steps", "int", 1000, "step limit of one episode", min=1),
-        Param("q-init", "float", 0.0, "initial value of every Q(s, a)"),
-        Param("kernel", "str", "auto", "step kernel", choices=("auto", "numba", "numpy", "python")),
+        ALPHA,
+        EPSILON,
+        MAX_STEPS,
+        q_init("Q(s, a)"),
+        kernel("numba", "numpy", "python"),
     )
 
     def __init__(
