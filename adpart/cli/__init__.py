@@ -9,6 +9,7 @@ from adpart.cli.common import AdpartGroup
 from adpart.cli.discover_cmd import discover_cmd
 from adpart.cli.envs import env_group, envs_cmd
 from adpart.cli.experiment import experiment_cmd
+from adpart.cli.hierarchy_cmd import hierarchy_cmd
 from adpart.cli.kb import kb
 from adpart.cli.learn import learn_cmd
 from adpart.cli.options_cmd import options_cmd
@@ -44,3 +45,4 @@ cli.add_command(pipeline_cmd)
 cli.add_command(transfer_cmd)
 cli.add_command(partition_cmd)
 cli.add_command(sweep_cmd)
+cli.add_command(hierarchy_cmd)

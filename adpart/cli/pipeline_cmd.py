@@ -132,6 +132,18 @@ def _say(quiet: bool):  # type: ignore[no-untyped-def]
 )
 @click.option("--no-baseline", is_flag=True, help="Skip learning later tasks flat for comparison.")
 @click.option(
+    "--hierarchy",
+    metavar="NAME",
+    help="Start each later task from the layer this hierarchy-estimator plugin builds from the "
+    "earlier tasks (expected-learning-time, all-subgoals) instead of the multi-phase partition.",
+)
+@click.option(
+    "--hierarchy-opt",
+    multiple=True,
+    metavar="KEY=VALUE",
+    help="An estimator parameter, e.g. --hierarchy-opt threshold-scale=0.001.",
+)
+@click.option(
     "--out",
     type=click.Path(file_okay=False, path_type=Path),
     help="Folder for figures and summary.json [default: adpart-pipeline/ENV].",
@@ -155,6 +167,8 @@ def pipeline_cmd(
     flat_opt: tuple[str, ...],
     hier_opt: tuple[str, ...],
     no_baseline: bool,
+    hierarchy: str | None,
+    hierarchy_opt: tuple[str, ...],
     out: Path | None,
     as_json: bool,
     quiet: bool,
@@ -164,6 +178,8 @@ def pipeline_cmd(
     """Learn the first task, discover subgoals, learn options, partition, transfer to the rest.
 
     \b
+    With --hierarchy NAME each later task starts from the layer that estimator builds from the
+    tasks learned before it in the sequence (section 4.4) instead of the multi-phase partition.
     Every step is stored in the knowledge base and reused when the same step is asked again,
     so a second run (or one resumed after a crash) recomputes nothing it already has. Ends with
     a table (runs within the bound, median episodes to reach it, final value gap) and one figure
@@ -188,6 +204,8 @@ def pipeline_cmd(
         flat_params=_key_values(flat_opt, "--flat-opt"),
         hierarchical_params=_key_values(hier_opt, "--hier-opt"),
         baseline=not no_baseline,
+        hierarchy=hierarchy,
+        hierarchy_params=_key_values(hierarchy_opt, "--hierarchy-opt"),
     )
     out = out or Path("adpart-pipeline") / env.replace(":", "_")
     kb = KnowledgeBase.open(KBLocation.resolve(kb_path, kb_artifacts))

@@ -19,6 +19,7 @@ EXPERIMENT_MODULES: tuple[str, ...] = (
     "adpart.experiments.subgoals",
     "adpart.experiments.options_three_floor",
     "adpart.experiments.partition_three_floor",
+    "adpart.experiments.task_sequence",
 )
 
 

@@ -149,7 +149,7 @@ def _select_tasks(kb: Any, env: Any, tasks: Sequence[str | int] | None) -> list[
     """``(task record, newest policy)`` of the chosen (default: all learned) tasks."""
     policies: dict[int, Any] = {}
     for pol in kb.records("policy", environment=env):
-        if pol.q is not None:
+        if pol.q is not None and not pol.provenance.parameters.get("q_columns"):
             policies[pol.task_id] = pol  # ascending ids: the newest wins
     records = [t for t in kb.records("task", environment=env) if t.id in policies]
     if tasks is not None:
@@ -236,7 +236,12 @@ def load_inputs(
         learned.append(task_from_model(mdp, Q, opts, threshold=L, name=task_rec.name, weight=wi))
     A = dyn.n_actions
     S = dyn.n_states
-    adm = np.concatenate([dyn.admissible] + [o.initiation[:, None] for o in opts], axis=1)
+    dyn_adm = (
+        dyn.admissible
+        if dyn.admissible is not None
+        else np.ones((dyn.n_states, dyn.n_actions), dtype=bool)
+    )
+    adm = np.concatenate([dyn_adm] + [o.initiation[:, None] for o in opts], axis=1)
     term = np.concatenate([np.ones((S, A), dtype=bool)]
                           + [(o.beta >= 1.0)[:, None] for o in opts], axis=1)
     task_ids = {t.id for t, _ in chosen}

@@ -4,7 +4,9 @@
 2. discover subgoals in its best learned policy (a detector plugin);
 3. learn options to the subgoals and their exact multi-time models;
 4. partition the state space over the options - phases 1-2 before the next task's reward is
-   used, phase 3 once it is;
+   used, phase 3 once it is - or, with ``hierarchy=NAME``, build the layer for each later task
+   with that ``hierarchy-estimator`` plugin from the tasks of the sequence learned before it
+   (section 4.4, Algorithm 3; :mod:`adpart.hierarchy`);
 5. learn every later task on that decision layer with the hierarchical learner (refinement
    where flat and abstract values disagree), and flat without transfer for comparison.
 
@@ -55,6 +57,10 @@ class PipelineConfig:
         baseline: also learn each later task flat (no transfer) for the comparison.
         gap_fraction: a run has "learned" a task once its greedy policy's value gap stays below
             this fraction of ``|V*|`` at the start distribution (reported as episodes-to-bound).
+        hierarchy: a ``hierarchy-estimator`` plugin (``expected-learning-time``,
+            ``all-subgoals``); when set, each later task starts from the layer that estimator
+            builds from the earlier tasks of the sequence instead of the multi-phase partition.
+        hierarchy_params: that estimator's parameters.
     """
 
     env: str
@@ -73,12 +79,19 @@ class PipelineConfig:
     hierarchical_params: dict[str, Any] = field(default_factory=dict)
     baseline: bool = True
     gap_fraction: float = 0.05
+    hierarchy: str | None = None
+    hierarchy_params: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if len(self.tasks) < 2:
             raise TaskError(
                 "a pipeline needs at least two tasks: the first is learned flat, later ones "
                 "transfer (e.g. --tasks reach-goal,reach-top-west)"
+            )
+        if self.hierarchy is not None and not self.baseline:
+            raise TaskError(
+                "--hierarchy builds each layer from the flat (primitive-action) Q values of the "
+                "earlier tasks, which the flat baseline provides; drop --no-baseline"
             )
 
 
@@ -148,6 +161,148 @@ def task_row(
     }
 
 
+# --------------------------------------------------------------------------- hierarchy layers
+
+
+@dataclass(frozen=True)
+class Layer:
+    """A decision layer the hierarchical learner can start from.
+
+    Attributes:
+        ref: the stored partition the learner loads (``partition:N``).
+        blocks: its number of blocks.
+        built: the partition the estimator stored (``ref`` differs when options were added).
+        options: option refs the estimator's layer offers somewhere.
+        reused: whether the layer came from the knowledge base.
+        detail: the estimator's summary (trace, estimate, tasks) when it was built here.
+    """
+
+    ref: str
+    blocks: int
+    built: str
+    options: list[str]
+    reused: bool
+    detail: dict[str, Any] = field(default_factory=dict)
+
+
+def _newest_policies(kb: Any, env: Any, task_ids: list[int]) -> list[int]:
+    """The policy standing for each task in ``build_hierarchy`` (its newest with Q)."""
+    newest: dict[int, int] = {}
+    for pol in kb.records("policy", environment=env):
+        if pol.q is not None and pol.task_id in task_ids:
+            newest[pol.task_id] = max(pol.id, newest.get(pol.task_id, -1))
+    return [newest[t] for t in task_ids if t in newest]
+
+
+def _stored_hierarchy(
+    kb: Any, env: Any, estimator: str, params: dict[str, Any], task_ids: list[int]
+) -> Any:
+    """A ``hierarchy`` partition built by ``estimator`` with ``params`` from exactly these
+    tasks' current policies, or None - so a pipeline run again does not build it again."""
+    policies = _newest_policies(kb, env, task_ids)
+    wanted = {k.replace("-", "_"): v for k, v in params.items()}
+    for rec in reversed(kb.records("partition", environment=env)):
+        prov = rec.provenance
+        if rec.kind != "hierarchy" or prov.plugin != estimator:
+            continue
+        got = prov.parameters
+        if sorted(got.get("tasks", [])) != sorted(task_ids):
+            continue
+        if sorted(got.get("policies", [])) != sorted(policies):
+            continue
+        if all(got.get(k) == v for k, v in wanted.items()):
+            return rec
+    return None
+
+
+def _with_options(kb: Any, env: Any, rec: Any, option_ids: list[int]) -> tuple[Any, bool]:
+    """``rec`` itself when it offers options; otherwise the same blocks over ``option_ids``.
+
+    The hierarchical learner needs at least one option (its refinement may add any of them,
+    section 4.3); a layer that offers only primitive actions is stored again over the
+    pipeline's options with every option column off, child of ``rec``. Returns
+    ``(record, reused)``.
+    """
+    if rec.option_ids or not option_ids:
+        return rec, True
+    for cand in kb.records("partition", environment=env):
+        if (cand.kind == "hierarchy" and tuple(cand.parent_ids) == (rec.id,)
+                and list(cand.option_ids) == list(option_ids)
+                and cand.provenance.plugin == "adpart.workflows.pipeline"):
+            return cand, True
+    labels = kb.load(rec, "labels")
+    adm = kb.load(rec, "block_actions").astype(bool)
+    adm = np.concatenate([adm, np.zeros((adm.shape[0], len(option_ids)), dtype=bool)], axis=1)
+    padded = kb.put_partition(
+        env, "hierarchy", labels, options=list(option_ids), includes_primitives=True,
+        block_actions=adm, parents=[rec.id], plugin="adpart.workflows.pipeline",
+        parameters={"from": rec.ref, "reason": "options offered in no block, for refinement"},
+    )
+    return padded, False
+
+
+def hierarchy_layer(
+    kb: Any, env_name: str, estimator: str, params: dict[str, Any], task_ids: list[int],
+    option_ids: list[int],
+) -> Layer:
+    """The layer ``estimator`` builds from the learned tasks ``task_ids`` (reused when stored).
+
+    ``option_ids`` are the options the learner may fall back on when the layer offers none
+    (:func:`_with_options`).
+    """
+    from adpart.hierarchy import build_hierarchy
+    from adpart.plugins import get_registry
+
+    resolved = get_registry().get("hierarchy-estimator", estimator).resolve_params(params)
+    env = kb.find_environment(env_name)
+    rec = _stored_hierarchy(kb, env, estimator, resolved, task_ids)
+    detail: dict[str, Any] = {}
+    reused = rec is not None
+    if rec is None:
+        result = build_hierarchy(kb, env_name, estimator=estimator, tasks=task_ids,
+                                 params=params)
+        rec = kb.get("partition", int(result.partition_id))
+        detail = result.summary()
+    else:
+        got = rec.provenance.parameters
+        detail = {"estimator": estimator, "partition": rec.ref, "blocks": rec.n_blocks,
+                  "options": [f"option:{i}" for i in rec.option_ids],
+                  "tasks": [f"task:{i}" for i in got.get("tasks", [])],
+                  "estimate": got.get("estimate"), "steps": got.get("steps")}
+    learnable, kept = _with_options(kb, env, rec, option_ids)
+    return Layer(learnable.ref, int(rec.n_blocks), rec.ref,
+                 [f"option:{i}" for i in rec.option_ids], reused and kept, detail)
+
+
+def _partition_layer(kb: Any, config: PipelineConfig, subgoal_ref: str, task: str,
+                     report: PipelineReport) -> Layer:
+    """The multi-phase partition over the subgoal options for ``task`` (phases 1-3)."""
+    part = partition_environment(
+        kb, config.env, subgoal_ref, delta=config.delta, epsilon=config.epsilon, task=task
+    )
+    summary = part.summary()
+    reused = (all(p.reused for p in part.phase1) and part.phase2.reused
+              and (part.phase3 is None or part.phase3.reused))
+    report.stages.append(
+        Stage(
+            "partition",
+            task,
+            part.final_record.ref,
+            reused,
+            sum(part.seconds.values()),
+            {
+                "phase1_blocks": [p.blocks for p in part.phase1],
+                "phase2_blocks": part.phase2.blocks,
+                "final_blocks": part.final.n_blocks,
+                "check": summary["check"],
+                "value_gap": summary["value_gap"],
+            },
+        )
+    )
+    return Layer(part.final_record.ref, int(part.final.n_blocks), part.final_record.ref,
+                 [], reused)
+
+
 def run_pipeline(
     kb: Any,
     config: PipelineConfig,
@@ -211,31 +366,24 @@ def run_pipeline(
         )
     )
 
+    learned = [parse_ref(first_ids["task"], "task")]
+    option_ids = [r.id for r in stored.records]
     for task in later:
-        say(f"partitioning for {task} (delta {config.delta}, epsilon {config.epsilon})")
-        part = partition_environment(
-            kb, config.env, found.record.ref, delta=config.delta, epsilon=config.epsilon, task=task
-        )
-        summary = part.summary()
-        report.stages.append(
-            Stage(
-                "partition",
-                task,
-                part.final_record.ref,
-                all(p.reused for p in part.phase1)
-                and part.phase2.reused
-                and (part.phase3 is None or part.phase3.reused),
-                sum(part.seconds.values()),
-                {
-                    "phase1_blocks": [p.blocks for p in part.phase1],
-                    "phase2_blocks": part.phase2.blocks,
-                    "final_blocks": part.final.n_blocks,
-                    "check": summary["check"],
-                    "value_gap": summary["value_gap"],
-                },
+        if config.hierarchy is None:
+            say(f"partitioning for {task} (delta {config.delta}, epsilon {config.epsilon})")
+            layer = _partition_layer(kb, config, found.record.ref, task, report)
+            label = f"partition ({layer.blocks} blocks)"
+        else:
+            say(f"building the {config.hierarchy} layer for {task} from {len(learned)} tasks")
+            start = time.perf_counter()
+            layer = hierarchy_layer(kb, config.env, config.hierarchy,
+                                    dict(config.hierarchy_params), list(learned), option_ids)
+            report.stages.append(
+                Stage("hierarchy", task, layer.ref, layer.reused, time.perf_counter() - start,
+                      {**layer.detail, "built": layer.built, "final_blocks": layer.blocks})
             )
-        )
-        say(f"learning {task} on {part.final.n_blocks} blocks (hierarchical)")
+            label = f"{config.hierarchy} ({layer.blocks} blocks)"
+        say(f"learning {task} on {layer.blocks} blocks (hierarchical)")
         hier_req = LearnRequest(
             env=config.env,
             task=task,
@@ -245,19 +393,20 @@ def run_pipeline(
             episodes=config.episodes,
             seed=config.seed,
             eval_every=config.eval_every,
-            partition=part.final_record.ref,
+            partition=layer.ref,
         )
-        _, hier_curve = _learn(kb, hier_req, report, "learn-hierarchical")
-        report.curves[task] = {f"partition ({part.final.n_blocks} blocks)": hier_curve}
+        hier_ids, hier_curve = _learn(kb, hier_req, report, "learn-hierarchical")
+        report.curves[task] = {label: hier_curve}
         report.rows.append(
             task_row(
                 task,
                 "hierarchical",
                 hier_curve,
                 config.gap_fraction,
-                {"initial_blocks": part.final.n_blocks, "partition": part.final_record.ref},
+                {"initial_blocks": layer.blocks, "partition": layer.ref},
             )
         )
+        task_id = parse_ref(hier_ids["task"], "task")
         if config.baseline:
             say(f"learning {task} flat for comparison")
             base_req = LearnRequest(
@@ -273,6 +422,8 @@ def run_pipeline(
             _, base_curve = _learn(kb, base_req, report, "learn-flat")
             report.curves[task]["flat (no transfer)"] = base_curve
             report.rows.append(task_row(task, "flat", base_curve, config.gap_fraction, {}))
+        if task_id not in learned:
+            learned.append(task_id)
 
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)

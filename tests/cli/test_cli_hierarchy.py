@@ -1,0 +1,128 @@
+"""`adpart hierarchy` and `adpart pipeline --hierarchy`: layers stored, reused, errors one line."""
+
+from __future__ import annotations
+
+import json
+from itertools import pairwise
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from adpart.cli import cli
+from adpart.cli.hierarchy_cmd import hierarchy_cmd
+from adpart.store import KnowledgeBase
+
+PIPELINE = [
+    "pipeline", "two-rooms", "--tasks", "reach-goal,goal:x=9,y=5,goal:x=2,y=2",
+    "--runs", "2", "--episodes", "100", "--first-episodes", "500", "--epsilon", "1",
+    "--flat-opt", "alpha=1", "--flat-opt", "epsilon=0.5",
+    "--hier-opt", "alpha=1", "--hier-opt", "epsilon=0.3",
+    "--hierarchy", "expected-learning-time",
+]
+
+
+@pytest.fixture(scope="module")
+def pipeline_kb(tmp_path_factory):
+    root = tmp_path_factory.mktemp("hier")
+    kb_dir = root / "kb"
+    first = CliRunner().invoke(cli, [*PIPELINE, "--kb", str(kb_dir), "--out", str(root / "o"),
+                                     "--json"])
+    assert first.exit_code == 0, first.output
+    return kb_dir, json.loads(first.output), root
+
+
+def counts(kb_dir):
+    kb = KnowledgeBase.open(str(kb_dir))
+    try:
+        return kb.counts()
+    finally:
+        kb.close()
+
+
+def test_pipeline_with_hierarchy_learns_each_task_on_the_built_layer_and_reuses_it(pipeline_kb):
+    kb_dir, summary, root = pipeline_kb
+    stages = [(s["stage"], s["task"]) for s in summary["stages"]]
+    assert stages[3:] == [
+        ("hierarchy", "goal:x=9,y=5"), ("learn-hierarchical", "goal:x=9,y=5"),
+        ("learn-flat", "goal:x=9,y=5"),
+        ("hierarchy", "goal:x=2,y=2"), ("learn-hierarchical", "goal:x=2,y=2"),
+        ("learn-flat", "goal:x=2,y=2"),
+    ]
+    layers = [s for s in summary["stages"] if s["stage"] == "hierarchy"]
+    # the first layer is built from the first task alone, the second from the first two
+    assert [len(s["detail"]["tasks"]) for s in layers] == [1, 2]
+    for s in layers:
+        trace = s["detail"]["trace"]
+        assert all(b <= a for a, b in pairwise(trace))  # never rises
+    kb = KnowledgeBase.open(str(kb_dir))
+    try:
+        runs = {r.id: r for r in kb.records("run")}
+        for _s, row in zip(layers, [r for r in summary["tasks"] if r["learner"] == "hierarchical"],
+                          strict=True):
+            part = kb.get("partition", int(row["partition"].split(":")[1]))
+            assert part.kind == "hierarchy" and part.option_ids  # the learner needs an option
+            assert row["initial_blocks"] == np.unique(kb.load(part, "labels")).size
+        learned_on = {r.partition_id for r in runs.values() if r.learner == "hierarchical"}
+        assert learned_on == {int(r["partition"].split(":")[1]) for r in summary["tasks"]
+                              if r["learner"] == "hierarchical"}
+    finally:
+        kb.close()
+    before = counts(kb_dir)
+    again = CliRunner().invoke(cli, [*PIPELINE, "--kb", str(kb_dir), "--out", str(root / "o")])
+    assert again.exit_code == 0, again.output
+    assert again.output.count("reused") == 9
+    assert counts(kb_dir) == before
+
+
+def test_hierarchy_without_baseline_is_refused(tmp_path):
+    res = CliRunner().invoke(cli, [*PIPELINE, "--no-baseline", "--kb", str(tmp_path / "kb")])
+    assert res.exit_code == 2 and "--no-baseline" in res.output
+
+
+def test_hierarchy_command_stores_the_layer_it_prints(pipeline_kb, tmp_path):
+    kb_dir = pipeline_kb[0]
+    res = CliRunner().invoke(hierarchy_cmd, ["two-rooms", "--tasks", "reach-goal,goal:x=9,y=5",
+                                             "--kb", str(kb_dir), "--json",
+                                             "--plot", str(tmp_path / "layer.png")])
+    assert res.exit_code == 0, res.output
+    out = json.loads(res.output)
+    assert out["task_names"] == ["reach-goal", "goal:x=9,y=5"]
+    assert all(b <= a for a, b in zip(out["trace"], out["trace"][1:], strict=False))
+    assert out["estimate"] <= out["trace"][0]
+    kb = KnowledgeBase.open(str(kb_dir))
+    try:
+        part = kb.get("partition", int(out["partition"].split(":")[1]))
+        labels, adm = kb.load(part, "labels"), kb.load(part, "block_actions")
+        names = list(kb.get("environment", part.environment_id).spec["actions"]) + [
+            kb.get("option", i).name for i in part.option_ids]
+    finally:
+        kb.close()
+    assert part.kind == "hierarchy" and part.provenance.plugin == "expected-learning-time"
+    assert np.bincount(labels).tolist() == out["block_states"]
+    assert [[names[k] for k in np.flatnonzero(row)] for row in adm] == out["block_columns"]
+    assert [f"option:{i}" for i in part.option_ids] == out["options"]
+    assert (tmp_path / "layer.png").stat().st_size > 1000
+    if len(out["trace"]) > 1:
+        assert (tmp_path / "layer_trace.png").stat().st_size > 1000
+    text = CliRunner().invoke(hierarchy_cmd, ["two-rooms", "--estimator", "all-subgoals",
+                                              "--kb", str(kb_dir)])
+    assert text.exit_code == 0, text.output
+    assert "by all-subgoals" in text.output and "E[t_learn]" in text.output
+    assert "block 0" in text.output
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["--estimator", "no-such"], "no-such"),
+        (["--tasks", "not-learned"], "not-learned"),
+        (["--param", "threshold"], "KEY=VALUE"),
+        (["--param", "bogus=1"], "bogus"),
+    ],
+)
+def test_bad_input_is_one_line_and_exit_2(pipeline_kb, args, needle):
+    res = CliRunner().invoke(hierarchy_cmd, ["two-rooms", *args, "--kb", str(pipeline_kb[0])])
+    assert res.exit_code == 2, res.output
+    assert needle in res.output and "Traceback" not in res.output
+    assert len(res.output.strip().splitlines()) == 1

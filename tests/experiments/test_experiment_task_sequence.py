@@ -1,0 +1,52 @@
+"""`task-sequence` (quick): five urban tasks, a built layer per later task, task five compared."""
+
+from __future__ import annotations
+
+import json
+from itertools import pairwise
+
+import numpy as np
+
+from adpart.experiments.base import ExperimentConfig, run_experiment
+from adpart.experiments.task_sequence import TASKS, task_sequence  # noqa: F401 (registers)
+from adpart.store import KnowledgeBase
+
+
+def test_quick_run_builds_a_layer_per_task_and_compares_task_five(tmp_path):
+    kb_dir = tmp_path / "kb"
+    config = ExperimentConfig(out=tmp_path / "out", runs=2, seed=0, quick=True, kb=str(kb_dir))
+    report, files = run_experiment("task-sequence", config)
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["name"] == "task-sequence" and set(files) == {"json", "markdown"}
+    layers = report.data["layers"]
+    assert [layer["task"] for layer in layers] == list(TASKS[1:])
+    stages = report.data["pipeline"]["stages"]
+    built = [s for s in stages if s["stage"] == "hierarchy"]
+    # layer k is built from the k tasks before it (the first task, then each later one)
+    assert [len(s["detail"]["tasks"]) for s in built] == [1, 2, 3, 4]
+    for layer in layers:
+        trace = layer["trace"]
+        assert all(b <= a for a, b in pairwise(trace))
+    rows = report.data["pipeline"]["tasks"]
+    assert {(r["task"], r["learner"]) for r in rows} == {(TASKS[0], "flat")} | {
+        (t, learner) for t in TASKS[1:] for learner in ("hierarchical", "flat")}
+    five = report.data["task_five"]
+    kb = KnowledgeBase.open(str(kb_dir))
+    try:
+        for name in ("expected-learning-time", "all-subgoals"):
+            rec = kb.get("partition", int(five[name]["partition"].split(":")[1]))
+            assert rec.kind == "hierarchy"
+            assert np.unique(kb.load(rec, "labels")).size == five[name]["initial_blocks"]
+        subgoal_layer = kb.get("partition", int(five["all-subgoals"]["partition"].split(":")[1]))
+        assert subgoal_layer.option_ids  # every subgoal option offered somewhere
+    finally:
+        kb.close()
+    for name, finals in five["final_blocks"].items():
+        initial = five["expected-learning-time" if name.startswith("expected") else
+                       "all-subgoals"]["initial_blocks"]
+        assert len(finals) == 2 and min(finals) >= initial  # refinement only adds blocks
+    text = (tmp_path / "out" / "summary.md").read_text()
+    assert "72" in text and "43" in text
+    assert len(report.figures) == 6
+    for fig in report.figures:
+        assert (tmp_path / "out" / fig.split("/")[-1]).stat().st_size > 1000
