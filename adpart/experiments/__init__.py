@@ -20,6 +20,7 @@ EXPERIMENT_MODULES: tuple[str, ...] = (
     "adpart.experiments.options_three_floor",
     "adpart.experiments.partition_three_floor",
     "adpart.experiments.task_sequence",
+    "adpart.experiments.transfer",
 )
 
 

@@ -1,0 +1,86 @@
+"""`three-floor`, `three-floor-arm`, `urban` (quick): pipeline, alternatives, report, bounds."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from adpart.experiments.base import ExperimentConfig, run_experiment
+from adpart.experiments.transfer import three_floor  # noqa: F401 (registers the three)
+
+LEARNERS = {"flat Q", "partition, no refinement", "partition, refinement",
+            "partition, reward variation"}
+
+
+def _run(name, tmp_path, kb=None):
+    config = ExperimentConfig(out=tmp_path / "out", runs=2, seed=0, quick=True, kb=kb)
+    report, files = run_experiment(name, config)
+    return report, files
+
+
+def _check_common(report, files, tmp_path, n_states):
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["name"] == report.name and set(files) == {"json", "markdown"}
+    for fig in report.figures:
+        assert (tmp_path / "out" / fig.split("/")[-1]).stat().st_size > 1000
+    rows = {r["learner"]: r for r in report.data["rows"]}
+    assert LEARNERS <= set(rows)
+    bound = report.data["theorem_4_5_bound"]
+    for row in rows.values():
+        assert row["runs"] == 2
+        assert row["final_gap_max"] <= bound + 1e-9  # the exact gap within theorem 4.5's bound
+    stages = {s["stage"] for s in report.data["pipeline"]["stages"]}
+    assert {"learn-flat", "discover", "options", "partition", "learn-hierarchical"} <= stages
+    blocks = report.data["blocks"]
+    # no refinement keeps its decision layer; refinement only ever adds blocks
+    nr = blocks["no refinement"]
+    assert nr["final_min"] == nr["final_max"] == nr["initial"] < n_states
+    assert blocks["refinement"]["final_min"] >= blocks["refinement"]["initial"]
+    assert report.data["refinements_per_run"] and all(
+        n >= 0 for n in report.data["refinements_per_run"])
+    assert report.seed_reports and any("Ours" in f for f in report.findings)
+    assert (tmp_path / "out" / "summary.md").read_text().count("- ") >= 5
+    return rows
+
+
+def test_three_floor_quick(tmp_path):
+    report, files = _run("three-floor", tmp_path)
+    rows = _check_common(report, files, tmp_path, 2900)
+    assert {"SMDP Q (discovered + primitives)", "hand-designed, refinement",
+            "hand-designed, reward variation"} <= set(rows)
+    # the new goal is not a subgoal: without refinement no run ever reaches it
+    nr = rows["partition, no refinement"]
+    assert nr["runs_within_bound"] == 0
+    assert nr["final_gap_mean"] == pytest.approx(nr["v_star_start"] + 1 / (1 - 0.99), abs=1e-6)
+    # reward variation makes the goal a subgoal: every run within the bound
+    rv = rows["partition, reward variation"]
+    assert rv["runs_within_bound"] == 2 and rv["final_gap_max"] <= rv["bound"]
+    assert report.data["hand_designed"]["blocks"] > 1
+    assert "about 63" in (tmp_path / "out" / "summary.md").read_text()
+    labels = [(c["label_a"], c["label_b"]) for c in report.data["comparisons"]]
+    assert ("partition, refinement", "partition, reward variation") in labels
+
+
+def test_three_floor_arm_quick_and_resume(tmp_path):
+    kb = str(tmp_path / "kb")
+    report, files = _run("three-floor-arm", tmp_path, kb=kb)
+    _check_common(report, files, tmp_path, 3600)
+    assert report.data["settings"]["detector"] == "count-mc"
+    # a rerun on the same knowledge base recomputes none of the pipeline's stages
+    again, _ = _run("three-floor-arm", tmp_path, kb=kb)
+    assert all(s["reused"] for s in again.data["pipeline"]["stages"])
+    assert again.data["rows"] == report.data["rows"]
+
+
+@pytest.mark.slow
+def test_urban_quick(tmp_path):
+    """Slow (about 90 s): 1,200 flat episodes of the first task on 20,004 states, then phases
+    1-3 split the states into thousands of blocks (docs/hierarchical-learning.md)."""
+    report, files = _run("urban", tmp_path)
+    rows = _check_common(report, files, tmp_path, 20004)
+    assert np.isfinite(rows["partition, refinement"]["v_star_start"])
+    assert report.data["settings"]["new_task"] == "navigate-pickup"
+    assert (rows["partition, reward variation"]["final_gap_max"]
+            < rows["partition, no refinement"]["final_gap_mean"])
