@@ -34,6 +34,7 @@ import numpy as np
 
 from adpart.envs.domains.parr_maze import ParrMaze
 from adpart.envs.domains.taxi import Taxi
+from adpart.experiments.maxq import evaluated, fmt_steps, median_ci, steps_to_tolerance
 from adpart.learning.curves import start_distribution
 from adpart.learning.maxq import get_graph, hierarchical_rollouts, maxq_q, taxi_graph
 from adpart.learning.maxq.maxq_q import _Run
@@ -51,34 +52,39 @@ PARR_GAP = 2.0
 ROLLOUTS = 20
 
 
-def steps_to_gap(gaps: np.ndarray, steps: np.ndarray, eval_eps: np.ndarray,
-                 gap: float) -> np.ndarray:
-    """Per run: cumulative primitive steps at the first evaluation from which the gap stays
-    ``<= gap`` (NaN if it never settles; a NaN gap counts as not within)."""
-    ok = gaps <= gap
-    stays = np.flip(np.logical_and.accumulate(np.flip(ok, axis=1), axis=1), axis=1)
-    cum = np.cumsum(steps, axis=1)
-    first = np.argmax(stays, axis=1)
-    return np.where(stays.any(axis=1), cum[np.arange(len(first)), eval_eps[first] - 1], np.nan)
-
-
 def _curve_steps(curve, eval_every: int, gap: float) -> np.ndarray:
-    n = curve.n_episodes
-    eps = np.array(sorted({*range(eval_every, n + 1, eval_every), n}))
-    return steps_to_gap(curve.matrix("value_gap")[:, eps - 1], curve.matrix("steps"), eps, gap)
+    """Per run: primitive steps until the greedy policy stays within ``gap``; inf if never."""
+    ev = evaluated(curve.n_episodes, eval_every)
+    return steps_to_tolerance(curve.matrix("value_gap"), curve.matrix("steps"), ev, gap)[0]
+
+
+def _final(gaps: np.ndarray) -> float:
+    """Median final gap over runs; an undefined value (never finishing) counts as inf."""
+    return float(np.median(np.where(np.isnan(gaps), np.inf, gaps)))
 
 
 def _table(title: str, rows: dict[str, np.ndarray], finals: dict[str, float],
            timings: dict[str, float], runs: int) -> dict[str, float]:
     print(title)
-    print(f"{'learner':<26}{'median steps':>14}{'runs settled':>14}{'final gap':>11}{'cpu s':>8}")
+    print(f"{'learner':<26}{'median steps':>14}{'95% CI of median':>26}{'runs settled':>14}"
+          f"{'final gap':>11}{'cpu s':>8}")
     med = {}
     for label, steps in rows.items():
-        m = float(np.nanmedian(steps)) if np.isfinite(steps).any() else float("nan")
+        m, lo, hi = median_ci(steps)
         med[label] = m
-        print(f"{label:<26}{m:>14,.0f}{int(np.isfinite(steps).sum()):>10}/{runs:<3}"
+        ci = f"[{fmt_steps(lo)}, {fmt_steps(hi)}]"
+        print(f"{label:<26}{fmt_steps(m):>14}{ci:>26}{int(np.isfinite(steps).sum()):>10}/{runs:<3}"
               f"{finals[label]:>11.3f}{timings[label]:>8.1f}")
     return med
+
+
+def _ratio(num: float, den: float, budget: float) -> str:
+    """``num / den`` of medians; a censored (inf) numerator gives a lower bound via the budget."""
+    if np.isfinite(num) and np.isfinite(den):
+        return f"{num / den:.2f}"
+    if not np.isfinite(num) and np.isfinite(den):
+        return f"> {budget / den:.2f} (numerator censored at its mean budget)"
+    return "undefined (denominator never settled)"
 
 
 def taxi(runs: int = RUNS, seed: int = 2000) -> dict[str, float]:
@@ -86,6 +92,7 @@ def taxi(runs: int = RUNS, seed: int = 2000) -> dict[str, float]:
     rows: dict[str, np.ndarray] = {}
     finals: dict[str, float] = {}
     timings: dict[str, float] = {}
+    budgets: dict[str, float] = {}
     settings = {"MAXQ-Q, abstraction": (True, 3000), "MAXQ-Q, no abstraction": (False, 6000)}
     for label, (abstraction, episodes) in settings.items():
         g = taxi_graph().compile(mdp, abstraction=abstraction)
@@ -94,38 +101,45 @@ def taxi(runs: int = RUNS, seed: int = 2000) -> dict[str, float]:
                      epsilon=EPSILON, eval_every=EVAL, max_steps_per_episode=1000)
         timings[label] = time.process_time() - t0
         rows[label] = _curve_steps(res.curve, EVAL, GAP)
-        finals[label] = float(np.nanmedian(res.curve.matrix("value_gap")[:, -1]))
+        finals[label] = _final(res.curve.matrix("value_gap")[:, -1])
+        budgets[label] = float(res.curve.matrix("steps").sum(axis=1).mean())
     t0 = time.process_time()
-    res = q_learning(mdp, runs=runs, episodes=6000, seed=seed, alpha=ALPHA, epsilon=EPSILON,
+    res = q_learning(mdp, runs=runs, episodes=30000, seed=seed, alpha=ALPHA, epsilon=EPSILON,
                      eval_every=EVAL, max_steps_per_episode=1000)
     timings["flat Q"] = time.process_time() - t0
     rows["flat Q"] = _curve_steps(res.curve, EVAL, GAP)
-    finals["flat Q"] = float(np.nanmedian(res.curve.matrix("value_gap")[:, -1]))
+    finals["flat Q"] = _final(res.curve.matrix("value_gap")[:, -1])
+    budgets["flat Q"] = float(res.curve.matrix("steps").sum(axis=1).mean())
     med = _table(f"fickle Taxi (516 states, gamma = 1), {runs} runs, alpha = {ALPHA}, "
                  f"epsilon = {EPSILON}; primitive steps until the greedy policy stays within "
                  f"{GAP} of V* (reference: V*, which the polled hierarchy reaches)",
                  rows, finals, timings, runs)
     ratio = med["flat Q"] / med["MAXQ-Q, abstraction"]
     ratio_no = med["MAXQ-Q, no abstraction"] / med["flat Q"]
-    print(f"flat Q / MAXQ-Q (abstraction) = {ratio:.2f}   (Dietterich: about 2)")
-    print(f"MAXQ-Q (no abstraction) / flat Q = {ratio_no:.2f}   (Dietterich: > 1)")
+    print(f"flat Q / MAXQ-Q (abstraction) = "
+          f"{_ratio(med['flat Q'], med['MAXQ-Q, abstraction'], budgets['flat Q'])}"
+          "   (Dietterich: about 2)")
+    noabs = "MAXQ-Q, no abstraction"
+    print(f"MAXQ-Q (no abstraction) / flat Q = "
+          f"{_ratio(med[noabs], med['flat Q'], budgets[noabs])}"
+          "   (Dietterich: > 1)")
     return {**{f"taxi steps[{k}]": v for k, v in med.items()}, "taxi flat/maxq": ratio,
             "taxi maxq-noabs/flat": ratio_no}
 
 
-def parr(runs: int = RUNS, seed: int = 3000, episodes: int = 1000,
+def parr(runs: int = RUNS, seed: int = 3000, episodes: int = 300,
          eval_every: int = 50) -> dict[str, float]:
     mdp = ParrMaze(mini=True).mdp()
     mu = start_distribution(mdp)
     v_star = float(mu @ policy_evaluation(mdp, solve(mdp, 1e-10).policy))
     g = get_graph("parr-maze").compile(mdp)
-    eps_ = np.array(sorted({*range(eval_every, episodes + 1, eval_every), episodes}))
+    eps_ = evaluated(episodes, eval_every)
     t0 = time.process_time()
     alpha_s, eps_s = parse_schedule(ALPHA), parse_schedule(EPSILON)
     rngs = np.random.default_rng(seed).spawn(runs)
     cdf = np.cumsum(mu)
     steps = np.zeros((runs, episodes), dtype=np.int64)
-    gaps = np.full((runs, eps_.size), np.nan)
+    gaps = np.full((runs, episodes), np.nan)
     for k in range(runs):
         agent = _Run(mdp, g, rngs[k], alpha_s, eps_s, 5000)
         i = 0
@@ -136,24 +150,29 @@ def parr(runs: int = RUNS, seed: int = 3000, episodes: int = 1000,
             if e + 1 == eps_[i]:
                 ret = hierarchical_rollouts(mdp, g, agent.tables(), ROLLOUTS,
                                             seed=seed + 7919 * k + e, max_steps=5000)
-                gaps[k, i] = v_star - float(np.mean(ret[0]))
+                gaps[k, e] = v_star - float(np.mean(ret[0])) if ret[2].all() else np.nan
                 i += 1
     timings = {"MAXQ-Q": time.process_time() - t0}
-    rows = {"MAXQ-Q": steps_to_gap(gaps, steps, eps_, PARR_GAP)}
-    finals = {"MAXQ-Q": float(np.nanmedian(gaps[:, -1]))}
+    rows = {"MAXQ-Q": steps_to_tolerance(gaps, steps, eps_, PARR_GAP)[0]}
+    finals = {"MAXQ-Q": _final(gaps[:, -1])}
+    budget = float(steps.sum(axis=1).mean())
     t0 = time.process_time()
     flat_eps = episodes * 4
     res = q_learning(mdp, runs=runs, episodes=flat_eps, seed=seed, alpha=ALPHA,
                      epsilon=EPSILON, eval_every=eval_every, max_steps_per_episode=5000)
     timings["flat Q"] = time.process_time() - t0
     rows["flat Q"] = _curve_steps(res.curve, eval_every, PARR_GAP)
-    finals["flat Q"] = float(np.nanmedian(res.curve.matrix("value_gap")[:, -1]))
+    finals["flat Q"] = _final(res.curve.matrix("value_gap")[:, -1])
+    flat_budget = float(res.curve.matrix("steps").sum(axis=1).mean())
     med = _table(f"Parr's mini maze (1,988 states, gamma = 0.99), {runs} runs, alpha = "
                  f"{ALPHA}, epsilon = {EPSILON}; primitive steps until the greedy policy stays "
                  f"within {PARR_GAP} of V*(start) = {v_star:.2f} (MAXQ-Q: hierarchical greedy "
                  f"execution, {ROLLOUTS} rollouts; flat Q: exact)", rows, finals, timings, runs)
     ratio = med["flat Q"] / med["MAXQ-Q"]
-    print(f"flat Q / MAXQ-Q = {ratio:.2f}   (Dietterich, full maze: about 10)")
+    print(f"flat Q / MAXQ-Q = {_ratio(med['flat Q'], med['MAXQ-Q'], flat_budget)}"
+          "   (Dietterich, full maze: about 10)")
+    print(f"mean primitive steps of the whole training: MAXQ-Q {budget:,.0f} over {episodes} "
+          f"episodes, flat Q {flat_budget:,.0f} over {flat_eps} episodes")
     return {**{f"parr steps[{k}]": v for k, v in med.items()}, "parr flat/maxq": ratio}
 
 

@@ -21,6 +21,7 @@ EXPERIMENT_MODULES: tuple[str, ...] = (
     "adpart.experiments.partition_three_floor",
     "adpart.experiments.task_sequence",
     "adpart.experiments.transfer",
+    "adpart.experiments.maxq",
 )
 
 

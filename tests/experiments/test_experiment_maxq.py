@@ -1,0 +1,69 @@
+"""Quick versions of ``maxq-taxi`` / ``maxq-parr`` and the statistics they rely on."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from adpart.experiments import ExperimentConfig, get_experiment, run_experiment
+from adpart.experiments.maxq import evaluated, median_ci, steps_to_tolerance
+
+
+def test_steps_to_tolerance_against_a_loop() -> None:
+    gaps = np.array([[5.0, 0.1, 3.0, 0.2, 0.1],
+                     [0.1, 0.1, 0.1, 0.1, 0.1],
+                     [np.nan, 0.1, np.nan, np.nan, np.nan]])
+    steps = np.array([[10, 20, 30, 40, 50], [1, 1, 1, 1, 1], [5, 5, 5, 5, 5]])
+    ev = np.arange(1, 6)
+    at, eps = steps_to_tolerance(gaps, steps, ev, 0.5)
+    # oracle: scan backwards for the last failure
+    for k in range(3):
+        ok = gaps[k] <= 0.5
+        last_bad = max((i for i in range(5) if not ok[i]), default=-1)
+        if last_bad == 4:
+            assert np.isinf(at[k]) and np.isinf(eps[k])
+        else:
+            assert eps[k] == last_bad + 2
+            assert at[k] == steps[k, : last_bad + 2].sum()
+    assert np.isinf(at[2])  # an undefined (never finishing) score is never within
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.one_of(st.floats(0, 1e6), st.just(np.inf)), min_size=1, max_size=15),
+       st.integers(0, 100))
+def test_median_ci_brackets_the_median(values: list[float], seed: int) -> None:
+    x = np.array(values)
+    m, lo, hi = median_ci(x, n_boot=200, seed=seed)
+    assert lo <= m <= hi or (np.isinf(m) and np.isinf(hi))
+    assert np.min(x) <= lo and hi <= np.max(x)
+    assert m == np.sort(x)[(x.size + 1) // 2 - 1]  # the lower median, an element of x
+
+
+def test_evaluated_schedule() -> None:
+    assert evaluated(10, 3).tolist() == [3, 6, 9, 10]
+    assert evaluated(9, 3).tolist() == [3, 6, 9]
+
+
+@pytest.mark.parametrize("name", ["maxq-taxi", "maxq-parr"])
+def test_quick_experiment_writes_report(name: str, tmp_path) -> None:
+    assert get_experiment(name).name == name
+    report, _paths = run_experiment(name, ExperimentConfig(out=tmp_path, runs=2, quick=True))
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["name"] == name
+    rows = summary["data"]["rows"]
+    assert len(rows) == (4 if name == "maxq-taxi" else 3)
+    for row in rows:
+        assert row["runs"] == 2 and 0 <= row["reached"] <= 2
+        assert row["total_steps_mean"] > 0
+    assert summary["data"]["comparisons"]
+    for fig in report.figures:
+        assert (tmp_path / fig.split("/")[-1]).stat().st_size > 0
+    assert "What we measured" in (tmp_path / "summary.md").read_text()
+    if name == "maxq-parr":
+        first = summary["data"]["first_task"]
+        assert first["samples"] > 0 and first["mu"] is not None
+        assert any("seed's claims" in f for f in summary["findings"])
