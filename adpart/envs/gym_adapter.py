@@ -405,7 +405,8 @@ class GymDomain(Domain):
             raise ModelError(
                 f"gym:{env_id} with fickle_passenger=True changes the destination inside step(), "
                 "but env.unwrapped.P omits that change, so a model read from P would be wrong. "
-                "Use the built-in 'taxi-fickle' domain (Taxi(fickle=True)), whose model encodes it, "
+                "Use the built-in 'taxi-fickle' domain (Taxi(fickle=True)), whose model encodes "
+                "it, "
                 "or fickle_passenger=False"
             )
         suffix = ",".join(f"{k}={v}" for k, v in sorted(self.make_kwargs.items()))

@@ -14,7 +14,8 @@ One agent-step (Watkins' Q-learning, dissertation eq. 2.4) consumes exactly four
    actions of ``s`` (uniform exploration restricted to admissible actions); otherwise it is the
    ``floor(u[1] * t)``-th of the ``t`` actions tied for ``max_a Q(s, a)`` (random tie-breaking;
    inadmissible entries hold ``-inf`` and never tie);
-3. ``s'`` = the successor whose row-offset cumulative probability (``FiniteMDP.sampler_keys``) is the
+3. ``s'`` = the successor whose row-offset cumulative probability
+   (``FiniteMDP.sampler_keys``) is the
    first to exceed ``a*S + s + u[2]`` -- exactly :meth:`FiniteMDP.sample_next` with ``u[2]``;
 4. ``n(s, a) += 1``; ``alpha = max(floor, alpha_ep[k] * n(s, a)**-omega)``;
    ``target = r`` if ``s'`` is terminal (episode over on arrival, no bootstrap), else

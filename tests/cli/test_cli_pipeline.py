@@ -1,4 +1,4 @@
-"""`adpart pipeline` and `adpart transfer`: end to end, reuse on a second run, resume after SIGKILL."""
+"""`adpart pipeline` and `adpart transfer`: end to end, reuse on a rerun, resume after SIGKILL."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Primitive actions as the fallback where no option can start (``include_primitives="uncovered"``)."""
+"""Primitive actions as the fallback where no option can start (include_primitives="uncovered")."""
 
 from __future__ import annotations
 
