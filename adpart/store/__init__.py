@@ -19,8 +19,9 @@ from adpart.store.entities import (
     Task,
 )
 from adpart.store.errors import StoreError
-from adpart.store.kb import CheckReport, GcReport, KnowledgeBase
+from adpart.store.kb import KnowledgeBase
 from adpart.store.location import KBLocation, default_location
+from adpart.store.maintenance import CheckReport, GcReport
 from adpart.store.schema import SCHEMA_VERSION
 
 __all__ = [

@@ -24,6 +24,7 @@ hash is recomputed as well. See docs/knowledge-base.md, "Why one hash is enough"
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
@@ -320,10 +321,8 @@ class ArtifactStore:
                     out.write(encoded)
                 self.fs.move(tmp, final)
             except (pa.ArrowException, OSError) as exc:
-                try:
+                with contextlib.suppress(pa.ArrowException, OSError):  # may never have been made
                     self.fs.delete_file(tmp)
-                except (pa.ArrowException, OSError):
-                    pass  # the temporary file never came into being
                 raise StoreError(f"cannot write artifact {uri} under {self.root!r}: {exc}; check "
                                  "the artifact root is writable and has space") from exc
             return digest.result()
