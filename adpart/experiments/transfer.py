@@ -362,7 +362,7 @@ def three_floor_arm(config: ExperimentConfig) -> ExperimentReport:
             "Figs. 5.12-5.14; section 5.1.5")
 def urban(config: ExperimentConfig) -> ExperimentReport:
     """navigate -> navigate-pickup with count-mc subgoals; refinement, none, reward variation."""
-    b = _budget(config, {"runs": min(config.runs, 10), "first": 1500, "episodes": 500,
+    b = _budget(config, {"runs": config.runs, "first": 1500, "episodes": 500,
                          "horizon": 1000},
                 {"runs": 2, "first": 1200, "episodes": 20, "horizon": 1000})
     setup = _Setup("urban", FIRST_URBAN_TASK, "navigate-pickup", "count-mc", b["runs"], b["first"],
