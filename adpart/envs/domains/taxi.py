@@ -125,6 +125,17 @@ def _walls() -> tuple[np.ndarray, np.ndarray]:
     return east_open, west_open
 
 
+
+def _assemble(rows: list, cols: list, probs: list, S: int) -> sp.csr_array:
+    """The (A*S, S) transition matrix from lists of (row, column, probability) array chunks."""
+    P = sp.csr_array(
+        (np.concatenate(probs), (np.concatenate(rows), np.concatenate(cols))),
+        shape=(len(ACTION_NAMES) * S, S),
+    )
+    P.sum_duplicates()
+    P.eliminate_zeros()
+    return P
+
 class Taxi(Domain):
     """Dietterich's Taxi: 500 states in Gymnasium's encoding, 6 actions, task ``deliver``.
 
@@ -262,11 +273,7 @@ class Taxi(Domain):
         rows += [PICKUP * S + s, PUTDOWN * S + s]
         cols += [next_pick, next_put]
         probs += [np.ones(S), np.ones(S)]
-        P = sp.csr_array(
-            (np.concatenate(probs), (np.concatenate(rows), np.concatenate(cols))),
-            shape=(len(ACTION_NAMES) * S, S),
-        )
-        P.sum_duplicates()
+        P = _assemble(rows, cols, probs, S)
         features = {
             "x": col.astype(np.int64),
             "y": row.astype(np.int64),
@@ -369,12 +376,7 @@ class Taxi(Domain):
         rows += [PICKUP * S + s, PUTDOWN * S + s]
         cols += [next_pick, next_put]
         probs += [np.ones(S), np.ones(S)]
-        P = sp.csr_array(
-            (np.concatenate(probs), (np.concatenate(rows), np.concatenate(cols))),
-            shape=(len(ACTION_NAMES) * S, S),
-        )
-        P.sum_duplicates()
-        P.eliminate_zeros()
+        P = _assemble(rows, cols, probs, S)
         features = {
             "x": col.astype(np.int64),
             "y": row.astype(np.int64),
