@@ -22,10 +22,15 @@ ADPART := $(VENV)/bin/adpart
 DEMO   := demo-output
 
 # The main job on the embedded default knowledge base ($$ADPART_KB, else ~/.local/share/adpart/kb):
+# flat Q-learning on two-rooms and three-floor (curves, policies, summaries), then
 # the transfer pipeline on three-floor - learn reach-goal flat, discover subgoals, learn options,
 # partition, learn reach-top-west on the decision layer vs flat - with figures in demo-output/.
 # A second `make demo` reuses everything the knowledge base already holds.
 demo: $(STAMP)
+	$(ADPART) learn two-rooms --runs 10 --episodes 300 --alpha 1 --epsilon 0.5 --eval-every 25 \
+		-q --out $(DEMO)/learn-two-rooms
+	$(ADPART) learn three-floor --runs 10 --episodes 500 --alpha 1 --max-steps 5000 \
+		--eval-every 25 -q --out $(DEMO)/learn-three-floor
 	$(ADPART) env show three-floor --task reach-goal --out $(DEMO)/three-floor-vstar.png --json
 	$(ADPART) pipeline three-floor --tasks reach-goal,reach-top-west --runs 10 --episodes 500 \
 		--first-episodes 500 --eval-every 25 --flat-opt alpha=1 --flat-opt max-steps=5000 \

@@ -70,7 +70,8 @@ class LocalExecutor(Executor):
                 "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
             )
             context = multiprocessing.get_context(method)
-            self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=context)
+            self._pool = ProcessPoolExecutor(
+                max_workers=self.workers, mp_context=context, initializer=_one_thread_per_worker)
         return self._pool
 
     def map(self, fn: Callable[[T], R], items: Iterable[T]) -> list[R]:
@@ -83,6 +84,11 @@ class LocalExecutor(Executor):
         if self._pool is not None:
             self._pool.shutdown()
             self._pool = None
+
+
+def _one_thread_per_worker() -> None:
+    """Give each pool worker one numba thread: the workers already fill the cores."""
+    os.environ["NUMBA_NUM_THREADS"] = "1"
 
 
 def run_with(executor: Executor, fn: Callable[[Any], Any], items: Iterable[Any]) -> list[Any]:

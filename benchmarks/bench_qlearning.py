@@ -7,13 +7,13 @@ streams and produce bit-identical Q tables (checked here), so the comparison is 
 
 * ``python``  -- the reference: a plain Python loop, one run after another;
 * ``numpy``   -- the lock-step loop, each step vectorised over the 50 agents;
-* ``numba``   -- the same lock-step loop compiled with numba (the default kernel).
+* ``numba``   -- the round loop compiled with numba (the default kernel), once on one thread
+  and once on all of numba's threads (one per core).
 
 For scale, Gymnasium's Taxi-v4 is stepped through ``gymnasium.Env.step`` with random actions.
-Figures are agent-steps per second of *process CPU time* (the kernels are single-threaded, so on
-an idle machine this equals wall time, and it does not count time stolen by other processes on a
-shared machine); ratios are against the Python loop measured in the same run (best of
-``repeats`` timings, after one warm-up call that also loads numba's compiled cache).
+Figures are agent-steps per second of wall time, including the refills of the uniform buffers;
+ratios are against the Python loop measured in the same run (best of ``repeats`` timings, after
+one warm-up call that also loads numba's compiled cache). Run it on a quiet machine.
 """
 
 from __future__ import annotations
@@ -38,13 +38,30 @@ def _run_kernel(name: str, mdp, runs: int, episodes: int, horizon: int, seed: in
     st.state[:] = [st.start_state(rng.random()) for rng in rngs]
     st.target[:] = episodes
     kernel = _kernels.KERNELS[name]
-    t0 = time.process_time()
+    t0 = time.perf_counter()
     while kernel(st):
         for k in np.flatnonzero((st.cursor == BLOCK_ROWS) & (st.episode < st.target)):
             rngs[k].random(out=st.U[k])
             st.cursor[k] = 0
-    seconds = time.process_time() - t0
+    seconds = time.perf_counter() - t0
     return seconds, int(st.out_steps.sum()), st.Q
+
+
+def numba_threads() -> int:
+    """numba's current thread count (1 without numba)."""
+    try:
+        import numba
+    except ImportError:
+        return 1
+    return numba.get_num_threads()
+
+
+def set_numba_threads(n: int) -> None:
+    try:
+        import numba
+    except ImportError:
+        return
+    numba.set_num_threads(n)
 
 
 def _best(name: str, mdp, runs: int, episodes: int, horizon: int, repeats: int
@@ -61,12 +78,12 @@ def _taxi_steps_per_second(n_steps: int = 100_000) -> float:
     rng = np.random.default_rng(0)
     actions = rng.integers(0, env.action_space.n, size=n_steps).tolist()
     env.reset(seed=0)
-    t0 = time.process_time()
+    t0 = time.perf_counter()
     for a in actions:
         _, _, terminated, truncated, _ = env.step(a)
         if terminated or truncated:
             env.reset()
-    seconds = time.process_time() - t0
+    seconds = time.perf_counter() - t0
     env.close()
     return n_steps / seconds
 
@@ -78,15 +95,20 @@ def main(runs: int = 50, episodes: int = 100, horizon: int = 200, repeats: int =
     _run_kernel("numba", mdp, 2, 1, 10)
     t_py, n_py, q_py = _best("python", mdp, runs, episodes, horizon, 1)
     t_np, n_np, q_np = _best("numpy", mdp, runs, episodes, horizon, repeats)
-    t_nb, n_nb, q_nb = _best("numba", mdp, runs, episodes, horizon, repeats)
-    assert n_py == n_np == n_nb == runs * episodes * horizon
-    identical = bool(np.array_equal(q_py, q_np) and np.array_equal(q_py, q_nb))
-    rates = {"python": n_py / t_py, "numpy": n_np / t_np, "numba": n_nb / t_nb}
+    threads = numba_threads()
+    set_numba_threads(1)
+    t_n1, n_n1, q_n1 = _best("numba", mdp, runs, episodes, horizon, 3 * repeats)
+    set_numba_threads(threads)
+    t_nb, n_nb, q_nb = _best("numba", mdp, runs, episodes, horizon, 3 * repeats)
+    assert n_py == n_np == n_n1 == n_nb == runs * episodes * horizon
+    identical = all(np.array_equal(q_py, q) for q in (q_np, q_n1, q_nb))
+    rates = {"python": n_py / t_py, "numpy": n_np / t_np, "numba-1-thread": n_n1 / t_n1,
+             f"numba-{threads}-threads": n_nb / t_nb}
     taxi = _taxi_steps_per_second()
     print(f"bench_qlearning: random_grid_mdp(10_000), K={runs} runs x {episodes} episodes x "
           f"{horizon} steps = {n_py:,} agent-steps per kernel")
     for name, rate in rates.items():
-        print(f"  {name:<7} {rate / 1e6:8.2f} M agent-steps/s   "
+        print(f"  {name:<16} {rate / 1e6:8.2f} M agent-steps/s   "
               f"x{rate / rates['python']:6.1f} the Python loop")
     print(f"  gymnasium Taxi-v4 Env.step: {taxi / 1e6:8.3f} M steps/s   "
           f"x{taxi / rates['python']:6.2f} the Python loop")
@@ -95,7 +117,8 @@ def main(runs: int = 50, episodes: int = 100, horizon: int = 200, repeats: int =
     return {
         "agent_steps": n_py,
         "steps_per_second": rates,
-        "ratio_numba_vs_python": rates["numba"] / rates["python"],
+        "ratio_numba_1_thread_vs_python": rates["numba-1-thread"] / rates["python"],
+        "ratio_numba_vs_python": rates[f"numba-{threads}-threads"] / rates["python"],
         "ratio_numpy_vs_python": rates["numpy"] / rates["python"],
         "taxi_gymnasium_steps_per_second": taxi,
         "identical": identical,

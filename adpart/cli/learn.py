@@ -23,7 +23,13 @@ from adpart.cli.common import (
     split_plugin_options,
 )
 from adpart.store.location import KBLocation
-from adpart.workflows import LearnRequest, record_learning, run_learning, write_learning_outputs
+from adpart.workflows import (
+    LearnRequest,
+    find_learning,
+    record_learning,
+    run_learning,
+    write_learning_outputs,
+)
 
 
 @click.command(name="learn", cls=plugin_options_command("learner"))
@@ -110,7 +116,9 @@ def learn_cmd(
 
     \b
     and records in the knowledge base (--kb, unless --no-store): the environment and task, one
-    policy per run (Q and greedy policy) and one run with the curve; their ids are printed.
+    policy per run (Q and greedy policy) and one run with the curve; their ids are printed. A run
+    is deterministic in its settings and seed, so one the knowledge base already holds is not
+    recorded twice.
     """
     reg = registry()
     spec = reg.get("learner", learner)
@@ -151,7 +159,11 @@ def learn_cmd(
         summary = outcome.summary()
         summary["files"] = write_learning_outputs(out, outcome)
         if not no_store and kb is not None:
-            summary["kb"] = record_learning(kb, outcome)
+            # Runs are deterministic in their request: one already recorded is not stored twice.
+            known = find_learning(kb, request)
+            summary["kb"] = (
+                {**known, "already_stored": True} if known else record_learning(kb, outcome)
+            )
     finally:
         if kb is not None:
             kb.close()
@@ -169,7 +181,8 @@ def learn_cmd(
     click.echo(f"wrote {out}/: curve.parquet policy.parquet curve.png summary.json")
     if "kb" in summary:
         ids = summary["kb"]
+        verb = "already stored" if ids.get("already_stored") else "stored"
         click.echo(
-            f"stored in {ids['location']}: {ids['run']}, {ids['task']}, policies "
+            f"{verb} in {ids['location']}: {ids['run']}, {ids['task']}, policies "
             f"{ids['policies'][0]} .. {ids['policies'][-1]}"
         )

@@ -3,7 +3,9 @@
 Every kernel advances K independent agents, each with its own Q table, visit counts and
 pre-drawn uniforms, until every agent has completed ``target[k]`` episodes (then it returns 0)
 or until some still-active agent has used up its uniforms (then it returns 1 and the driver in
-:mod:`adpart.learning.qlearning` refills that agent's row from its own generator).
+:mod:`adpart.learning.qlearning` refills that agent's row from its own generator). The K runs
+advance together in rounds: in each round every active agent takes its next steps, and no agent
+starts a new round before all have finished the last one.
 
 One agent-step (Watkins' Q-learning, dissertation eq. 2.4) consumes exactly four uniforms
 ``u = U[k, cursor[k]]``:
@@ -30,9 +32,12 @@ Because each agent reads only its own uniforms, a run's trajectory is independen
 in which agents are advanced and of how many other agents run beside it; the three kernels
 differ only in that order and in their speed:
 
-* ``numba``: the lock-step loop (all active agents take step t, then step t+1) compiled with
-  numba; the default (measured ~30x the Python loop at K = 50: benchmarks/bench_qlearning.py).
-* ``numpy``: the same lock-step loop with each step vectorised over the active agents; its
+* ``numba``: the round loop compiled with numba; in a round each active agent uses up the rest
+  of its buffer of uniforms (:data:`NUMBA_STRIDE`), and the agents of a round run in parallel
+  on numba's threads (``NUMBA_NUM_THREADS``; one per core by default). It is the default
+  (benchmarks/bench_qlearning.py prints its rate against the Python loop).
+* ``numpy``: strict lock-step (all active agents take step t, then step t+1), each step
+  vectorised over the active agents; its
   cost is dominated by ~30 numpy calls per step, so it gains only a few times over Python at
   K = 50.
 * ``python``: a plain per-agent Python loop; the reference implementation the tests compare
@@ -322,13 +327,123 @@ def _compile_numba() -> Callable[..., int]:
     import numba
 
     @numba.njit(cache=True, nogil=True)
-    def lockstep(keys, indptr, indices, R, terminal, adm_ptr, adm_idx, start_cdf, last_start,
-                 gamma, horizon, a_scale, a_rate, a_omega, a_floor, e_scale, e_rate, e_omega,
-                 e_floor, stride, Q, n_sa, n_s, state, episode, target, t_ep, ret, dret, gpow,
-                 alpha_ep, eps_ep, U, cursor, out_steps, out_ret, out_dret):  # pragma: no cover
-        K, S, A = Q.shape
+    def advance(k, stride, keys, indptr, indices, R, terminal, adm_ptr, adm_idx, start_cdf,
+                last_start, gamma, horizon, a_scale, a_rate, a_omega, a_floor, e_scale, e_rate,
+                e_omega, e_floor, a_pow, e_pow, Q, n_sa, n_s, state, episode, target, t_ep, ret,
+                dret, gpow, alpha_ep, eps_ep, U, cursor, out_steps, out_ret,
+                out_dret):  # pragma: no cover
+        """Agent ``k`` takes up to ``stride`` steps (it reads and writes only its own rows)."""
+        S, A = R.shape
         B = U.shape[1]
         n_start = start_cdf.shape[0]
+        n_pow = a_pow.shape[0]
+        for _ in range(stride):
+            if episode[k] >= target[k] or cursor[k] == B:
+                break
+            c = cursor[k]
+            u0 = U[k, c, 0]
+            u1 = U[k, c, 1]
+            u2 = U[k, c, 2]
+            u3 = U[k, c, 3]
+            cursor[k] = c + 1
+            s = state[k]
+            n_s[k, s] += 1
+            eps = eps_ep[k]
+            if e_omega != 0.0:
+                n = n_s[k, s]
+                eps = eps * (e_pow[n] if n < n_pow else float(n) ** -e_omega)
+            eps = max(e_floor, eps)
+            if u0 < eps:
+                lo = adm_ptr[s]
+                m = adm_ptr[s + 1] - lo
+                j = min(int(u1 * m), m - 1)
+                a = adm_idx[lo + j]
+            else:
+                best = Q[k, s, 0]  # one pass: the maximum, its first action, the ties
+                a = 0
+                t = 1
+                for b in range(1, A):
+                    q = Q[k, s, b]
+                    if q > best:
+                        best = q
+                        a = b
+                        t = 1
+                    elif q == best:
+                        t += 1
+                if t > 1:
+                    j = min(int(u1 * t), t - 1)
+                    for b in range(A):
+                        if Q[k, s, b] == best:
+                            if j == 0:
+                                a = b
+                                break
+                            j -= 1
+            row = a * S + s
+            x = row + u2
+            lo = indptr[row]
+            hi = indptr[row + 1]
+            left, right = lo, hi
+            while left < right:  # first position in the row with keys > x
+                mid = (left + right) >> 1
+                if keys[mid] <= x:
+                    left = mid + 1
+                else:
+                    right = mid
+            s2 = indices[min(left, hi - 1)]
+            r = R[s, a]
+            n_sa[k, s, a] += 1
+            alpha = alpha_ep[k]
+            if a_omega != 0.0:
+                n = n_sa[k, s, a]
+                alpha = alpha * (a_pow[n] if n < n_pow else float(n) ** -a_omega)
+            alpha = max(a_floor, alpha)
+            done = terminal[s2]
+            if done:
+                td_target = r
+            else:
+                best_next = Q[k, s2, 0]
+                for b in range(1, A):
+                    best_next = max(best_next, Q[k, s2, b])
+                td_target = r + gamma * best_next
+            old = Q[k, s, a]
+            Q[k, s, a] = old + alpha * (td_target - old)
+            ret[k] += r
+            dret[k] += gpow[k] * r
+            gpow[k] *= gamma
+            t_ep[k] += 1
+            if done or t_ep[k] == horizon:
+                ep = episode[k]
+                out_steps[k, ep] = t_ep[k]
+                out_ret[k, ep] = ret[k]
+                out_dret[k, ep] = dret[k]
+                ep += 1
+                episode[k] = ep
+                t_ep[k] = 0
+                ret[k] = 0.0
+                dret[k] = 0.0
+                gpow[k] = 1.0
+                left, right = 0, n_start
+                while left < right:
+                    mid = (left + right) >> 1
+                    if start_cdf[mid] <= u3:
+                        left = mid + 1
+                    else:
+                        right = mid
+                state[k] = min(left, last_start)
+                alpha_ep[k] = a_scale * a_rate ** float(ep)
+                eps_ep[k] = e_scale * e_rate ** float(ep)
+            else:
+                state[k] = s2
+
+
+    @numba.njit(cache=True, nogil=True, parallel=True)
+    def lockstep(keys, indptr, indices, R, terminal, adm_ptr, adm_idx, start_cdf, last_start,
+                 gamma, horizon, a_scale, a_rate, a_omega, a_floor, e_scale, e_rate, e_omega,
+                 e_floor, stride, a_pow, e_pow, Q, n_sa, n_s, state, episode, target, t_ep, ret,
+                 dret, gpow, alpha_ep, eps_ep, U, cursor, out_steps, out_ret,
+                 out_dret):  # pragma: no cover
+        K = Q.shape[0]
+        B = U.shape[1]
         while True:
             any_active = False
             for k in range(K):
@@ -338,116 +453,44 @@ def _compile_numba() -> Callable[..., int]:
                         return 1
             if not any_active:
                 return 0
-            for k in range(K):
-                for _ in range(stride):
-                    if episode[k] >= target[k] or cursor[k] == B:
-                        break
-                    c = cursor[k]
-                    u0 = U[k, c, 0]
-                    u1 = U[k, c, 1]
-                    u2 = U[k, c, 2]
-                    u3 = U[k, c, 3]
-                    cursor[k] = c + 1
-                    s = state[k]
-                    n_s[k, s] += 1
-                    eps = eps_ep[k]
-                    if e_omega != 0.0:
-                        eps = eps * float(n_s[k, s]) ** -e_omega
-                    eps = max(e_floor, eps)
-                    if u0 < eps:
-                        lo = adm_ptr[s]
-                        m = adm_ptr[s + 1] - lo
-                        j = min(int(u1 * m), m - 1)
-                        a = adm_idx[lo + j]
-                    else:
-                        best = Q[k, s, 0]
-                        for b in range(1, A):
-                            best = max(best, Q[k, s, b])
-                        t = 0
-                        for b in range(A):
-                            if Q[k, s, b] == best:
-                                t += 1
-                        j = min(int(u1 * t), t - 1)
-                        a = -1
-                        for b in range(A):
-                            if Q[k, s, b] == best:
-                                if j == 0:
-                                    a = b
-                                    break
-                                j -= 1
-                    row = a * S + s
-                    x = row + u2
-                    lo = indptr[row]
-                    hi = indptr[row + 1]
-                    left, right = lo, hi
-                    while left < right:  # first position in the row with keys > x
-                        mid = (left + right) >> 1
-                        if keys[mid] <= x:
-                            left = mid + 1
-                        else:
-                            right = mid
-                    s2 = indices[min(left, hi - 1)]
-                    r = R[s, a]
-                    n_sa[k, s, a] += 1
-                    alpha = alpha_ep[k]
-                    if a_omega != 0.0:
-                        alpha = alpha * float(n_sa[k, s, a]) ** -a_omega
-                    alpha = max(a_floor, alpha)
-                    done = terminal[s2]
-                    if done:
-                        td_target = r
-                    else:
-                        best_next = Q[k, s2, 0]
-                        for b in range(1, A):
-                            best_next = max(best_next, Q[k, s2, b])
-                        td_target = r + gamma * best_next
-                    old = Q[k, s, a]
-                    Q[k, s, a] = old + alpha * (td_target - old)
-                    ret[k] += r
-                    dret[k] += gpow[k] * r
-                    gpow[k] *= gamma
-                    t_ep[k] += 1
-                    if done or t_ep[k] == horizon:
-                        ep = episode[k]
-                        out_steps[k, ep] = t_ep[k]
-                        out_ret[k, ep] = ret[k]
-                        out_dret[k, ep] = dret[k]
-                        ep += 1
-                        episode[k] = ep
-                        t_ep[k] = 0
-                        ret[k] = 0.0
-                        dret[k] = 0.0
-                        gpow[k] = 1.0
-                        left, right = 0, n_start
-                        while left < right:
-                            mid = (left + right) >> 1
-                            if start_cdf[mid] <= u3:
-                                left = mid + 1
-                            else:
-                                right = mid
-                        state[k] = min(left, last_start)
-                        alpha_ep[k] = a_scale * a_rate ** float(ep)
-                        eps_ep[k] = e_scale * e_rate ** float(ep)
-                    else:
-                        state[k] = s2
+            for k in numba.prange(K):
+                advance(k, stride, keys, indptr, indices, R, terminal, adm_ptr, adm_idx,
+                        start_cdf, last_start, gamma, horizon, a_scale, a_rate, a_omega, a_floor,
+                        e_scale, e_rate, e_omega, e_floor, a_pow, e_pow, Q, n_sa, n_s, state,
+                        episode, target, t_ep, ret, dret, gpow, alpha_ep, eps_ep, U, cursor,
+                        out_steps, out_ret, out_dret)
 
     return lockstep
 
 
-def numba_kernel(st: LockStepState, stride: int = 1) -> int:
+#: Visit counts below this read ``n**-omega`` from a table (32 KiB, stays in L1/L2 cache)
+#: instead of calling ``pow`` -- a third of the step's cost with visit-count schedules.
+NUMBA_POW_TABLE = 4096
+
+#: Steps each agent takes per round in the numba kernel. A whole buffer (the default) keeps one
+#: agent's tables in cache for its whole stretch and needs one thread synchronisation per
+#: buffer; measured at K = 50 on a 10^4-state grid, one thread: 7.8 M agent-steps/s with 16
+#: steps a round, 10.1 M with a whole buffer.
+NUMBA_STRIDE = 1 << 30
+
+
+def numba_kernel(st: LockStepState, stride: int = NUMBA_STRIDE) -> int:
     """Lock-step loop compiled with numba (compiled once per process, cached on disk).
 
-    In each round every active agent takes up to ``stride`` steps before the next agent moves:
-    ``stride = 1`` is strict lock-step; a larger stride keeps one agent's Q table in cache for
-    longer. Results do not depend on it (each run reads only its own uniforms).
+    In each round every active agent takes up to ``stride`` steps, the agents spread over
+    numba's threads; ``stride = 1`` is strict lock-step. Results depend neither on the stride
+    nor on the number of threads: each run reads only its own uniforms and writes only its own
+    rows.
     """
     global _NUMBA_KERNEL
     if _NUMBA_KERNEL is None:
         _NUMBA_KERNEL = _compile_numba()
+    a_pow = _pow_table(st.cache, ("visits", -st.alpha[2]), None, -st.alpha[2], NUMBA_POW_TABLE)
+    e_pow = _pow_table(st.cache, ("visits", -st.eps[2]), None, -st.eps[2], NUMBA_POW_TABLE)
     return int(_NUMBA_KERNEL(
         st.keys, st.indptr, st.indices, st.R, st.terminal, st.adm_ptr, st.adm_idx, st.start_cdf,
-        st.last_start, st.gamma, st.horizon, *st.alpha, *st.eps, stride, st.Q, st.n_sa, st.n_s,
-        st.state,
+        st.last_start, st.gamma, st.horizon, *st.alpha, *st.eps, stride,
+        a_pow[:NUMBA_POW_TABLE], e_pow[:NUMBA_POW_TABLE], st.Q, st.n_sa, st.n_s, st.state,
         st.episode, st.target, st.t_ep, st.ret, st.dret, st.gpow, st.alpha_ep, st.eps_ep, st.U,
         st.cursor, st.out_steps, st.out_ret, st.out_dret,
     ))

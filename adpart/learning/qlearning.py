@@ -49,8 +49,10 @@ from adpart.mdp.solvers import greedy_policy
 
 __all__ = ["QLearningResult", "default_kernel", "q_learning"]
 
-#: Rows of uniforms drawn per refill of one run's buffer (4 uniforms a row).
-BLOCK_ROWS = 2048
+#: Rows of uniforms drawn per refill of one run's buffer (4 uniforms a row, 256 KiB a run).
+#: Results do not depend on it (a run's stream is consumed in order); larger buffers mean fewer
+#: rounds of the numba kernel (measured 10-15% faster at K = 50 than 2,048 rows).
+BLOCK_ROWS = 8192
 
 
 def default_kernel() -> str:

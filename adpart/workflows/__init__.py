@@ -7,6 +7,7 @@ knowledge base; the CLI only parses arguments and prints.
 from adpart.workflows.learning import (
     LearnOutcome,
     LearnRequest,
+    find_learning,
     record_learning,
     run_learning,
     write_learning_outputs,
@@ -16,6 +17,7 @@ from adpart.workflows.resolve import resolve_domain
 __all__ = [
     "LearnOutcome",
     "LearnRequest",
+    "find_learning",
     "record_learning",
     "resolve_domain",
     "run_learning",

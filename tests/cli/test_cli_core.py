@@ -330,6 +330,28 @@ def test_learn_records_policies_and_run_in_the_knowledge_base(tmp_path):
     assert json.loads(again.output)["kb"]["task"] == ids["task"]  # same task record reused
 
 
+def test_learn_does_not_record_the_same_request_twice(tmp_path):
+    kb_dir = tmp_path / "kb"
+    args = ["learn", "two-rooms", "--runs", "2", "--episodes", "10", "--seed", "3",
+            "--kb", str(kb_dir), "--json"]
+    first = json.loads(run(*args, "--out", str(tmp_path / "a")).output)["kb"]
+    second = json.loads(run(*args, "--out", str(tmp_path / "b")).output)["kb"]
+    assert second.pop("already_stored") is True and "already_stored" not in first
+    assert second == first
+    other = json.loads(run(*args[:-1], "--seed", "4", "--json", "--out", str(tmp_path / "c"))
+                       .output)["kb"]
+    assert other["run"] != first["run"]  # another seed is another run
+    text = run(*args[:-1], "--out", str(tmp_path / "d")).output
+    assert f"already stored in {kb_dir}: {first['run']}" in text
+    from adpart.store import KnowledgeBase
+
+    kb = KnowledgeBase.open(str(kb_dir))
+    try:
+        assert len(kb.records("run")) == 2
+    finally:
+        kb.close()
+
+
 def test_learn_no_store_leaves_the_knowledge_base_alone(tmp_path):
     kb_dir = tmp_path / "kb"
     result = run(

@@ -138,6 +138,42 @@ def test_kernels_are_bit_identical(kernel):
         assert np.array_equal(res.curve[col], ref.curve[col], equal_nan=True), col
 
 
+def test_numba_kernel_past_its_power_table_matches_python():
+    # Visit counts beyond NUMBA_POW_TABLE switch the numba kernel from table look-ups to pow();
+    # both must agree with the Python kernel bit for bit.
+    from adpart.learning._kernels import NUMBA_POW_TABLE
+
+    mdp = random_mdp(3, 2, density=0.6, seed=1)
+    kw = {"runs": 2, "episodes": 3, "seed": 5, "alpha": "1/n^0.8", "epsilon": "0.5/n^0.3",
+          "max_steps_per_episode": 6 * NUMBA_POW_TABLE, "eval_every": 3}
+    ref = q_learning(mdp, kernel="python", **kw)
+    res = q_learning(mdp, kernel="numba", **kw)
+    assert ref.visits.max() > NUMBA_POW_TABLE
+    assert np.array_equal(res.Q, ref.Q)
+
+
+@pytest.mark.parametrize(("threads", "stride"), [(1, 1), (1, 7), (2, 1 << 30)])
+def test_numba_kernel_does_not_depend_on_threads_or_stride(threads, stride, monkeypatch):
+    numba = pytest.importorskip("numba")
+    from adpart.learning import _kernels
+
+    mdp = random_mdp(12, 3, density=0.3, seed=5)
+    mdp = mdp.with_rewards(mdp.R, terminal=np.arange(12) == 11)
+    kw = {"runs": 5, "episodes": 40, "seed": 3, "alpha": "1/n^0.8", "epsilon": 0.2,
+          "max_steps_per_episode": 50, "eval_every": 40}
+    ref = q_learning(mdp, kernel="python", **kw)
+    monkeypatch.setitem(_kernels.KERNELS, "numba",
+                        lambda st: _kernels.numba_kernel(st, stride=stride))
+    before = numba.get_num_threads()
+    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    try:
+        res = q_learning(mdp, kernel="numba", **kw)
+    finally:
+        numba.set_num_threads(before)
+    assert np.array_equal(res.Q, ref.Q)
+    assert np.array_equal(res.curve.matrix("steps"), ref.curve.matrix("steps"))
+
+
 def test_run_does_not_depend_on_number_of_runs_or_eval_blocks(grid_mdp):
     kw = {"episodes": 30, "seed": 4, "alpha": 0.3, "epsilon": 0.2}
     many = q_learning(grid_mdp, runs=5, eval_every=3, **kw)
