@@ -113,7 +113,7 @@ def _initial_state(
     q_init: float, mu: np.ndarray,
 ) -> _kernels.LockStepState:
     S, A = mdp.n_states, mdp.n_actions
-    keys = mdp.sampler_keys  # the same keys FiniteMDP.sample_next searches
+    keys, indptr, indices = mdp.sampler_arrays  # the keys FiniteMDP.sample_next searches
     adm = mdp.admissible
     rows, cols = np.nonzero(adm)
     adm_ptr = np.zeros(S + 1, dtype=np.int64)
@@ -121,9 +121,9 @@ def _initial_state(
     start_cdf = np.cumsum(mu)
     Q = np.where(adm, float(q_init), -np.inf)
     st = _kernels.LockStepState(
-        keys=np.ascontiguousarray(keys, dtype=np.float64),
-        indptr=mdp.P.indptr.astype(np.int64),
-        indices=mdp.P.indices.astype(np.int64),
+        keys=keys,
+        indptr=indptr,
+        indices=indices,
         R=np.ascontiguousarray(mdp.R, dtype=np.float64),
         terminal=np.ascontiguousarray(mdp.terminal, dtype=bool),
         adm_ptr=adm_ptr,

@@ -345,6 +345,19 @@ class FiniteMDP:
         keys.setflags(write=False)
         return keys
 
+    @cached_property
+    def sampler_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(sampler_keys, indptr, indices)`` with int64 indices: what compiled samplers read.
+
+        Compiled kernels (Q-learning, the subgoal walkers) search row ``a*S + s`` of ``keys``
+        between ``indptr[row]`` and ``indptr[row + 1]`` for the first key above ``row + u``.
+        """
+        indptr = self.P.indptr.astype(np.int64)
+        indices = self.P.indices.astype(np.int64)
+        for arr in (indptr, indices):
+            arr.setflags(write=False)
+        return self.sampler_keys, indptr, indices
+
     def sample_next(
         self, states: np.ndarray, actions: np.ndarray, rng: np.random.Generator
     ) -> np.ndarray:

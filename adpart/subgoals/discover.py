@@ -21,6 +21,7 @@ from adpart.subgoals.montecarlo import (
     arrival_counts,
     bernstein_epsilon,
     bernstein_samples,
+    sample_arrivals,
     sample_trajectories,
 )
 from adpart.subgoals.policy import (
@@ -34,6 +35,7 @@ from adpart.subgoals.ratios import (
     RatioSamples,
     check_level,
     gradient_ratios,
+    interior_triples,
     samples_per_state,
     t_test_threshold,
 )
@@ -160,6 +162,7 @@ def discover_monte_carlo(
 
     ratio_paths = sample_trajectories(mdp, pol, trajectories, rng, horizon, checked=True)
     arrivals = arrival_counts(ratio_paths, S)
+    triples = interior_triples(ratio_paths)
     n_samples = trajectories
     truncated = int(ratio_paths.truncated.sum())
     history: list[dict[str, object]] = []
@@ -168,12 +171,12 @@ def discover_monte_carlo(
     while True:
         size = min(batch, max_samples - n_samples) if n_samples < max_samples else 0
         if size > 0:
-            traj = sample_trajectories(mdp, pol, size, rng, horizon, checked=True)
-            arrivals += arrival_counts(traj, S)
-            truncated += int(traj.truncated.sum())
+            batch_arrivals, cut = sample_arrivals(mdp, pol, size, rng, horizon, checked=True)
+            arrivals += batch_arrivals
+            truncated += cut
             n_samples += size
         counts = S * arrivals / n_samples
-        rs = gradient_ratios(counts, ratio_paths)
+        rs = gradient_ratios(counts, triples)
         mu, nu, sd, n_ps = _threshold(rs, S, p, n)
         passed = rs.ratios > mu + 2.0 * epsilon / np.maximum(1.0, rs.next_delta)
         subgoals = np.unique(rs.states[passed])

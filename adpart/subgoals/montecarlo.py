@@ -1,9 +1,9 @@
 """Monte Carlo count metric (definition 4.4) and the Bernstein sample bound (eqs. 4.3, thm 4.2).
 
-Trajectories are sampled under the policy from uniform start states, all of them advanced
-together (one :meth:`FiniteMDP.sample_next` call per time step for every walker still running),
-until they arrive at a terminal state or reach the horizon. A trajectory's count of state ``s``
-is its number of arrivals at ``s`` before its first self-loop step, which makes the estimator
+Trajectories are sampled under the policy from uniform start states by compiled walkers
+(:mod:`adpart.subgoals._walkers`), until they arrive at a terminal state or reach the horizon.
+A trajectory's count of state ``s`` is its number of arrivals at ``s`` before its first
+self-loop step, which makes the estimator
 ``C_H(s) = |S| * mean arrivals`` unbiased for the exhaustive ``C*`` of eq. 4.1 (whose sum over
 ``s' != s`` does not count paths through a self-loop; see :mod:`adpart.subgoals.count`).
 """
@@ -17,7 +17,8 @@ import numpy as np
 
 from adpart.errors import TaskError
 from adpart.mdp.model import FiniteMDP
-from adpart.subgoals.policy import check_mdp, check_policy, sample_actions
+from adpart.subgoals._walkers import count_arrivals, walk_paths
+from adpart.subgoals.policy import check_mdp, check_policy
 
 
 @dataclass(frozen=True, eq=False)
@@ -48,7 +49,7 @@ def sample_trajectories(
     *,
     checked: bool = False,
 ) -> Trajectories:
-    """Sample ``n`` trajectories under ``policy`` from uniform start states, vectorised.
+    """Sample ``n`` trajectories under ``policy`` from uniform start states.
 
     Args:
         mdp: the MDP; an episode ends on arrival at a terminal state.
@@ -60,30 +61,60 @@ def sample_trajectories(
     """
     mdp = check_mdp(mdp)
     pol = policy if checked else check_policy(mdp, policy)
+    _check_count(n)
+    H = _horizon(mdp, horizon)
+    start = rng.integers(0, mdp.n_states, size=int(n))
+    columns, truncated = walk_paths(*_walker_args(mdp, pol), start, H, rng)
+    paths = np.ascontiguousarray(columns.T)
+    lengths = (paths >= 0).sum(axis=1)
+    return Trajectories(paths, lengths, truncated)
+
+
+def sample_arrivals(
+    mdp: FiniteMDP,
+    policy: np.ndarray,
+    n: int,
+    rng: np.random.Generator,
+    horizon: int | None = None,
+    *,
+    checked: bool = False,
+) -> tuple[np.ndarray, int]:
+    """Arrival counts of ``n`` fresh trajectories, without keeping the trajectories.
+
+    Returns ``(arrivals, cut)``: ``(S,)`` float64 arrivals of each state before each
+    trajectory's first self-loop step (so ``|S| * arrivals / n`` is ``C_H`` of definition 4.4,
+    the same estimator as :func:`arrival_counts` of :func:`sample_trajectories`), and the number
+    of trajectories the horizon cut while they were still counting. A trajectory is not walked
+    past its first self-loop step, whose later arrivals would not count.
+    """
+    mdp = check_mdp(mdp)
+    pol = policy if checked else check_policy(mdp, policy)
+    _check_count(n)
+    H = _horizon(mdp, horizon)
+    start = rng.integers(0, mdp.n_states, size=int(n))
+    arrivals = np.zeros(mdp.n_states)
+    cut = count_arrivals(*_walker_args(mdp, pol), start, H, rng, arrivals)
+    return arrivals, int(cut)
+
+
+def _check_count(n: object) -> None:
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
         raise TaskError(f"number of trajectories n = {n!r} must be an integer >= 1")
-    S = mdp.n_states
-    H = S if horizon is None else int(horizon)
+
+
+def _horizon(mdp: FiniteMDP, horizon: int | None) -> int:
+    H = mdp.n_states if horizon is None else int(horizon)
     if H < 1:
         raise TaskError(f"horizon = {horizon!r} must be >= 1")
-    state = rng.integers(0, S, size=int(n))
-    columns = [state.copy()]
-    running = np.flatnonzero(~mdp.terminal[state])
-    for _ in range(H):
-        if running.size == 0:
-            break
-        cur = state[running]
-        nxt = mdp.sample_next(cur, sample_actions(pol, cur, rng), rng)
-        state[running] = nxt
-        col = np.full(int(n), -1, dtype=np.int64)
-        col[running] = nxt
-        columns.append(col)
-        running = running[~mdp.terminal[nxt]]
-    paths = np.stack(columns, axis=1)
-    lengths = (paths >= 0).sum(axis=1)
-    truncated = np.zeros(int(n), dtype=bool)
-    truncated[running] = True
-    return Trajectories(paths, lengths, truncated)
+    return H
+
+
+def _walker_args(mdp: FiniteMDP, pol: np.ndarray) -> tuple:
+    """The model and policy arguments of the compiled walkers (:mod:`._walkers`)."""
+    stochastic = pol.ndim == 2
+    actions = np.zeros(1, dtype=np.int64) if stochastic else pol
+    cdf = np.cumsum(pol, axis=1) if stochastic else np.zeros((1, 1))
+    return (*mdp.sampler_arrays, mdp.terminal, actions, cdf, stochastic)
 
 
 def arrival_counts(traj: Trajectories, n_states: int) -> np.ndarray:

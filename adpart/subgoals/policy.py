@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse import csgraph
 
 from adpart.errors import ModelError, TaskError
 from adpart.mdp.model import FiniteMDP
+from adpart.subgoals._walkers import reach_backwards
 
 #: Tolerance on the row sums of a stochastic policy.
 POLICY_ATOL = 1e-8
@@ -107,10 +107,14 @@ def walker_matrix(mdp: FiniteMDP, policy: np.ndarray) -> sp.csr_array:
     stops on arrival at a terminal state and *its path stops counting* on a self-loop step (a path
     through a self-loop is not counted by eq. 4.1).
     """
-    W = policy_matrix(mdp, policy).tocoo()
-    keep = (W.row != W.col) & ~mdp.terminal[W.row] & (W.data > 0)
+    W = policy_matrix(mdp, policy)
     S = mdp.n_states
-    return sp.csr_array((W.data[keep], (W.row[keep], W.col[keep])), shape=(S, S))
+    rows = np.repeat(np.arange(S), np.diff(W.indptr))
+    drop = (W.indices == rows) | mdp.terminal[rows] | ~(W.data > 0)
+    walker = sp.csr_array((np.where(drop, 0.0, W.data), W.indices.copy(), W.indptr.copy()),
+                          shape=(S, S))
+    walker.eliminate_zeros()
+    return walker
 
 
 def trapped_states(walker: sp.csr_array, atol: float = 1e-12) -> np.ndarray:
@@ -119,18 +123,13 @@ def trapped_states(walker: sp.csr_array, atol: float = 1e-12) -> np.ndarray:
     A state *leaks* when its row of ``P_pi^0`` sums to less than one (terminal, or a self-loop
     possible). States that cannot reach a leaking state form closed cycles of the policy that
     never reach a terminal state; the count metric of eq. 4.1 then grows with its horizon.
-    Found exactly by one breadth-first search on the reversed graph from a virtual sink.
+    Found exactly by one breadth-first search backwards from all leaking states at once.
     """
-    S = walker.shape[0]
     leak = 1.0 - np.asarray(walker.sum(axis=1)).ravel() > atol
-    rev = walker.T.tocoo()
-    rows = np.concatenate([rev.row, np.full(int(leak.sum()), S)])
-    cols = np.concatenate([rev.col, np.flatnonzero(leak)])
-    graph = sp.csr_array((np.ones(rows.size), (rows, cols)), shape=(S + 1, S + 1))
-    reach = csgraph.breadth_first_order(graph, S, directed=True, return_predecessors=False)
-    ok = np.zeros(S + 1, dtype=bool)
-    ok[reach] = True
-    return np.flatnonzero(~ok[:S])
+    into = walker.tocsc()  # column j lists the states that step into j
+    reached = leak.copy()
+    reach_backwards(into.indptr.astype(np.int64), into.indices.astype(np.int64), reached)
+    return np.flatnonzero(~reached)
 
 
 def loop_error(trapped: np.ndarray, what: str) -> TaskError:

@@ -13,6 +13,7 @@ has no ratio and is left to reward variation, section 4.3.1). The normalised for
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from scipy import stats
@@ -59,18 +60,33 @@ class RatioSamples:
         return float(self.ratios.mean()), float(self.ratios.std(ddof=1))
 
 
-def gradient_ratios(counts: np.ndarray, traj: Trajectories) -> RatioSamples:
-    """All gradient ratio samples of ``counts`` along the sampled trajectories (vectorised)."""
+def interior_triples(traj: Trajectories) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(prev, cur, nxt)``: every interior position ``s_{t-1}, s_t, s_{t+1}`` of the paths.
+
+    Self-loop repeats are dropped first (the path does not move). The triples depend only on
+    the paths, so a caller that re-scores the same paths under changing counts (the Monte Carlo
+    detector, once per batch) computes them once.
+    """
     p = traj.paths
     keep = p >= 0
-    keep[:, 1:] &= p[:, 1:] != p[:, :-1]  # drop self-loop repeats: the path does not move
+    keep[:, 1:] &= p[:, 1:] != p[:, :-1]
     flat = p[keep]
     row = np.broadcast_to(np.arange(p.shape[0])[:, None], p.shape)[keep]
     if flat.size < 3:
-        empty = np.zeros(0)
-        return RatioSamples(np.zeros(0, dtype=np.int64), empty, empty)
+        empty = np.zeros(0, dtype=np.int64)
+        return empty, empty, empty
     interior = row[:-2] == row[2:]
-    prev, cur, nxt = flat[:-2][interior], flat[1:-1][interior], flat[2:][interior]
+    return flat[:-2][interior], flat[1:-1][interior], flat[2:][interior]
+
+
+def gradient_ratios(
+    counts: np.ndarray, traj: Trajectories | tuple[np.ndarray, np.ndarray, np.ndarray]
+) -> RatioSamples:
+    """All gradient ratio samples of ``counts`` along the sampled trajectories (vectorised).
+
+    ``traj`` is the :class:`Trajectories` or their :func:`interior_triples`.
+    """
+    prev, cur, nxt = interior_triples(traj) if isinstance(traj, Trajectories) else traj
     c = np.asarray(counts, dtype=np.float64)
     d_t = c[cur] - c[prev]
     d_next = c[nxt] - c[cur]
@@ -86,6 +102,11 @@ def check_level(p: float) -> float:
     return float(p)
 
 
+@lru_cache(maxsize=256)
+def _t_quantile(q: float, dof: int) -> float:
+    return float(stats.t.ppf(q, dof))
+
+
 def t_test_threshold(mean: float, sd: float, n: int, p: float = 0.025) -> float:
     """The sample mean ``rho`` a state needs to pass the one-sided t-test of eq. 4.2 at level p.
 
@@ -96,7 +117,7 @@ def t_test_threshold(mean: float, sd: float, n: int, p: float = 0.025) -> float:
         raise TaskError(f"samples per state N = {n!r} must be an integer >= 2 for a t-test")
     if not (np.isfinite(mean) and np.isfinite(sd) and sd >= 0):
         raise TaskError(f"ratio mean {mean!r} and sd {sd!r} must be finite, sd >= 0")
-    return float(mean + stats.t.ppf(1.0 - p, int(n) - 1) * sd / np.sqrt(int(n)))
+    return float(mean + _t_quantile(1.0 - p, int(n) - 1) * sd / np.sqrt(int(n)))
 
 
 def samples_per_state(samples: RatioSamples, n_states: int) -> int:

@@ -1,0 +1,157 @@
+"""Compiled walkers for the Monte Carlo count metric (definition 4.4) and the ratio paths.
+
+Also :func:`reach_backwards`, the search behind ``trapped_states``. The two walkers both draw
+from the caller's ``numpy.random.Generator`` (numba advances the same bit generator, so a seed
+gives the same draws as numpy would):
+
+* :func:`walk_paths` records whole trajectories. It consumes the generator exactly as the
+  vectorised numpy walker did (time step by time step; per step first one action uniform per
+  running walker for a stochastic policy, then one successor uniform per running walker, walkers
+  in index order), so the ratio paths of a seed are the same as before the walker was compiled.
+* :func:`count_arrivals` only adds up arrivals, one trajectory after another, and stops a
+  trajectory at its first self-loop step: later arrivals do not count (eq. 4.1 sums over paths
+  without self-loops), so walking on would spend random numbers and time on nothing.
+
+Successors are drawn as in :meth:`adpart.mdp.model.FiniteMDP.sample_next`: the first entry of
+row ``a*S + s`` whose row-offset cumulative probability (``FiniteMDP.sampler_keys``) exceeds
+``a*S + s + u``, clipped to the row's last entry.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+
+@numba.njit(cache=True, nogil=True)
+def _action(s, u, actions, cdf, stochastic):  # pragma: no cover - compiled
+    """The policy's action in ``s``: a lookup, or the ``u``-th quantile of its distribution.
+
+    The stochastic rule is ``sample_actions``'s: the number of cumulative probabilities
+    ``<= u * total``, at most ``A - 1``.
+    """
+    if not stochastic:
+        return actions[s]
+    A = cdf.shape[1]
+    x = u * cdf[s, A - 1]
+    a = 0
+    for b in range(A):
+        if x >= cdf[s, b]:
+            a += 1
+    return min(a, A - 1)
+
+
+@numba.njit(cache=True, nogil=True)
+def _successor(row, u, keys, indptr, indices):  # pragma: no cover - compiled
+    x = row + u
+    lo = indptr[row]
+    hi = indptr[row + 1]
+    left, right = lo, hi
+    while left < right:  # first position in the row with keys > x
+        mid = (left + right) >> 1
+        if keys[mid] <= x:
+            left = mid + 1
+        else:
+            right = mid
+    return indices[min(left, hi - 1)]
+
+
+@numba.njit(cache=True, nogil=True)
+def walk_paths(keys, indptr, indices, terminal, actions, cdf, stochastic, start, horizon,
+               gen):  # pragma: no cover - compiled
+    """Trajectories from ``start`` for at most ``horizon`` steps, time step by time step.
+
+    Returns ``(columns, truncated)``: ``columns`` is ``(T + 1, n)`` with the states at each time
+    (-1 once a walker has stopped), ``truncated`` marks walkers still running after ``horizon``.
+    """
+    n = start.shape[0]
+    S = terminal.shape[0]
+    state = start.copy()
+    running = np.empty(n, dtype=np.int64)
+    m = 0
+    for i in range(n):
+        if not terminal[state[i]]:
+            running[m] = i
+            m += 1
+    cap = 64
+    cols = np.full((cap, n), -1, dtype=np.int64)
+    cols[0, :] = state
+    act = np.empty(n, dtype=np.int64)
+    t = 0
+    while t < horizon and m > 0:
+        for j in range(m):
+            s = state[running[j]]
+            act[j] = _action(s, gen.random() if stochastic else 0.0, actions, cdf, stochastic)
+        if t + 2 > cap:
+            grown = np.full((2 * cap, n), -1, dtype=np.int64)
+            grown[:cap] = cols
+            cols = grown
+            cap *= 2
+        kept = 0
+        for j in range(m):
+            i = running[j]
+            s2 = _successor(act[j] * S + state[i], gen.random(), keys, indptr, indices)
+            state[i] = s2
+            cols[t + 1, i] = s2
+            if not terminal[s2]:
+                running[kept] = i
+                kept += 1
+        m = kept
+        t += 1
+    truncated = np.zeros(n, dtype=np.bool_)
+    for j in range(m):
+        truncated[running[j]] = True
+    return cols[: t + 1], truncated
+
+
+@numba.njit(cache=True, nogil=True)
+def count_arrivals(keys, indptr, indices, terminal, actions, cdf, stochastic, start, horizon,
+                   gen, arrivals):  # pragma: no cover - compiled
+    """Add each trajectory's arrivals before its first self-loop step to ``arrivals``.
+
+    Returns the number of trajectories the horizon cut while they were still counting.
+    """
+    S = terminal.shape[0]
+    cut = 0
+    for i in range(start.shape[0]):
+        s = start[i]
+        if terminal[s]:
+            continue
+        t = 0
+        while True:
+            if t == horizon:
+                cut += 1
+                break
+            a = _action(s, gen.random() if stochastic else 0.0, actions, cdf, stochastic)
+            s2 = _successor(a * S + s, gen.random(), keys, indptr, indices)
+            if s2 == s:
+                break
+            arrivals[s2] += 1.0
+            if terminal[s2]:
+                break
+            s = s2
+            t += 1
+    return cut
+
+
+@numba.njit(cache=True, nogil=True)
+def reach_backwards(indptr, indices, reached):  # pragma: no cover - compiled
+    """Mark every state with a path into a marked one (breadth-first from all marked at once).
+
+    ``indptr``/``indices`` list, for each state ``j``, the states with an edge into ``j`` (the
+    CSC form of the walker matrix); ``reached`` is updated in place.
+    """
+    queue = np.flatnonzero(reached)
+    order = np.empty(reached.shape[0], dtype=np.int64)
+    order[: queue.shape[0]] = queue
+    head = 0
+    tail = queue.shape[0]
+    while head < tail:
+        j = order[head]
+        head += 1
+        for k in range(indptr[j], indptr[j + 1]):
+            i = indices[k]
+            if not reached[i]:
+                reached[i] = True
+                order[tail] = i
+                tail += 1
