@@ -68,7 +68,7 @@ def main() -> None:
         t0 = time.perf_counter()
         mdp, policy = goal_grid(n)
         print(f"  (grid {n:,}: model and policy in {time.perf_counter() - t0:.1f} s)")
-        run(f"grid {n:,}", mdp, policy, 1)
+        run(f"grid {n:,}", mdp, policy, 3 if n <= 10**5 else 1)
 
 
 if __name__ == "__main__":
