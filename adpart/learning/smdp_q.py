@@ -187,9 +187,9 @@ def make_state(
     flat_shape = (K, S, A) if track_flat else (K, 1, A)
     Qf = np.where(mdp.admissible, float(q_init), -np.inf) if track_flat else np.zeros((1, A))
     st = kernels.SMDPLockStepState(
-        keys=np.ascontiguousarray(mdp.sampler_keys, dtype=np.float64),
-        indptr=mdp.P.indptr.astype(np.int64),
-        indices=mdp.P.indices.astype(np.int64),
+        keys=mdp.sampler_arrays[0],
+        indptr=mdp.sampler_arrays[1],
+        indices=mdp.sampler_arrays[2],
         R=np.ascontiguousarray(mdp.R, dtype=np.float64),
         terminal=np.ascontiguousarray(mdp.terminal, dtype=bool),
         start_cdf=np.cumsum(mu),
