@@ -1,4 +1,4 @@
-"""Built-in learners: flat Q-learning in lock-step and the value-iteration reference."""
+"""Built-in learners: flat Q-learning (K runs at once) and the value-iteration reference."""
 
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ class QLearner:
     """Flat epsilon-greedy Q-learning, K runs advanced together (see docs/learning.md)."""
 
     name = "q-learning"
-    description = "flat epsilon-greedy Q-learning, all runs advanced in lock-step"
+    description = "flat epsilon-greedy Q-learning, all runs advanced together (numba, threaded)"
     params = (
         ALPHA,
         EPSILON,
