@@ -14,7 +14,13 @@ from adpart.errors import TaskError
 from adpart.mdp.model import FiniteMDP
 from adpart.plugins.registry import Param
 from adpart.subgoals.discover import discover_exhaustive, discover_monte_carlo
-from adpart.subgoals.literature import betweenness, top_states, transition_graph, visit_frequency
+from adpart.subgoals.literature import (
+    betweenness,
+    local_maxima,
+    top_states,
+    transition_graph,
+    visit_frequency,
+)
 from adpart.subgoals.policy import check_mdp, check_policy
 from adpart.subgoals.result import SubgoalResult
 from adpart.subgoals.reward import with_reward_variation
@@ -112,16 +118,29 @@ class RewardVariation:
         return SubgoalResult(out.subgoals, out.scores, out.threshold, stats, params, self.name)
 
 
+#: How the betweenness detector turns scores into subgoals.
+SELECT_RULES = ("local-maxima", "top")
+
+
 class Betweenness:
-    """Betweenness centrality of the policy-independent transition graph (Simsek & Barto 2008)."""
+    """Betweenness centrality of the policy-independent transition graph (Simsek & Barto 2008).
+
+    Subgoals are the local maxima of betweenness (``select="local-maxima"``, the paper's rule:
+    more central than every neighbour) or the ``top`` most central states (``select="top"``).
+    """
 
     name = "betweenness"
-    description = "top-k betweenness centrality on the transition graph (Simsek & Barto 2008)"
-    params = (Param("top", "int", 4, "number of subgoals (highest centrality)", min=1),
+    description = "local maxima (or top-k) of transition-graph betweenness (Simsek & Barto 2008)"
+    params = (Param("select", "str", "local-maxima",
+                    "local-maxima (higher than every neighbour, the paper's rule) or top",
+                    choices=SELECT_RULES),
+              Param("top", "int", 4, "number of subgoals with --select top", min=1),
               Param("sources", "int", 0, "sampled BFS sources; 0 = all (exact)", min=0))
 
-    def __init__(self, top: int = 4, sources: int = 0) -> None:
-        self.top, self.sources = int(top), int(sources)
+    def __init__(self, select: str = "local-maxima", top: int = 4, sources: int = 0) -> None:
+        if select not in SELECT_RULES:
+            raise TaskError(f"select = {select!r}; use one of {', '.join(SELECT_RULES)}")
+        self.select, self.top, self.sources = select, int(top), int(sources)
 
     def detect(self, mdp: FiniteMDP, policy: np.ndarray | None, rng: np.random.Generator) -> (
         SubgoalResult
@@ -132,10 +151,14 @@ class Betweenness:
         src = None
         if 0 < self.sources < S:
             src = np.sort(rng.choice(S, size=self.sources, replace=False))
-        scores = betweenness(transition_graph(mdp), sources=src)
+        graph = transition_graph(mdp)
+        scores = betweenness(graph, sources=src)
+        subgoals = (local_maxima(graph, scores) if self.select == "local-maxima"
+                    else top_states(scores, self.top))
         stats = {"time_s": time.perf_counter() - t0, "sources": S if src is None else src.size}
-        return SubgoalResult(top_states(scores, self.top), scores, None, stats,
-                             {"top": self.top, "sources": self.sources}, self.name)
+        return SubgoalResult(subgoals, scores, None, stats,
+                             {"select": self.select, "top": self.top, "sources": self.sources},
+                             self.name)
 
 
 class VisitFrequency:

@@ -1,7 +1,8 @@
 """Policy-independent subgoal scores from the literature, for comparison with the count metric.
 
 * Betweenness centrality of the transition graph (Simsek & Barto 2008): edge ``s -> s'`` when some
-  admissible action reaches ``s' != s`` with positive probability. Computed with Brandes'
+  admissible action reaches ``s' != s`` with positive probability; subgoals are its local maxima
+  (:func:`local_maxima`, the paper's rule) or its ``k`` highest states. Computed with Brandes'
   algorithm, vectorised over a chunk of sources at once: breadth-first distances from
   :func:`scipy.sparse.csgraph.shortest_path`, then shortest-path counts forward and dependencies
   backward one distance layer at a time, each layer one sparse-times-dense product. (networkx is
@@ -97,6 +98,22 @@ def visit_frequency(mdp: FiniteMDP, rng: np.random.Generator, *, walks: int = 50
     freq = freq / max(n_ok, 1)
     freq[mdp.terminal] = 0.0
     return freq, n_ok
+
+
+def local_maxima(graph: sp.csr_array, scores: np.ndarray) -> np.ndarray:
+    """States scoring strictly higher than every neighbour (either edge direction), score > 0.
+
+    Şimşek & Barto (2008) take the local maxima of betweenness as subgoals: a state is a
+    bottleneck when it is more central than the states around it, wherever it ranks globally.
+    """
+    S = graph.shape[0]
+    coo = sp.coo_array(graph)
+    u = np.concatenate([coo.row, coo.col]).astype(np.int64)
+    v = np.concatenate([coo.col, coo.row]).astype(np.int64)
+    off = u != v
+    best_neighbour = np.full(S, -np.inf)
+    np.maximum.at(best_neighbour, u[off], scores[v[off]])
+    return np.flatnonzero((scores > best_neighbour) & (scores > 0)).astype(np.int64)
 
 
 def top_states(scores: np.ndarray, k: int) -> np.ndarray:

@@ -81,6 +81,8 @@ def test_discover_with_another_detector_and_errors(tmp_path):
             str(kb_dir),
             "--detector",
             "betweenness",
+            "--select",
+            "top",
             "--top",
             "1",
             "--json",
@@ -88,10 +90,20 @@ def test_discover_with_another_detector_and_errors(tmp_path):
     )
     assert top.exit_code == 0, top.output
     assert json.loads(top.output)["subgoals"] == [DOORWAY]
+    local = CliRunner().invoke(
+        cli,
+        ["discover", "two-rooms", "--policy", "1", "--kb", str(kb_dir), "--detector",
+         "betweenness", "--json"],
+    )
+    assert local.exit_code == 0, local.output
+    summary = json.loads(local.output)
+    assert summary["subgoals"] == [DOORWAY]  # the only local maximum of the 8-connected rooms
+    assert summary["params"]["select"] == "local-maxima"
     for args, message in [
         (["--top", "2"], "--top is not a parameter of subgoal-detector 'count-exhaustive'"),
         (["--p", "1.5"], "p"),
         (["--detector", "count"], "no subgoal-detector named 'count'"),
+        (["--detector", "betweenness", "--select", "best"], "--select"),
     ]:
         bad = CliRunner().invoke(
             cli, ["discover", "two-rooms", "--policy", "1", "--kb", str(kb_dir), *args]

@@ -116,11 +116,39 @@ def test_subgoal_four_rooms_count_regression():
 
 
 def test_subgoal_four_rooms_betweenness():
-    """Plain shortest-path betweenness puts the hallway-adjacent cells first (see docs)."""
+    """Local maxima of betweenness (Simsek & Barto's rule) are the 8 cells flanking the hallways.
+
+    A one-cell hallway of a 4-connected grid can never be among the top: every shortest path
+    through it also passes both cells beside it, and those cells carry paths inside their rooms
+    as well. Checked here for all four hallways; the top 4 is hallway 25 and its neighbours.
+    """
     mdp = get_domain("four-rooms").mdp("G1")
-    res = Betweenness(top=12).detect(mdp, None, np.random.default_rng(0))
-    assert {25, 51, 62, 88} <= set(res.subgoals.tolist())
-    assert Betweenness().detect(mdp, None, None).subgoals.tolist() == [24, 25, 26, 54]
+    res = Betweenness().detect(mdp, None, np.random.default_rng(0))
+    assert res.subgoals.tolist() == [24, 26, 42, 54, 58, 70, 87, 89]
+    graph = transition_graph(mdp)
+    for hallway in (25, 51, 62, 88):
+        neighbours = graph[[hallway]].indices
+        assert neighbours.size == 2 and set(neighbours) <= set(res.subgoals.tolist())
+        assert np.all(res.scores[neighbours] > res.scores[hallway])
+    top = Betweenness(select="top", top=12).detect(mdp, None, np.random.default_rng(0))
+    assert {25, 51, 62, 88} <= set(top.subgoals.tolist())
+    assert Betweenness(select="top").detect(mdp, None, None).subgoals.tolist() == [24, 25, 26, 54]
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 10_000), S=st.integers(2, 9))
+def test_local_maxima_match_a_loop_oracle(seed, S):
+    import scipy.sparse as sp
+
+    from adpart.subgoals.literature import local_maxima
+
+    rng = np.random.default_rng(seed)
+    adj = rng.random((S, S)) < 0.3
+    scores = rng.integers(0, 4, S).astype(float)
+    got = local_maxima(sp.csr_array(adj.astype(float)), scores)
+    expect = [s for s in range(S) if scores[s] > 0 and all(
+        scores[s] > scores[t] for t in range(S) if t != s and (adj[s, t] or adj[t, s]))]
+    assert got.tolist() == expect
 
 
 def _brandes_oracle(adj: np.ndarray) -> np.ndarray:
