@@ -14,12 +14,18 @@ See ``docs/subgoals.md`` for the interpretations chosen.
 
 from adpart.subgoals.count import CountMetric, count_metric
 from adpart.subgoals.discover import discover_exhaustive, discover_monte_carlo
-from adpart.subgoals.literature import betweenness, transition_graph, visit_frequency
+from adpart.subgoals.literature import (
+    betweenness,
+    local_maxima,
+    transition_graph,
+    visit_frequency,
+)
 from adpart.subgoals.montecarlo import (
     Trajectories,
     arrival_counts,
     bernstein_epsilon,
     bernstein_samples,
+    sample_arrivals,
     sample_trajectories,
 )
 from adpart.subgoals.policy import check_policy, policy_matrix, trapped_states, walker_matrix
@@ -35,8 +41,8 @@ from adpart.subgoals.reward import reward_variation_states, with_reward_variatio
 __all__ = [
     "CountMetric", "RatioSamples", "SubgoalResult", "Trajectories", "arrival_counts",
     "bernstein_epsilon", "bernstein_samples", "betweenness", "check_policy", "count_metric",
-    "discover_exhaustive", "discover_monte_carlo", "gradient_ratios", "policy_matrix",
-    "reward_variation_states", "sample_trajectories", "samples_per_state", "t_test_threshold",
-    "transition_graph", "trapped_states", "visit_frequency", "walker_matrix",
-    "with_reward_variation",
+    "discover_exhaustive", "discover_monte_carlo", "gradient_ratios", "local_maxima",
+    "policy_matrix", "reward_variation_states", "sample_arrivals", "sample_trajectories",
+    "samples_per_state", "t_test_threshold", "transition_graph", "trapped_states",
+    "visit_frequency", "walker_matrix", "with_reward_variation",
 ]
