@@ -326,6 +326,8 @@ def numba_available() -> bool:
 def _compile_numba() -> Callable[..., int]:
     import numba
 
+    from adpart.mdp._sampling import successor
+
     @numba.njit(cache=True, nogil=True)
     def advance(k, stride, keys, indptr, indices, R, terminal, adm_ptr, adm_idx, start_cdf,
                 last_start, gamma, horizon, a_scale, a_rate, a_omega, a_floor, e_scale, e_rate,
@@ -378,18 +380,7 @@ def _compile_numba() -> Callable[..., int]:
                                 a = b
                                 break
                             j -= 1
-            row = a * S + s
-            x = row + u2
-            lo = indptr[row]
-            hi = indptr[row + 1]
-            left, right = lo, hi
-            while left < right:  # first position in the row with keys > x
-                mid = (left + right) >> 1
-                if keys[mid] <= x:
-                    left = mid + 1
-                else:
-                    right = mid
-            s2 = indices[min(left, hi - 1)]
+            s2 = successor(a * S + s, u2, keys, indptr, indices)
             r = R[s, a]
             n_sa[k, s, a] += 1
             alpha = alpha_ep[k]

@@ -56,6 +56,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from adpart.mdp._sampling import successor
+
 #: Uniforms per agent-step in the main stream (explore?, which option, successor, next start).
 UNIFORMS_PER_STEP = 4
 #: Uniforms per agent-step in the auxiliary stream (stochastic action, termination draw).
@@ -269,19 +271,7 @@ def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, h
                 a = 0
                 while pol_cdf[row_m, a] <= v0:
                     a += 1
-            row = a * S + s
-            x = row + U[k, c, 2]
-            lo = indptr[row]
-            hi = indptr[row + 1]
-            left = lo
-            right = hi
-            while left < right:  # first position in the row with keys > x
-                mid = (left + right) >> 1
-                if keys[mid] <= x:
-                    left = mid + 1
-                else:
-                    right = mid
-            s2 = indices[min(left, hi - 1)]
+            s2 = successor(a * S + s, U[k, c, 2], keys, indptr, indices)
             cursor[k] = c + 1
             r = R[s, a]
             done = terminal[s2]

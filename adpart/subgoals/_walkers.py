@@ -22,6 +22,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from adpart.mdp._sampling import successor
+
 
 @numba.njit(cache=True, nogil=True)
 def _action(s, u, actions, cdf, stochastic):  # pragma: no cover - compiled
@@ -39,21 +41,6 @@ def _action(s, u, actions, cdf, stochastic):  # pragma: no cover - compiled
         if x >= cdf[s, b]:
             a += 1
     return min(a, A - 1)
-
-
-@numba.njit(cache=True, nogil=True)
-def _successor(row, u, keys, indptr, indices):  # pragma: no cover - compiled
-    x = row + u
-    lo = indptr[row]
-    hi = indptr[row + 1]
-    left, right = lo, hi
-    while left < right:  # first position in the row with keys > x
-        mid = (left + right) >> 1
-        if keys[mid] <= x:
-            left = mid + 1
-        else:
-            right = mid
-    return indices[min(left, hi - 1)]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -90,7 +77,7 @@ def walk_paths(keys, indptr, indices, terminal, actions, cdf, stochastic, start,
         kept = 0
         for j in range(m):
             i = running[j]
-            s2 = _successor(act[j] * S + state[i], gen.random(), keys, indptr, indices)
+            s2 = successor(act[j] * S + state[i], gen.random(), keys, indptr, indices)
             state[i] = s2
             cols[t + 1, i] = s2
             if not terminal[s2]:
@@ -123,7 +110,7 @@ def count_arrivals(keys, indptr, indices, terminal, actions, cdf, stochastic, st
                 cut += 1
                 break
             a = _action(s, gen.random() if stochastic else 0.0, actions, cdf, stochastic)
-            s2 = _successor(a * S + s, gen.random(), keys, indptr, indices)
+            s2 = successor(a * S + s, gen.random(), keys, indptr, indices)
             if s2 == s:
                 break
             arrivals[s2] += 1.0
