@@ -326,7 +326,7 @@ def numba_available() -> bool:
 def _compile_numba() -> Callable[..., int]:
     import numba
 
-    from adpart.mdp._sampling import successor
+    from adpart.mdp._sampling import first_above, successor
 
     @numba.njit(cache=True, nogil=True)
     def advance(k, stride, keys, indptr, indices, R, terminal, adm_ptr, adm_idx, start_cdf,
@@ -413,14 +413,7 @@ def _compile_numba() -> Callable[..., int]:
                 ret[k] = 0.0
                 dret[k] = 0.0
                 gpow[k] = 1.0
-                left, right = 0, n_start
-                while left < right:
-                    mid = (left + right) >> 1
-                    if start_cdf[mid] <= u3:
-                        left = mid + 1
-                    else:
-                        right = mid
-                state[k] = min(left, last_start)
+                state[k] = min(first_above(start_cdf, u3, 0, n_start), last_start)
                 alpha_ep[k] = a_scale * a_rate ** float(ep)
                 eps_ep[k] = e_scale * e_rate ** float(ep)
             else:

@@ -56,7 +56,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from adpart.mdp._sampling import successor
+from adpart.mdp._sampling import first_above, successor
 
 #: Uniforms per agent-step in the main stream (explore?, which option, successor, next start).
 UNIFORMS_PER_STEP = 4
@@ -332,16 +332,7 @@ def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, h
                 dret[k] = 0.0
                 gpow[k] = 1.0
                 cur[k] = -1
-                left = 0
-                right = n_start
-                u3 = U[k, c, 3]
-                while left < right:
-                    mid = (left + right) >> 1
-                    if start_cdf[mid] <= u3:
-                        left = mid + 1
-                    else:
-                        right = mid
-                state[k] = min(left, last_start)
+                state[k] = min(first_above(start_cdf, U[k, c, 3], 0, n_start), last_start)
                 alpha_ep[k] = a_scale * math.pow(a_rate, float(ep))
                 eps_ep[k] = e_scale * math.pow(e_rate, float(ep))
             else:

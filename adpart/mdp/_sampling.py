@@ -1,6 +1,9 @@
-"""The successor draw every compiled sampler shares (learners and subgoal walkers).
+"""The draws every compiled sampler shares (learners and subgoal walkers).
 
-``successor(row, u, keys, indptr, indices)`` is the CSR position search of
+``first_above(values, x, lo, hi)`` is the first position in ``values[lo:hi]`` (sorted) whose
+value exceeds ``x`` (``hi`` when none does): numpy's ``searchsorted(side="right")``; the
+learners draw start states with it. ``successor(row, u, keys, indptr, indices)`` is the CSR
+position search of
 :meth:`adpart.mdp.model.FiniteMDP.sample_next` for one ``(row = a*S + s, u)``: the first entry of
 the row whose row-offset cumulative probability (``FiniteMDP.sampler_keys``) exceeds ``row + u``,
 clipped to the row's last entry; it returns that entry's successor state. With numba it is
@@ -9,25 +12,33 @@ compiled (and callable from compiled kernels); without, it is the same plain fun
 
 from __future__ import annotations
 
-
-def _successor(row, u, keys, indptr, indices):  # pragma: no cover - compiled when numba imports
-    x = row + u
-    lo = indptr[row]
-    hi = indptr[row + 1]
-    left = lo
-    right = hi
-    while left < right:  # first position in the row with keys > x
-        mid = (left + right) >> 1
-        if keys[mid] <= x:
-            left = mid + 1
-        else:
-            right = mid
-    return indices[min(left, hi - 1)]
-
+from collections.abc import Callable
 
 try:
     import numba
 except ImportError:  # pragma: no cover - numba is a dependency; kept for a bare interpreter
-    successor = _successor
+
+    def _compiled(fn: Callable) -> Callable:
+        return fn
+
 else:
-    successor = numba.njit(cache=True, nogil=True)(_successor)
+    _compiled = numba.njit(cache=True, nogil=True)
+
+
+@_compiled
+def first_above(values, x, lo, hi):  # pragma: no cover - compiled
+    left = lo
+    right = hi
+    while left < right:
+        mid = (left + right) >> 1
+        if values[mid] <= x:
+            left = mid + 1
+        else:
+            right = mid
+    return left
+
+
+@_compiled
+def successor(row, u, keys, indptr, indices):  # pragma: no cover - compiled
+    hi = indptr[row + 1]
+    return indices[min(first_above(keys, row + u, indptr[row], hi), hi - 1)]
