@@ -59,12 +59,8 @@ def sample_trajectories(
         horizon: the most steps a trajectory takes (default ``|S|``, the cap of eq. 4.1).
         checked: skip validating ``policy`` (callers that already did).
     """
-    mdp = check_mdp(mdp)
-    pol = policy if checked else check_policy(mdp, policy)
-    _check_count(n)
-    H = _horizon(mdp, horizon)
-    start = rng.integers(0, mdp.n_states, size=int(n))
-    columns, truncated = walk_paths(*_walker_args(mdp, pol), start, H, rng)
+    args, start, H = _walk_setup(mdp, policy, n, rng, horizon, checked)
+    columns, truncated = walk_paths(*args, start, H, rng)
     paths = np.ascontiguousarray(columns.T)
     lengths = (paths >= 0).sum(axis=1)
     return Trajectories(paths, lengths, truncated)
@@ -87,34 +83,29 @@ def sample_arrivals(
     of trajectories the horizon cut while they were still counting. A trajectory is not walked
     past its first self-loop step, whose later arrivals would not count.
     """
-    mdp = check_mdp(mdp)
-    pol = policy if checked else check_policy(mdp, policy)
-    _check_count(n)
-    H = _horizon(mdp, horizon)
-    start = rng.integers(0, mdp.n_states, size=int(n))
+    args, start, H = _walk_setup(mdp, policy, n, rng, horizon, checked)
     arrivals = np.zeros(mdp.n_states)
-    cut = count_arrivals(*_walker_args(mdp, pol), start, H, rng, arrivals)
+    cut = count_arrivals(*args, start, H, rng, arrivals)
     return arrivals, int(cut)
 
 
-def _check_count(n: object) -> None:
+def _walk_setup(
+    mdp: FiniteMDP, policy: np.ndarray, n: int, rng: np.random.Generator, horizon: int | None,
+    checked: bool,
+) -> tuple[tuple, np.ndarray, int]:
+    """Validate, then ``(walker arguments, start states, horizon)``; draws the starts first."""
+    mdp = check_mdp(mdp)
+    pol = policy if checked else check_policy(mdp, policy)
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
         raise TaskError(f"number of trajectories n = {n!r} must be an integer >= 1")
-
-
-def _horizon(mdp: FiniteMDP, horizon: int | None) -> int:
     H = mdp.n_states if horizon is None else int(horizon)
     if H < 1:
         raise TaskError(f"horizon = {horizon!r} must be >= 1")
-    return H
-
-
-def _walker_args(mdp: FiniteMDP, pol: np.ndarray) -> tuple:
-    """The model and policy arguments of the compiled walkers (:mod:`._walkers`)."""
+    start = rng.integers(0, mdp.n_states, size=int(n))
     stochastic = pol.ndim == 2
     actions = np.zeros(1, dtype=np.int64) if stochastic else pol
     cdf = np.cumsum(pol, axis=1) if stochastic else np.zeros((1, 1))
-    return (*mdp.sampler_arrays, mdp.terminal, actions, cdf, stochastic)
+    return (*mdp.sampler_arrays, mdp.terminal, actions, cdf, stochastic), start, H
 
 
 def arrival_counts(traj: Trajectories, n_states: int) -> np.ndarray:
