@@ -117,10 +117,10 @@ def _span_table(
     onehot = sp.csr_array(
         (np.ones(S), labels.astype(np.int64), np.arange(S + 1, dtype=np.int64)), shape=(S, n_blocks)
     )
-    M = sp.coo_array(sub @ onehot)
-    M.sum_duplicates()
+    M = sp.csr_array(sub @ onehot)  # a sparse product has one entry per (row, column)
+    rows = np.repeat(np.arange(M.shape[0], dtype=np.int64), np.diff(M.indptr))
     nz = M.data > 0
-    row, target, mass = M.row[nz].astype(np.int64), M.col[nz].astype(np.int64), M.data[nz]
+    row, target, mass = rows[nz], M.indices[nz].astype(np.int64), M.data[nz]
     state = dstates[row % nd]
     block = labels[state]
     key = (block * k + row // nd) * n_blocks + target
@@ -157,7 +157,12 @@ def delta_refine(
     S = labels.size
     labels = labels.astype(np.int64, copy=True)
     n_blocks = int(labels.max()) + 1
-    FT = sp.csr_array(F.T)
+    # Who steps into whom under some option, deduplicated across options (a dirty block's
+    # predecessors are looked up in it every round).
+    into = sp.csr_array(F.T).tocoo()
+    preds_of = sp.csr_array((np.ones(into.nnz, dtype=np.int8), (into.row, into.col % S)),
+                            shape=(S, S))
+    preds_of.sum_duplicates()
     width = delta + atol
     dirty = np.ones(n_blocks, dtype=bool)
     rounds = 0
@@ -190,9 +195,9 @@ def delta_refine(
         changed[split] = True
         changed[old_n:] = True
         moved = np.flatnonzero(changed[labels])
-        preds = np.unique(FT[moved].indices % S) if moved.size else np.zeros(0, dtype=np.int64)
         dirty = changed.copy()
-        dirty[labels[preds]] = True
+        if moved.size:
+            dirty[labels[preds_of[moved].indices]] = True
     return labels, rounds
 
 
