@@ -165,7 +165,8 @@ def info(kb_location: KBLocation, as_json: bool) -> None:
     click.echo(f"artifacts:      {data['artifacts']}")
     click.echo(f"schema version: {data['schema_version']}")
     for kind, count in data["counts"].items():
-        click.echo(f"{kind + 's:':<15} {count}")
+        plural = kind[:-1] + "ies" if kind.endswith("y") else kind + "s"
+        click.echo(f"{plural + ':':<15} {count}")
     click.echo(f"artifact bytes: {data['artifact_bytes']}")
 
 

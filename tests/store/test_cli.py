@@ -31,7 +31,9 @@ def test_info(cli_kb):
     data = json.loads(result.output)
     assert data["schema_version"] == 1
     assert data["counts"]["partition"] == 2 and data["artifact_bytes"] == kb.artifact_bytes() > 0
-    assert "schema version: 1" in _run("info", *opts).output
+    text = _run("info", *opts).output
+    assert "schema version: 1" in text
+    assert "policies:" in text and "partitions:" in text and "policys" not in text
 
 
 def test_ls_and_show(cli_kb):
