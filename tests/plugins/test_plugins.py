@@ -138,3 +138,17 @@ def test_local_executor_returns_results_in_order():
 
     with LocalExecutor(workers=2) as ex:
         assert ex.map(abs, [-5, 4, -3, 2, -1]) == [5, 4, 3, 2, 1]
+
+
+def numba_threads_here(_: object) -> int:
+    import numba
+
+    return numba.get_num_threads()
+
+
+def test_local_executor_workers_use_one_numba_thread():
+    # The pool's workers already fill the cores; threaded kernels inside them would oversubscribe.
+    from adpart.execution import LocalExecutor
+
+    with LocalExecutor(workers=2) as ex:
+        assert ex.map(numba_threads_here, range(4)) == [1, 1, 1, 1]
