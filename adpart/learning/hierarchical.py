@@ -48,8 +48,8 @@ from adpart.learning.curves import (
     start_distribution,
     start_values,
 )
-from adpart.learning.qlearning import _count, _schedule, _seed
 from adpart.learning.schedules import Schedule, constant, visit_count
+from adpart.learning.settings import count, run_settings
 from adpart.learning.smdp_q import drive, kernel_function, make_state, option_set
 from adpart.mdp.model import FiniteMDP, SMDPModel
 from adpart.mdp.solvers import greedy_policy
@@ -310,20 +310,15 @@ def hierarchical_learning(
     Returns:
         A :class:`HierarchicalResult`.
     """
-    if not isinstance(mdp, FiniteMDP):
-        raise ModelError(f"hierarchical_learning needs a FiniteMDP, got {type(mdp).__name__}")
+    cfg = run_settings("hierarchical_learning", mdp, runs=runs, episodes=episodes,
+                       eval_every=eval_every, max_steps_per_episode=max_steps_per_episode,
+                       seed=seed, alpha=alpha, epsilon=epsilon_greedy, q_init=q_init,
+                       epsilon_name="epsilon_greedy")
+    K, N, M, H, root_seed = cfg.runs, cfg.episodes, cfg.eval_every, cfg.horizon, cfg.seed
+    alpha_s, eps_s = cfg.alpha, cfg.epsilon
     if mode not in MODES:
         raise TaskError(f"mode = {mode!r}; choose one of {list(MODES)}")
-    K = _count(runs, "runs")
-    N = _count(episodes, "episodes")
-    M = _count(eval_every, "eval_every")
-    H = _count(max_steps_per_episode, "max_steps_per_episode")
-    V = _count(min_visits, "min_visits") if min_visits != 0 else 0
-    root_seed = _seed(seed)
-    alpha_s = _schedule(alpha, "alpha")
-    eps_s = _schedule(epsilon_greedy, "epsilon_greedy")
-    if not np.isfinite(q_init):
-        raise TaskError(f"q_init = {q_init!r} must be a finite number")
+    V = count(min_visits, "min_visits") if min_visits != 0 else 0
     if threshold is not None and not (isinstance(threshold, (int, float)) and threshold >= 0):
         raise TaskError(
             f"threshold = {threshold!r} must be a number >= 0 (or None for the default)")

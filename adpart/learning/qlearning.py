@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from adpart.errors import ModelError, TaskError, UnknownNameError
+from adpart.errors import UnknownNameError
 from adpart.learning import _kernels
 from adpart.learning.curves import (
     LearningCurve,
@@ -43,7 +43,8 @@ from adpart.learning.curves import (
     start_distribution,
     start_values,
 )
-from adpart.learning.schedules import Schedule, constant, parse_schedule, visit_count
+from adpart.learning.schedules import Schedule, constant, visit_count
+from adpart.learning.settings import run_settings
 from adpart.mdp.model import FiniteMDP
 from adpart.mdp.solvers import greedy_policy
 
@@ -88,24 +89,6 @@ class QLearningResult:
         """``(K, S)`` int64 greedy policies (lowest action index on ties), as evaluated."""
         K, S, A = self.Q.shape
         return greedy_policy(self.Q.reshape(K * S, A)).reshape(K, S)
-
-
-def _count(value: object, what: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-        raise TaskError(f"{what} = {value!r} must be an integer >= 1")
-    return int(value)
-
-
-def _seed(seed: object) -> int:
-    if seed is None:
-        return int(np.random.SeedSequence().entropy)  # type: ignore[arg-type]
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise TaskError(f"seed = {seed!r} must be a non-negative integer (or None for a fresh one)")
-    return int(seed)
-
-
-def _schedule(value: object, what: str) -> Schedule:
-    return parse_schedule(value).check_probability(what)  # type: ignore[arg-type]
 
 
 def _initial_state(
@@ -197,20 +180,11 @@ def q_learning(
         TaskError: a setting is out of range.
         ModelError: ``mdp`` is not a FiniteMDP, or no episode can start, or bad reference values.
     """
-    if not isinstance(mdp, FiniteMDP):
-        raise ModelError(
-            f"q_learning needs a FiniteMDP, got {type(mdp).__name__}; build one with "
-            "adpart.envs.registry.get_domain(name).mdp()"
-        )
-    K = _count(runs, "runs")
-    N = _count(episodes, "episodes")
-    M = _count(eval_every, "eval_every")
-    H = _count(max_steps_per_episode, "max_steps_per_episode")
-    root_seed = _seed(seed)
-    alpha_s = _schedule(alpha, "alpha")
-    eps_s = _schedule(epsilon, "epsilon")
-    if not np.isfinite(q_init):
-        raise TaskError(f"q_init = {q_init!r} must be a finite number")
+    cfg = run_settings("q_learning", mdp, runs=runs, episodes=episodes, eval_every=eval_every,
+                       max_steps_per_episode=max_steps_per_episode, seed=seed, alpha=alpha,
+                       epsilon=epsilon, q_init=q_init)
+    K, N, M, H, root_seed = cfg.runs, cfg.episodes, cfg.eval_every, cfg.horizon, cfg.seed
+    alpha_s, eps_s = cfg.alpha, cfg.epsilon
     name = default_kernel() if kernel is None else kernel
     if name not in _kernels.KERNELS:
         raise UnknownNameError(

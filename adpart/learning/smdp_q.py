@@ -41,7 +41,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from adpart.errors import ModelError, TaskError, UnknownNameError
+from adpart.errors import ModelError, UnknownNameError
 from adpart.learning import _smdp_kernels as kernels
 from adpart.learning.curves import (
     LearningCurve,
@@ -49,8 +49,9 @@ from adpart.learning.curves import (
     start_distribution,
     start_values,
 )
-from adpart.learning.qlearning import BLOCK_ROWS, _count, _schedule, _seed
+from adpart.learning.qlearning import BLOCK_ROWS
 from adpart.learning.schedules import Schedule, constant, visit_count
+from adpart.learning.settings import run_settings
 from adpart.mdp.model import FiniteMDP, SMDPModel
 from adpart.mdp.solvers import greedy_policy
 from adpart.options.models import OptionModel, option_models
@@ -326,20 +327,11 @@ def smdp_q_learning(
     Raises:
         TaskError: a setting out of range. ModelError: bad options or MDP.
     """
-    if not isinstance(mdp, FiniteMDP):
-        raise ModelError(
-            f"smdp_q_learning needs a FiniteMDP, got {type(mdp).__name__}; build one with "
-            "adpart.envs.registry.get_domain(name).mdp()"
-        )
-    K = _count(runs, "runs")
-    N = _count(episodes, "episodes")
-    M = _count(eval_every, "eval_every")
-    H = _count(max_steps_per_episode, "max_steps_per_episode")
-    root_seed = _seed(seed)
-    alpha_s = _schedule(alpha, "alpha")
-    eps_s = _schedule(epsilon, "epsilon")
-    if not np.isfinite(q_init):
-        raise TaskError(f"q_init = {q_init!r} must be a finite number")
+    cfg = run_settings("smdp_q_learning", mdp, runs=runs, episodes=episodes,
+                       eval_every=eval_every, max_steps_per_episode=max_steps_per_episode,
+                       seed=seed, alpha=alpha, epsilon=epsilon, q_init=q_init)
+    K, N, M, H, root_seed = cfg.runs, cfg.episodes, cfg.eval_every, cfg.horizon, cfg.seed
+    alpha_s, eps_s = cfg.alpha, cfg.epsilon
     name, step_kernel = kernel_function(kernel)
     full, smdp = option_set(mdp, options, include_primitives=include_primitives, models=models)
     S = mdp.n_states

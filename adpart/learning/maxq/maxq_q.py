@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from adpart.errors import ModelError, TaskError
+from adpart.errors import TaskError
 from adpart.learning.curves import (
     LearningCurve,
     optimal_start_value,
@@ -51,6 +51,7 @@ from adpart.learning.curves import (
 )
 from adpart.learning.maxq.taskgraph import CompiledGraph
 from adpart.learning.schedules import Schedule, parse_schedule
+from adpart.learning.settings import count, run_settings
 from adpart.mdp.model import FiniteMDP
 
 __all__ = ["MaxQResult", "MaxQTables", "decomposed_values", "greedy_hierarchical_policy",
@@ -451,8 +452,8 @@ def hierarchical_rollouts(
     episodes start from ``start`` or from the start distribution, children are chosen greedily
     on ``C~ + V`` (ties to the first), and the tables are not changed.
     """
-    n = _count(episodes, "episodes")
-    H = _count(max_steps, "max_steps")
+    n = count(episodes, "episodes")
+    H = count(max_steps, "max_steps")
     rng = np.random.default_rng(seed)
     agent = _Run(mdp, graph, rng, parse_schedule(0.0), parse_schedule(0.0), H)
     agent.C = [[t.tolist() for t in row] for row in tables.C]
@@ -469,12 +470,6 @@ def hierarchical_rollouts(
         rets[e], steps[e] = dret, k
         done[e] = bool(mdp.terminal[agent.last_state])
     return rets, steps, done
-
-
-def _count(value: object, what: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-        raise TaskError(f"{what} = {value!r} must be an integer >= 1")
-    return int(value)
 
 
 def maxq_q(
@@ -509,24 +504,15 @@ def maxq_q(
         A :class:`MaxQResult`; its curve has one row per episode, ``decisions`` counting the
         root's choices.
     """
-    if not isinstance(mdp, FiniteMDP):
-        raise ModelError(f"maxq_q needs a FiniteMDP, got {type(mdp).__name__}")
+    cfg = run_settings("maxq_q", mdp, runs=runs, episodes=episodes, eval_every=eval_every,
+                       max_steps_per_episode=max_steps_per_episode, seed=seed, alpha=alpha,
+                       epsilon=epsilon)
+    K, N, M, H, root_seed = cfg.runs, cfg.episodes, cfg.eval_every, cfg.horizon, cfg.seed
+    alpha_s, eps_s = cfg.alpha, cfg.epsilon
     if not isinstance(graph, CompiledGraph) or graph.n_states != mdp.n_states or (
             graph.n_primitives != mdp.n_actions):
         raise TaskError("graph must be a task graph compiled on this MDP: "
                         "TaskGraph.compile(mdp)")
-    K = _count(runs, "runs")
-    N = _count(episodes, "episodes")
-    M = _count(eval_every, "eval_every")
-    H = _count(max_steps_per_episode, "max_steps_per_episode")
-    if seed is None:
-        root_seed = int(np.random.SeedSequence().entropy)  # type: ignore[arg-type]
-    elif isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise TaskError(f"seed = {seed!r} must be a non-negative integer (or None)")
-    else:
-        root_seed = int(seed)
-    alpha_s = parse_schedule(alpha).check_probability("alpha")
-    eps_s = parse_schedule(epsilon).check_probability("epsilon")
 
     mu = start_distribution(mdp)
     v_star = optimal_start_value(mdp, mu, reference_values)
