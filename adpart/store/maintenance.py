@@ -47,7 +47,7 @@ class Maintenance:
 
     def referrers(self) -> dict[str, list[str]]:
         """sha256 -> the records referencing it, as ``"policy:3 (q)"``."""
-        from adpart.store.kb import _SQL_OF
+        from adpart.store.queries import _SQL_OF
 
         kinds = {model: kind for kind, model in _SQL_OF.items()}
         out: dict[str, list[str]] = {}
@@ -62,7 +62,7 @@ class Maintenance:
 
     def counts(self) -> dict[str, int]:
         """Number of records of each kind."""
-        from adpart.store.kb import _SQL_OF
+        from adpart.store.queries import _SQL_OF
 
         with self._session() as s:
             return {kind: int(s.scalar(select(func.count()).select_from(model)) or 0)
