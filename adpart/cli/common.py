@@ -173,6 +173,29 @@ def executor_options(default: str = "local"):  # type: ignore[no-untyped-def]
     return decorate
 
 
+def run_options(  # type: ignore[no-untyped-def]
+    *, runs_help: str = "Independent runs.", episodes_help: str = "Episodes per run."
+):
+    """Decorator adding ``--episodes``, ``--runs``, ``--seed`` and ``--eval-every``."""
+
+    def decorate(func):  # type: ignore[no-untyped-def]
+        func = click.option(
+            "--eval-every",
+            type=click.IntRange(min=1),
+            default=10,
+            show_default=True,
+            help="Score the greedy policies exactly every N episodes.",
+        )(func)
+        func = click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True,
+                            help="Root seed.")(func)
+        func = click.option("--runs", type=click.IntRange(min=1), default=10, show_default=True,
+                            help=runs_help)(func)
+        return click.option("--episodes", type=click.IntRange(min=1), default=300,
+                            show_default=True, help=episodes_help)(func)
+
+    return decorate
+
+
 def make_executor(
     name: str, opts: tuple[str, ...] = (), ray_address: str | None = None
 ) -> Executor:

@@ -20,6 +20,7 @@ from adpart.cli.common import (
     plugin_options_command,
     progress_callback,
     registry,
+    run_options,
     split_plugin_options,
 )
 from adpart.store.location import KBLocation
@@ -36,24 +37,7 @@ from adpart.workflows import (
 @click.argument("env")
 @click.option("--task", help="Task name (see `adpart envs`) or goal:FEATURE=VALUE,... .")
 @click.option("--learner", default="q-learning", show_default=True, help="Learner plugin.")
-@click.option(
-    "--episodes",
-    type=click.IntRange(min=1),
-    default=300,
-    show_default=True,
-    help="Episodes per run (sweeps for value-iteration).",
-)
-@click.option(
-    "--runs", type=click.IntRange(min=1), default=10, show_default=True, help="Independent runs."
-)
-@click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True, help="Root seed.")
-@click.option(
-    "--eval-every",
-    type=click.IntRange(min=1),
-    default=10,
-    show_default=True,
-    help="Score the greedy policy exactly every N episodes.",
-)
+@run_options(episodes_help="Episodes per run (sweeps for value-iteration).")
 @executor_options()
 @click.option(
     "--runs-per-batch",

@@ -8,7 +8,7 @@ from typing import Any
 
 import click
 
-from adpart.cli.common import CLIError, dumps, echo_json, kb_location_options
+from adpart.cli.common import CLIError, dumps, echo_json, kb_location_options, run_options
 from adpart.store.location import KBLocation
 
 
@@ -93,30 +93,13 @@ def _say(quiet: bool):  # type: ignore[no-untyped-def]
     show_default=True,
     help="epsilon of eq. 4.7 (reward homogeneity) >= 0.",
 )
-@click.option(
-    "--runs", type=click.IntRange(min=1), default=10, show_default=True, help="Runs per learner."
-)
-@click.option(
-    "--episodes",
-    type=click.IntRange(min=1),
-    default=300,
-    show_default=True,
-    help="Episodes per later task.",
-)
+@run_options(runs_help="Runs per learner.", episodes_help="Episodes per later task.")
 @click.option(
     "--first-episodes",
     type=click.IntRange(min=1),
     default=500,
     show_default=True,
     help="Episodes of the first (flat) task.",
-)
-@click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True, help="Root seed.")
-@click.option(
-    "--eval-every",
-    type=click.IntRange(min=1),
-    default=10,
-    show_default=True,
-    help="Score greedy policies exactly every N episodes.",
 )
 @click.option(
     "--flat-opt",
@@ -240,10 +223,7 @@ def pipeline_cmd(
     metavar="ID",
     help="The decision layer (partition:N), e.g. from `adpart partition` or a pipeline.",
 )
-@click.option("--runs", type=click.IntRange(min=1), default=10, show_default=True)
-@click.option("--episodes", type=click.IntRange(min=1), default=300, show_default=True)
-@click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True)
-@click.option("--eval-every", type=click.IntRange(min=1), default=10, show_default=True)
+@run_options(runs_help="Runs per learner.", episodes_help="Episodes per run.")
 @click.option(
     "--hier-opt",
     multiple=True,
