@@ -126,6 +126,20 @@ def _walls() -> tuple[np.ndarray, np.ndarray]:
 
 
 
+def _features(row: np.ndarray, col: np.ndarray, passenger: np.ndarray, dest: np.ndarray
+              ) -> dict[str, np.ndarray]:
+    """The state features both taxi models expose (``x``/``y`` for the grid renderer)."""
+    return {
+        "x": col.astype(np.int64),
+        "y": row.astype(np.int64),
+        "taxi_row": row.astype(np.int64),
+        "taxi_col": col.astype(np.int64),
+        "passenger": passenger.astype(np.int64),
+        "destination": dest.astype(np.int64),
+        "in_taxi": (passenger == IN_TAXI).astype(np.int64),
+    }
+
+
 def _assemble(rows: list, cols: list, probs: list, S: int) -> sp.csr_array:
     """The (A*S, S) transition matrix from lists of (row, column, probability) array chunks."""
     P = sp.csr_array(
@@ -274,15 +288,7 @@ class Taxi(Domain):
         cols += [next_pick, next_put]
         probs += [np.ones(S), np.ones(S)]
         P = _assemble(rows, cols, probs, S)
-        features = {
-            "x": col.astype(np.int64),
-            "y": row.astype(np.int64),
-            "taxi_row": row.astype(np.int64),
-            "taxi_col": col.astype(np.int64),
-            "passenger": passenger.astype(np.int64),
-            "destination": dest.astype(np.int64),
-            "in_taxi": (passenger == IN_TAXI).astype(np.int64),
-        }
+        features = _features(row, col, passenger, dest)
         return Dynamics(
             P=P,
             action_names=ACTION_NAMES,
@@ -377,16 +383,7 @@ class Taxi(Domain):
         cols += [next_pick, next_put]
         probs += [np.ones(S), np.ones(S)]
         P = _assemble(rows, cols, probs, S)
-        features = {
-            "x": col.astype(np.int64),
-            "y": row.astype(np.int64),
-            "taxi_row": row.astype(np.int64),
-            "taxi_col": col.astype(np.int64),
-            "passenger": passenger.astype(np.int64),
-            "destination": dest.astype(np.int64),
-            "in_taxi": (passenger == IN_TAXI).astype(np.int64),
-            "pending": pending.astype(np.int64),
-        }
+        features = {**_features(row, col, passenger, dest), "pending": pending.astype(np.int64)}
         return Dynamics(
             P=P,
             action_names=ACTION_NAMES,
