@@ -44,6 +44,21 @@ flat learner's exactly, :mod:`adpart.learning._kernels`):
 7. the episode ends on arrival in a terminal state or after ``horizon`` steps; the next start
    state is the first whose cumulative start probability exceeds ``u[3]``.
 
+**Intra-option learning** (``intra``; Sutton, Precup & Singh 1999, section 5, "intra-option
+Q-learning"), after step 4: every option ``o'`` offered in the block ``d`` of ``s`` whose policy is
+deterministic and takes ``a`` in ``s`` (so it is *consistent* with the step; the primitive one-step
+option of ``a`` always is) gets the one-step update
+
+    Q(d, o') += alpha (r + gamma U(s', o') - Q(d, o')),
+    U(s', o') = (1 - beta_o'(s')) Q(block(s'), o') + beta_o'(s') max_o'' Q(block(s'), o''),
+
+with ``U = 0`` when ``s'`` is terminal, ``n(d, o') += 1`` for its step size, and no update when
+``o'`` would continue in ``s'`` (``beta < 1``) but is not offered in ``block(s')`` (a block-level
+layer may drop it there: no valid one-step target). The running option's SMDP update of step 6 is
+then skipped if every one of its steps got such an update (they already chain its value); an
+option that was not updated at some step (stochastic policy, or the missing target) keeps its
+step-6 update. The random streams are untouched, so ``intra=False`` is the rule above exactly.
+
 With every option a primitive action (``beta = 1``, deterministic) and the identity partition this
 is the flat kernel's rule operation for operation: ``G + g * best = (0 + 1 * r) + gamma * best``.
 """
@@ -82,6 +97,9 @@ class SMDPLockStepState:
     ``check_on``, ``threshold``, ``min_visits``, ``prim_opt`` (A,) option index of each primitive
     action (-1: none); ``prim_adm`` (S, A) where each action may be taken; ``fired`` (K, 3).
 
+    Intra-option learning: ``intra``; ``chained`` (K,) whether every step of the running option
+    so far got its one-step update.
+
     Agents: ``state``, ``episode``, ``target``, ``t_ep``, ``d_ep``, ``ret``, ``dret``, ``gpow``,
     ``cur`` (running option or -1), ``s0``, ``b0``, ``G``, ``g``, ``alpha_ep``, ``eps_ep``;
     uniforms ``U`` (K, B, 4), ``W`` (K, B, 2), ``cursor`` (K,).
@@ -118,6 +136,8 @@ class SMDPLockStepState:
     prim_opt: np.ndarray
     prim_adm: np.ndarray
     fired: np.ndarray
+    intra: bool
+    chained: np.ndarray
     state: np.ndarray
     episode: np.ndarray
     target: np.ndarray
@@ -161,7 +181,8 @@ class SMDPLockStepState:
             self.last_start, self.gamma, self.horizon, *self.alpha, *self.eps,
             self.pol_act, self.pol_cdf, self.beta, self.labels, self.adm, self.Q, self.n_o,
             self.n_d, self.n_blocks, self.track_flat, self.Qf, self.nf, self.check_on,
-            self.threshold, self.min_visits, self.prim_opt, self.prim_adm, self.fired, self.state,
+            self.threshold, self.min_visits, self.prim_opt, self.prim_adm, self.fired,
+            self.intra, self.chained, self.state,
             self.episode,
             self.target, self.t_ep, self.d_ep, self.ret, self.dret, self.gpow, self.cur, self.s0,
             self.b0, self.G, self.g, self.alpha_ep, self.eps_ep, self.U, self.W, self.cursor,
@@ -172,7 +193,8 @@ class SMDPLockStepState:
 def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, horizon,
              a_scale, a_rate, a_omega, a_floor, e_scale, e_rate, e_omega, e_floor,
              pol_act, pol_cdf, beta, labels, adm, Q, n_o, n_d, n_blocks, track_flat, Qf, nf,
-             check_on, threshold, min_visits, prim_opt, prim_adm, fired, state, episode, target,
+             check_on, threshold, min_visits, prim_opt, prim_adm, fired, intra, chained, state,
+             episode, target,
              t_ep,
              d_ep, ret, dret, gpow, cur, s0, b0, G, g, alpha_ep, eps_ep, U, W, cursor,
              out_steps, out_dec, out_ret, out_dret, out_blocks):
@@ -260,6 +282,7 @@ def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, h
                 b0[k] = d
                 G[k] = 0.0
                 g[k] = 1.0
+                chained[k] = True
                 d_ep[k] += 1
             o = cur[k]
             p = pol_act[o, s]
@@ -290,6 +313,39 @@ def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, h
                     tdf = r + gamma * bn
                 old = Qf[k, s, a]
                 Qf[k, s, a] = old + alpha * (tdf - old)
+            if intra:
+                d = labels[k, s]
+                d2 = labels[k, s2]
+                best2 = neg_inf
+                if not done:
+                    best2 = Q[k, d2, 0]
+                    for oo in range(1, O):
+                        best2 = max(best2, Q[k, d2, oo])
+                updated = False
+                for oo in range(O):
+                    if not adm[k, d, oo] or pol_act[oo, s] != a:
+                        continue
+                    if done:
+                        tdi = r
+                    else:
+                        bt = beta[oo, s2]
+                        if bt >= 1.0:
+                            tdi = r + gamma * best2
+                        elif adm[k, d2, oo]:
+                            tdi = r + gamma * ((1.0 - bt) * Q[k, d2, oo] + bt * best2)
+                        else:
+                            continue
+                    n_o[k, d, oo] += 1
+                    alpha = alpha_ep[k]
+                    if a_omega != 0.0:
+                        alpha = alpha * math.pow(float(n_o[k, d, oo]), -a_omega)
+                    alpha = max(a_floor, alpha)
+                    old = Q[k, d, oo]
+                    Q[k, d, oo] = old + alpha * (tdi - old)
+                    if oo == cur[k]:
+                        updated = True
+                if not updated:
+                    chained[k] = False
             G[k] += g[k] * r
             g[k] *= gamma
             ret[k] += r
@@ -299,6 +355,8 @@ def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, h
             cut = t_ep[k] == horizon
             if (done or cut or W[k, c, 1] < beta[o, s2]) and not adm[k, b0[k], o]:
                 cur[k] = -1  # an exploratory primitive action not offered in the block
+            elif (done or cut or W[k, c, 1] < beta[o, s2]) and intra and chained[k]:
+                cur[k] = -1  # its value was updated at every step (intra-option)
             elif done or cut or W[k, c, 1] < beta[o, s2]:
                 b = b0[k]
                 n_o[k, b, o] += 1
