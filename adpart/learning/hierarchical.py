@@ -288,6 +288,7 @@ def hierarchical_learning(
     progress: Callable[[int, int], object] | None = None,
     q_init: float = 0.0,
     kernel: str | None = None,
+    intra_option: bool = False,
 ) -> HierarchicalResult:
     """Learn ``mdp`` on a decision layer over ``options`` (section 4.3; module docstring).
 
@@ -306,6 +307,9 @@ def hierarchical_learning(
         runs, episodes, seed, alpha, max_steps_per_episode, eval_every, reference_values,
         progress, q_init, kernel: as :func:`adpart.learning.smdp_q.smdp_q_learning`;
         epsilon_greedy: the exploration schedule (``epsilon`` is the partition's).
+        intra_option: every primitive step also updates each option offered in the current
+            block whose policy takes that action there (block-level intra-option learning,
+            :mod:`adpart.learning._smdp_kernels`).
 
     Returns:
         A :class:`HierarchicalResult`.
@@ -365,6 +369,7 @@ def hierarchical_learning(
         np.broadcast_to(part0.admissible, (K, B0, len(full))), episodes=N, horizon=H,
         alpha=alpha_s, epsilon=eps_s, q_init=q_init, mu=mu, capacity=capacity,
         track_flat=True, threshold=L if check else np.inf, min_visits=V, prim_opt=prims,
+        intra=bool(intra_option),
     )
     parts = [part0] * K
     events: list[dict[str, int]] = []
@@ -429,7 +434,8 @@ def hierarchical_learning(
         "theorem_4_5_bound": default_threshold(mdp, epsilon=epsilon, delta=delta, scale=np.inf),
         "min_visits": V, "alpha": alpha_s.to_dict(), "epsilon_greedy": eps_s.to_dict(),
         "max_steps_per_episode": H, "eval_every": M, "q_init": float(q_init),
-        "kernel": kernel_name, "options": list(names), "extra_subgoals": [o.subgoal for o in extra],
+        "kernel": kernel_name, "intra_option": bool(intra_option), "options": list(names),
+        "extra_subgoals": [o.subgoal for o in extra],
         "initial_blocks": B0, "reference": "given" if reference_values is not None else "solved",
     }
     curve = LearningCurve.from_matrices(

@@ -33,9 +33,9 @@ For a subgoal ``g`` the option is built in three parts:
   0 otherwise, every state where the option terminates is absorbing with value 0, discounted by
   ``pseudo_gamma`` (the MDP's gamma if it is below 1, else 0.99). Its value is
   ``E[pseudo_gamma^(tau - 1) ; the option ends at g]`` (the +1 comes on arrival), so the policy
-  reaches ``g`` as fast and as surely as possible without leaving the region where the option runs. It is task-independent:
-  the MDP's own rewards play no part. Solved by modified policy iteration
-  (:func:`adpart.mdp.solvers.solve`) to ``epsilon``; ties go to the lowest action index. For
+  reaches ``g`` as fast and as surely as possible without leaving the region where the option
+  runs. It is task-independent: the MDP's own rewards play no part. Solved by modified policy
+  iteration (:func:`adpart.mdp.solvers.solve`) to ``epsilon``; ties go to the lowest action index. For
   ``"local"`` the policy is the basin's (solved once); the option simply ends where it leaves
   ``I``, which on the policy's own route happens only in a stochastic domain.
 """

@@ -16,7 +16,7 @@ GAMMA = 0.9
 
 
 def right_chain() -> FiniteMDP:
-    """States 0..6 on a line, actions left/right, -1 a step, 6 terminal, every episode starts at 0."""
+    """States 0..6 on a line, actions left/right, -1 a step, 6 terminal, episodes start at 0."""
     S, A = 7, 2
     P = np.zeros((S, A, S))
     for s in range(S):
@@ -87,8 +87,8 @@ def test_primitive_options_with_intra_are_still_flat_q_learning(make):
 def test_kernels_agree_with_intra_option_updates():
     mdp = get_domain("four-rooms").mdp("G1")
     opts = hallway_options(mdp)
-    kw = dict(include_primitives=True, runs=2, episodes=15, seed=4, eval_every=5,
-              intra_option=True)
+    kw = {"include_primitives": True, "runs": 2, "episodes": 15, "seed": 4, "eval_every": 5,
+          "intra_option": True}
     a = smdp_q_learning(mdp, opts, kernel="python", **kw)
     b = smdp_q_learning(mdp, opts, kernel="numba", **kw)
     np.testing.assert_array_equal(a.Q, b.Q)

@@ -28,14 +28,18 @@ class SMDPQLearner:
         ALPHA,
         EPSILON,
         Param("primitives", "bool", False, "offer the primitive actions beside the options"),
+        Param("intra-option", "bool", False,
+              "update every option consistent with each step (Sutton, Precup & Singh 1999)"),
         MAX_STEPS,
         q_init("Q(s, o)"),
         kernel("numba", "python"),
     )
 
     def __init__(self, alpha: str = "1/n^0.8", epsilon: str = "0.1", primitives: bool = False,
-                 max_steps: int = 1000, q_init: float = 0.0, kernel: str = "auto") -> None:
+                 intra_option: bool = False, max_steps: int = 1000, q_init: float = 0.0,
+                 kernel: str = "auto") -> None:
         self.alpha, self.epsilon, self.primitives = alpha, epsilon, bool(primitives)
+        self.intra_option = bool(intra_option)
         self.max_steps, self.q_init = max_steps, q_init
         self.kernel = None if kernel == "auto" else kernel
 
@@ -51,7 +55,7 @@ class SMDPQLearner:
             mdp, opts, include_primitives=self.primitives or not opts, runs=runs,
             episodes=episodes, seed=seed, alpha=self.alpha, epsilon=self.epsilon,
             max_steps_per_episode=self.max_steps, eval_every=eval_every, progress=progress,
-            q_init=self.q_init, kernel=self.kernel,
+            q_init=self.q_init, kernel=self.kernel, intra_option=self.intra_option,
         )
 
 
@@ -70,6 +74,8 @@ class HierarchicalLearner:
               min=0.0),
         Param("min-visits", "int", 2, "visits of the flat pair and block before a test fires",
               min=0),
+        Param("intra-option", "bool", False,
+              "update every offered option consistent with each step (block level)"),
         ALPHA,
         EPSILON,
         MAX_STEPS,
@@ -78,8 +84,10 @@ class HierarchicalLearner:
 
     def __init__(self, mode: str = "inconsistency", delta: float = 0.0,
                  partition_epsilon: float = 0.0, threshold: float = -1.0,
-                 threshold_scale: float = 0.5, min_visits: int = 2, alpha: str = "1/n^0.8",
-                 epsilon: str = "0.1", max_steps: int = 1000, kernel: str = "auto") -> None:
+                 threshold_scale: float = 0.5, min_visits: int = 2, intra_option: bool = False,
+                 alpha: str = "1/n^0.8", epsilon: str = "0.1", max_steps: int = 1000,
+                 kernel: str = "auto") -> None:
+        self.intra_option = bool(intra_option)
         self.mode, self.delta, self.partition_epsilon = mode, delta, partition_epsilon
         self.threshold = None if threshold < 0 else threshold
         self.threshold_scale, self.min_visits = threshold_scale, min_visits
@@ -102,7 +110,7 @@ class HierarchicalLearner:
             threshold_scale=self.threshold_scale, min_visits=self.min_visits, runs=runs,
             episodes=episodes, seed=seed, alpha=self.alpha, epsilon_greedy=self.epsilon,
             max_steps_per_episode=self.max_steps, eval_every=eval_every, progress=progress,
-            kernel=self.kernel,
+            kernel=self.kernel, intra_option=self.intra_option,
         )
 
 
