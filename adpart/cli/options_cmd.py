@@ -40,6 +40,13 @@ from adpart.workflows.refs import get_ref
     "E[gamma^tau] >= gamma^radius.",
 )
 @click.option(
+    "--cover/--no-cover",
+    default=True,
+    show_default=True,
+    help="With local initiation, also offer each state far from every subgoal the option to "
+    "its nearest one (a decision layer needs every state covered).",
+)
+@click.option(
     "--executor",
     default="serial",
     show_default=True,
@@ -52,6 +59,7 @@ def options_cmd(
     subgoals_ref: str,
     initiation: str,
     radius: float,
+    cover: bool,
     executor: str,
     as_json: bool,
     kb_path: str | None,
@@ -79,7 +87,7 @@ def options_cmd(
         start = time.perf_counter()
         with registry().get("executor", executor).create() as ex:
             stored = options_for_subgoals(kb, subgoal_set, initiation=initiation,
-                                          radius=radius, executor=ex)
+                                          radius=radius, cover=cover, executor=ex)
         seconds = time.perf_counter() - start
     finally:
         kb.close()
@@ -98,6 +106,7 @@ def options_cmd(
         "subgoal_set": subgoal_set.ref,
         "initiation": initiation,
         "radius": radius if initiation == "local" else None,
+        "cover": cover if initiation == "local" else None,
         "reused": stored.reused,
         "seconds": round(seconds, 3),
         "options": rows,

@@ -402,7 +402,7 @@ def maxq_parr(config: ExperimentConfig) -> ExperimentReport:
     goal_cells = np.flatnonzero(mdp.terminal & entered)
     states = np.unique(np.r_[sub, goal_cells[:1]])
     config.progress(f"{sub.size} subgoals; options and models")
-    options = subgoal_options(mdp, states, initiation="basin")
+    options = subgoal_options(mdp, states, initiation="local")
     models = option_models(mdp, options, duration=False)
     st = found.stats
     report.data["first_task"] = {

@@ -100,6 +100,11 @@ class SMDPLockStepState:
     Intra-option learning: ``intra``; ``chained`` (K,) whether every step of the running option
     so far got its one-step update.
 
+    Sound inconsistency test (hierarchical): ``Ql`` (K, S, A) the grounded lower bound of the flat
+    values, ``tsum``/``tsq`` (K, S, A) sums of its targets and their squares, ``succ0`` (K, S, A)
+    the first successor seen (-1 none yet, -2 more than one), ``lcb_z`` the z of its lower
+    confidence bound; ``flat_explore``: take the optimistic flat action where it beats the block.
+
     Agents: ``state``, ``episode``, ``target``, ``t_ep``, ``d_ep``, ``ret``, ``dret``, ``gpow``,
     ``cur`` (running option or -1), ``s0``, ``b0``, ``G``, ``g``, ``alpha_ep``, ``eps_ep``;
     uniforms ``U`` (K, B, 4), ``W`` (K, B, 2), ``cursor`` (K,).
@@ -138,6 +143,12 @@ class SMDPLockStepState:
     fired: np.ndarray
     intra: bool
     chained: np.ndarray
+    Ql: np.ndarray
+    tsum: np.ndarray
+    tsq: np.ndarray
+    succ0: np.ndarray
+    lcb_z: float
+    flat_explore: bool
     state: np.ndarray
     episode: np.ndarray
     target: np.ndarray
@@ -182,7 +193,8 @@ class SMDPLockStepState:
             self.pol_act, self.pol_cdf, self.beta, self.labels, self.adm, self.Q, self.n_o,
             self.n_d, self.n_blocks, self.track_flat, self.Qf, self.nf, self.check_on,
             self.threshold, self.min_visits, self.prim_opt, self.prim_adm, self.fired,
-            self.intra, self.chained, self.state,
+            self.intra, self.chained, self.Ql, self.tsum, self.tsq, self.succ0, self.lcb_z,
+            self.flat_explore, self.state,
             self.episode,
             self.target, self.t_ep, self.d_ep, self.ret, self.dret, self.gpow, self.cur, self.s0,
             self.b0, self.G, self.g, self.alpha_ep, self.eps_ep, self.U, self.W, self.cursor,
@@ -193,7 +205,8 @@ class SMDPLockStepState:
 def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, horizon,
              a_scale, a_rate, a_omega, a_floor, e_scale, e_rate, e_omega, e_floor,
              pol_act, pol_cdf, beta, labels, adm, Q, n_o, n_d, n_blocks, track_flat, Qf, nf,
-             check_on, threshold, min_visits, prim_opt, prim_adm, fired, intra, chained, state,
+             check_on, threshold, min_visits, prim_opt, prim_adm, fired, intra, chained,
+             Ql, tsum, tsq, succ0, lcb_z, flat_explore, state,
              episode, target,
              t_ep,
              d_ep, ret, dret, gpow, cur, s0, b0, G, g, alpha_ep, eps_ep, U, W, cursor,
@@ -222,22 +235,29 @@ def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, h
             s = state[k]
             if cur[k] < 0:
                 d = labels[k, s]
-                if check_on:
+                if check_on and n_d[k, d] >= min_visits:
                     best_a = -1
-                    vf = neg_inf
+                    vl = neg_inf
                     for a in range(A):
-                        if Qf[k, s, a] > vf:
-                            vf = Qf[k, s, a]
+                        n = nf[k, s, a]
+                        if not prim_adm[s, a] or n < min_visits or n == 0:
+                            continue
+                        lb = Ql[k, s, a]
+                        if succ0[k, s, a] == -2 and n > 1:  # more than one successor seen
+                            mean = tsum[k, s, a] / n
+                            var = max(0.0, (tsq[k, s, a] - n * mean * mean) / (n - 1))
+                            lb -= lcb_z * math.sqrt(var / n)
+                        if lb > vl:
+                            vl = lb
                             best_a = a
                     if best_a >= 0:
                         oa = prim_opt[best_a]
-                        if (oa >= 0 and not adm[k, d, oa] and nf[k, s, best_a] >= min_visits
-                                and n_d[k, d] >= min_visits):
+                        if oa >= 0 and not adm[k, d, oa]:
                             vp = neg_inf
                             for o in range(O):
                                 if adm[k, d, o] and Q[k, d, o] > vp:
                                     vp = Q[k, d, o]
-                            if vf - vp > threshold:
+                            if vl - vp > threshold:
                                 fired[k, 0] = s
                                 fired[k, 1] = d
                                 fired[k, 2] = best_a
@@ -277,6 +297,15 @@ def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, h
                                 o_sel = o
                                 break
                             j -= 1
+                if flat_explore and u0 >= eps:
+                    vf = neg_inf
+                    af = -1
+                    for a in range(A):
+                        if prim_adm[s, a] and Qf[k, s, a] > vf:
+                            vf = Qf[k, s, a]
+                            af = a
+                    if af >= 0 and vf > Q[k, d, o_sel]:
+                        o_sel = af  # the optimistic flat action beats the block's best
                 cur[k] = o_sel
                 s0[k] = s
                 b0[k] = d
@@ -313,6 +342,22 @@ def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, h
                     tdf = r + gamma * bn
                 old = Qf[k, s, a]
                 Qf[k, s, a] = old + alpha * (tdf - old)
+                if check_on:
+                    if done:
+                        tdl = r
+                    else:
+                        bl = Ql[k, s2, 0]
+                        for b in range(1, A):
+                            bl = max(bl, Ql[k, s2, b])
+                        tdl = r + gamma * bl
+                    old = Ql[k, s, a]
+                    Ql[k, s, a] = old + alpha * (tdl - old)
+                    tsum[k, s, a] += tdl
+                    tsq[k, s, a] += tdl * tdl
+                    if succ0[k, s, a] == -1:
+                        succ0[k, s, a] = s2
+                    elif succ0[k, s, a] != s2:
+                        succ0[k, s, a] = -2
             if intra:
                 d = labels[k, s]
                 d2 = labels[k, s2]

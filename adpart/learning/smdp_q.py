@@ -176,6 +176,7 @@ def make_state(
     *, episodes: int, horizon: int, alpha: Schedule, epsilon: Schedule, q_init: float,
     mu: np.ndarray, capacity: int, track_flat: bool = False, threshold: float = np.inf,
     min_visits: int = 0, prim_opt: np.ndarray | None = None, intra: bool = False,
+    lower_bound: float = -np.inf, lcb_z: float = 0.0, flat_explore: bool = False,
 ) -> kernels.SMDPLockStepState:
     """Kernel state for K runs on decision layers ``labels`` (K, S) / ``block_adm`` (K, B, O)."""
     K, S = labels.shape
@@ -186,6 +187,7 @@ def make_state(
     adm[:, :block_adm.shape[1]] = block_adm
     Q = np.where(adm, float(q_init), -np.inf)
     flat_shape = (K, S, A) if track_flat else (K, 1, A)
+    check = bool(track_flat and np.isfinite(threshold))
     Qf = np.where(mdp.admissible, float(q_init), -np.inf) if track_flat else np.zeros((1, A))
     st = kernels.SMDPLockStepState(
         keys=mdp.sampler_arrays[0],
@@ -211,7 +213,7 @@ def make_state(
         track_flat=bool(track_flat),
         Qf=np.broadcast_to(Qf, flat_shape).copy(),
         nf=np.zeros(flat_shape, dtype=np.int64),
-        check_on=bool(track_flat and np.isfinite(threshold)),
+        check_on=check,
         threshold=float(threshold),
         min_visits=int(min_visits),
         prim_opt=np.full(A, -1, dtype=np.int64) if prim_opt is None else prim_opt.astype(np.int64),
@@ -219,6 +221,14 @@ def make_state(
         fired=np.full((K, 3), -1, dtype=np.int64),
         intra=bool(intra),
         chained=np.ones(K, dtype=bool),
+        Ql=np.broadcast_to(np.where(mdp.admissible, float(lower_bound), -np.inf)
+                           if check else np.zeros((1, A)), flat_shape if check else (1, 1, A)
+                           ).copy(),
+        tsum=np.zeros(flat_shape if check else (1, 1, A)),
+        tsq=np.zeros(flat_shape if check else (1, 1, A)),
+        succ0=np.full(flat_shape if check else (1, 1, A), -1, dtype=np.int64),
+        lcb_z=float(lcb_z),
+        flat_explore=bool(flat_explore and track_flat),
         state=np.zeros(K, dtype=np.int64),
         episode=np.zeros(K, dtype=np.int64),
         target=np.zeros(K, dtype=np.int64),

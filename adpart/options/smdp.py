@@ -12,8 +12,9 @@ Terminal states of the MDP get zero rows - ``R`` *and* ``F``, in every column - 
 admissible (value 0, as in :meth:`FiniteMDP.as_smdp`). Zeroing ``F`` matters when the models were
 computed under another task, whose terminal states differ: a row left there would let the value
 of the new goal depend on the column a policy picks at it. Models for a new task should be that
-task's (:func:`adpart.options.models.option_models` on the new MDP); the zeroing is the guard. A non-terminal state where no option is admissible would get the
-value ``-inf``; stacking refuses it and names the state.
+task's (:func:`adpart.options.models.option_models` on the new MDP); the zeroing is the guard.
+A non-terminal state where no option is admissible would get the value ``-inf``; stacking
+refuses it and names the state.
 """
 
 from __future__ import annotations

@@ -35,9 +35,9 @@ For a subgoal ``g`` the option is built in three parts:
   ``E[pseudo_gamma^(tau - 1) ; the option ends at g]`` (the +1 comes on arrival), so the policy
   reaches ``g`` as fast and as surely as possible without leaving the region where the option
   runs. It is task-independent: the MDP's own rewards play no part. Solved by modified policy
-  iteration (:func:`adpart.mdp.solvers.solve`) to ``epsilon``; ties go to the lowest action index. For
-  ``"local"`` the policy is the basin's (solved once); the option simply ends where it leaves
-  ``I``, which on the policy's own route happens only in a stochastic domain.
+  iteration (:func:`adpart.mdp.solvers.solve`) to ``epsilon``; ties go to the lowest action
+  index. For ``"local"`` the policy is the basin's (solved once); the option simply ends where
+  it leaves ``I``, which on the policy's own route happens only in a stochastic domain.
 """
 
 from __future__ import annotations
@@ -298,12 +298,57 @@ def subgoal_options(
     *,
     initiation: str = "local",
     radius: float = LOCAL_RADIUS,
+    cover: bool = False,
     pseudo_gamma: float | None = None,
 ) -> list[Option]:
-    """One option per subgoal (in increasing state order), each bounded by the others' basins."""
+    """One option per subgoal (in increasing state order), each bounded by the others' basins.
+
+    With ``initiation="local"`` and ``cover=True`` a state that lies in no option's ball (no
+    subgoal within ``radius`` steps) but in some basin is added to the initiation set of the
+    option that reaches its subgoal most surely and soonest (the highest ``E[gamma^(tau-1)]``;
+    the lowest subgoal on ties): the *nearest* subgoal. Every state that can reach a subgoal
+    then has an option - which a decision layer needs, since its blocks must offer one - while
+    a state near subgoals is offered only theirs. The option still ends where it leaves its
+    initiation set, so from a far state it walks towards its subgoal until it enters another
+    subgoal's ball or its own: the basin cut where a neighbouring subgoal's region begins.
+    """
     mask = _subgoal_mask(subgoals, mdp.n_states)
-    return [
-        subgoal_option(mdp, int(g), subgoals=mask, initiation=initiation, radius=radius,
-                       pseudo_gamma=pseudo_gamma)
-        for g in np.flatnonzero(mask)
-    ]
+    goals = np.flatnonzero(mask)
+    if not (cover and isinstance(initiation, str) and initiation == "local"):
+        return [
+            subgoal_option(mdp, int(g), subgoals=mask, initiation=initiation, radius=radius,
+                           pseudo_gamma=pseudo_gamma)
+            for g in goals
+        ]
+    radius = check_radius(radius)
+    parts = [_basin_parts(mdp, int(g), mask, pseudo_gamma) for g in goals]
+    if not parts:
+        return []
+    within = pseudo_discount(mdp, pseudo_gamma) ** (radius - 1.0) * (1.0 - RADIUS_RTOL)
+    basins = np.stack([p[0] for p in parts])  # (G, S)
+    reach = np.where(basins, np.stack([p[3] for p in parts]), -1.0)
+    balls = basins & (reach >= within)
+    far = basins.any(axis=0) & ~balls.any(axis=0)
+    nearest = np.argmax(reach, axis=0)  # first maximum: the lowest subgoal on ties
+    options = []
+    for i, (g, (_, stop, policy, _)) in enumerate(zip(goals, parts, strict=True)):
+        init = balls[i] | (far & (nearest == i))
+        beta = (stop | ~init).astype(np.float64)
+        beta[g] = 1.0
+        options.append(Option(f"to-{int(g)}", init, policy, beta, subgoal=int(g),
+                              meta={"kind": "subgoal", "initiation": "local",
+                                    "radius": radius, "cover": True}))
+    return options
+
+
+def _basin_parts(mdp: FiniteMDP, subgoal: int, subgoals: np.ndarray,
+                 pseudo_gamma: float | None) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                      np.ndarray]:
+    """``(basin, stop, policy, reach)`` of the basin option to ``subgoal`` (module docstring)."""
+    others = subgoals.copy()
+    others[subgoal] = False
+    init = basin(mdp, subgoal, others)
+    stop = ~init | others
+    stop[subgoal] = True
+    policy, V = policy_to(mdp, subgoal, stop, pseudo_gamma=pseudo_gamma)
+    return init, stop, policy, start_value(mdp, subgoal, V, pseudo_gamma)

@@ -56,7 +56,7 @@ def test_local_initiation_is_the_bfs_ball_on_three_floor(radius):
     mdp = get_domain("three-floor").mdp("reach-top-west")
     rng = np.random.default_rng(radius)
     subgoals = sorted(rng.choice(np.flatnonzero(~mdp.terminal), 5, replace=False).tolist())
-    options = subgoal_options(mdp, subgoals, initiation="local", radius=radius)
+    options = subgoal_options(mdp, subgoals, initiation="local", radius=radius, cover=False)
     for option in options:
         want = oracle_initiation(mdp, option.subgoal, set(subgoals), radius)
         np.testing.assert_array_equal(option.initiation, want, err_msg=option.name)
@@ -84,7 +84,8 @@ def test_local_initiation_matches_bfs_on_random_deterministic_grids(seed, n, k, 
 def test_infinite_radius_is_the_basin():
     mdp = get_domain("three-floor").mdp("reach-top-west")
     subgoals = [100, 500, 1000]
-    for option in subgoal_options(mdp, subgoals, initiation="local", radius=np.inf):
+    for option in subgoal_options(mdp, subgoals, initiation="local", radius=np.inf,
+                                  cover=False):
         np.testing.assert_array_equal(option.initiation, basin(mdp, option.subgoal, subgoals))
 
 
@@ -104,3 +105,29 @@ def test_bad_radius_names_the_option(radius):
     mdp = random_grid_mdp(16, slip=0.0, seed=0)
     with pytest.raises(ModelError, match="--radius"):
         subgoal_option(mdp, 5, initiation="local", radius=radius)
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 10_000), n=st.integers(12, 60), k=st.integers(1, 4),
+       radius=st.integers(1, 6))
+def test_covering_adds_each_far_state_to_its_nearest_subgoal(seed, n, k, radius):
+    """cover=True: the balls as before, plus every state in no ball but in some basin, given to
+    one option whose subgoal is nearest by the BFS (any of them on a tie)."""
+    mdp = random_grid_mdp(n, slip=0.0, seed=seed)
+    rng = np.random.default_rng(seed)
+    subgoals = sorted(rng.choice(n, k, replace=False).tolist())
+    options = subgoal_options(mdp, subgoals, initiation="local", radius=radius, cover=True)
+    dist = {g: bfs_steps_to(mdp, g, set(subgoals)) for g in subgoals}
+    for s in range(n):
+        near = {g: d[s] for g, d in dist.items() if s in d}
+        holders = [o.subgoal for o in options if o.initiation[s]]
+        if not near:
+            assert holders == []
+            continue
+        balls = sorted(g for g, d in near.items() if d <= radius)
+        if balls:
+            assert sorted(holders) == balls
+        else:
+            assert len(holders) == 1 and near[holders[0]] == min(near.values())
+    for o in options:
+        assert (o.beta[~o.initiation] == 1.0).all() and o.beta[o.subgoal] == 1.0
