@@ -340,7 +340,8 @@ def hierarchical_learning(
         min_visits: visits of the flat pair and of the block before the test may fire.
         lcb_z: standard errors subtracted from a stochastic pair's lower-bound flat value.
         flat_explore: at a greedy decision take the optimistic flat action where it beats
-            the block's best value (exploration for goals that are no subgoal).
+            the block's best value (exploration for goals that are no subgoal; ``inconsistency``
+            mode only - the other modes make the goal reachable on the layer).
         models: exact models of ``options`` (computed when omitted).
         runs, episodes, seed, alpha, max_steps_per_episode, eval_every, reference_values,
         progress, q_init, kernel: as :func:`adpart.learning.smdp_q.smdp_q_learning`;
@@ -406,7 +407,7 @@ def hierarchical_learning(
         alpha=alpha_s, epsilon=eps_s, q_init=q_init, mu=mu, capacity=capacity,
         track_flat=True, threshold=L if check else np.inf, min_visits=V, prim_opt=prims,
         intra=bool(intra_option), lower_bound=flat_lower_bound(mdp, H), lcb_z=lcb_z,
-        flat_explore=flat_explore,
+        flat_explore=flat_explore and check,
     )
     parts = [part0] * K
     events: list[dict[str, int]] = []
@@ -474,7 +475,7 @@ def hierarchical_learning(
         "threshold_rule": "given" if threshold is not None else
         f"{threshold_scale} x |V*(start)|",
         "theorem_4_5_bound": theorem_bound(mdp, epsilon=epsilon, delta=delta),
-        "lcb_z": float(lcb_z), "flat_explore": bool(flat_explore),
+        "lcb_z": float(lcb_z), "flat_explore": bool(flat_explore and check),
         "flat_lower_bound": flat_lower_bound(mdp, H),
         "min_visits": V, "alpha": alpha_s.to_dict(), "epsilon_greedy": eps_s.to_dict(),
         "max_steps_per_episode": H, "eval_every": M, "q_init": float(q_init),

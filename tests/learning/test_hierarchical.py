@@ -176,7 +176,8 @@ def test_every_firing_is_a_real_inconsistency(setup):
     on = hierarchical_learning(mdp, opts, part, **SETTINGS)
     _, smdp = option_set(mdp, opts, include_primitives=True)
     adm = part.admissible[part.labels] & smdp.admissible  # primitives first, offered nowhere
-    layer = SMDPModel(R=np.where(adm, smdp.R, 0.0), F=smdp.F, admissible=adm | mdp.terminal[:, None])
+    layer = SMDPModel(R=np.where(adm, smdp.R, 0.0), F=smdp.F,
+                      admissible=adm | mdp.terminal[:, None])
     v_layer = solve(layer, 1e-10).V
     q_star = q_from_v(mdp, solve(mdp, 1e-10).V)
     L = on.parameters["threshold"]
