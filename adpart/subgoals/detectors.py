@@ -28,7 +28,7 @@ from adpart.subgoals.reward import with_reward_variation
 _P = Param("p", "float", 0.025, "level of the one-sided t-test (eq. 4.2), in (0, 1)", min=0.0)
 _TRAJ = Param("trajectories", "int", 30, "sampled paths along which ratios are taken", min=1)
 _N = Param("n", "int", 0, "N of eq. 4.2 (ratio samples per state); 0 = automatic", min=0)
-_LOOP = Param("on-loop", "str", "error", "a policy that never terminates: error or truncate",
+_LOOP = Param("on-loop", "str", "truncate", "a policy that never terminates: error or truncate",
               choices=("error", "truncate"))
 
 
@@ -40,7 +40,7 @@ class CountExhaustive:
     params = (_P, _TRAJ, _N, _LOOP)
 
     def __init__(self, p: float = 0.025, trajectories: int = 30, n: int = 0,
-                 on_loop: str = "error") -> None:
+                 on_loop: str = "truncate") -> None:
         self.kw = {"p": p, "trajectories": trajectories, "n": n, "on_loop": on_loop}
 
     def detect(self, mdp: FiniteMDP, policy: np.ndarray, rng: np.random.Generator) -> SubgoalResult:
@@ -67,7 +67,7 @@ class CountMonteCarlo:
 
     def __init__(self, p: float = 0.025, trajectories: int = 30, n: int = 0, batch: int = 50,
                  epsilon: float = 2.0, confidence: float = 0.9, stable_batches: int = 3,
-                 stop: str = "either", max_samples: int = 20000, on_loop: str = "error") -> None:
+                 stop: str = "either", max_samples: int = 20000, on_loop: str = "truncate") -> None:
         self.kw = {"p": p, "trajectories": trajectories, "n": n, "batch": batch,
                    "epsilon": epsilon, "confidence": confidence, "stable_batches": stable_batches,
                    "stop": stop, "max_samples": max_samples, "on_loop": on_loop}

@@ -306,6 +306,22 @@ def _partition_layer(kb: Any, config: PipelineConfig, subgoal_ref: str, task: st
                  [], reused)
 
 
+def episode_defaults(env: str) -> dict[str, Any]:
+    """Learner settings the pipeline uses unless ``--flat-opt``/``--hier-opt`` set them.
+
+    * ``alpha = 1`` when every transition of the environment is deterministic (a full step is
+      then the exact Bellman backup of the sampled transition), else the learners' ``1/n^0.8``;
+    * ``max-steps = max(1000, 2 |S|)``: the learners' 1,000-step cap is shorter than one sweep of
+      a 2,900-state building, and a cut episode teaches little.
+    """
+    from adpart.workflows.resolve import resolve_domain
+
+    dyn = resolve_domain(env).dynamics()
+    deterministic = bool(np.all(np.diff(dyn.P.indptr) <= 1))
+    return {"alpha": "1" if deterministic else "1/n^0.8",
+            "max-steps": max(1000, 2 * dyn.n_states)}
+
+
 def run_pipeline(
     kb: Any,
     config: PipelineConfig,
@@ -317,7 +333,9 @@ def run_pipeline(
     say = progress or (lambda message: None)
     report = PipelineReport(config)
     first, *later = config.tasks
-    flat = dict(config.flat_params)
+    defaults = episode_defaults(config.env)
+    flat = {**defaults, **config.flat_params}
+    hierarchical = {**defaults, **config.hierarchical_params}
 
     say(f"learning {first} flat ({config.runs} runs x {config.first_episodes} episodes)")
     first_req = LearnRequest(
@@ -392,7 +410,7 @@ def run_pipeline(
             env=config.env,
             task=task,
             learner="hierarchical",
-            params=dict(config.hierarchical_params),
+            params=dict(hierarchical),
             runs=config.runs,
             episodes=config.episodes,
             seed=config.seed,
