@@ -69,7 +69,7 @@ def _options(mdp: Any, states: np.ndarray, goal: np.ndarray | None = None
 
     mask = np.zeros(mdp.n_states, dtype=bool)
     mask[states] = True
-    options = subgoal_options(mdp, mask, initiation="local", radius=RADIUS)
+    options = subgoal_options(mdp, mask, initiation="local", radius=RADIUS, cover=False)
     if goal is not None:
         options += [subgoal_option(mdp, int(g), initiation="reachable", name=f"reward-{int(g)}")
                     for g in goal]
