@@ -346,9 +346,10 @@ def hierarchical_learning(
         runs, episodes, seed, alpha, max_steps_per_episode, eval_every, reference_values,
         progress, q_init, kernel: as :func:`adpart.learning.smdp_q.smdp_q_learning`;
         epsilon_greedy: the exploration schedule (``epsilon`` is the partition's).
-        intra_option: every primitive step also updates each option offered in the current
-            block whose policy takes that action there (block-level intra-option learning,
-            :mod:`adpart.learning._smdp_kernels`).
+        intra_option: every primitive step also updates the current block's column of that
+            primitive action where the block offers it (block-level intra-option learning for
+            the one-step options; multi-step ones have no valid one-step target on a block
+            layer, :mod:`adpart.learning._smdp_kernels`).
 
     Returns:
         A :class:`HierarchicalResult`.
@@ -406,7 +407,7 @@ def hierarchical_learning(
         np.broadcast_to(part0.admissible, (K, B0, len(full))), episodes=N, horizon=H,
         alpha=alpha_s, epsilon=eps_s, q_init=q_init, mu=mu, capacity=capacity,
         track_flat=True, threshold=L if check else np.inf, min_visits=V, prim_opt=prims,
-        intra=bool(intra_option), lower_bound=flat_lower_bound(mdp, H), lcb_z=lcb_z,
+        intra=2 if intra_option else 0, lower_bound=flat_lower_bound(mdp, H), lcb_z=lcb_z,
         flat_explore=flat_explore and check,
     )
     parts = [part0] * K

@@ -175,7 +175,7 @@ def make_state(
     mdp: FiniteMDP, options: Sequence[Option], labels: np.ndarray, block_adm: np.ndarray,
     *, episodes: int, horizon: int, alpha: Schedule, epsilon: Schedule, q_init: float,
     mu: np.ndarray, capacity: int, track_flat: bool = False, threshold: float = np.inf,
-    min_visits: int = 0, prim_opt: np.ndarray | None = None, intra: bool = False,
+    min_visits: int = 0, prim_opt: np.ndarray | None = None, intra: int = 0,
     lower_bound: float = -np.inf, lcb_z: float = 0.0, flat_explore: bool = False,
 ) -> kernels.SMDPLockStepState:
     """Kernel state for K runs on decision layers ``labels`` (K, S) / ``block_adm`` (K, B, O)."""
@@ -219,7 +219,7 @@ def make_state(
         prim_opt=np.full(A, -1, dtype=np.int64) if prim_opt is None else prim_opt.astype(np.int64),
         prim_adm=np.ascontiguousarray(mdp.admissible, dtype=bool),
         fired=np.full((K, 3), -1, dtype=np.int64),
-        intra=bool(intra),
+        intra=int(intra),
         chained=np.ones(K, dtype=bool),
         Ql=np.broadcast_to(np.where(mdp.admissible, float(lower_bound), -np.inf)
                            if check else np.zeros((1, A)), flat_shape if check else (1, 1, A)
@@ -356,7 +356,7 @@ def smdp_q_learning(
     labels = np.broadcast_to(np.arange(S, dtype=np.int64), (K, S))
     st = make_state(mdp, full, labels, np.broadcast_to(state_adm, (K, S, len(full))),
                     episodes=N, horizon=H, alpha=alpha_s, epsilon=eps_s, q_init=q_init, mu=mu,
-                    capacity=S, intra=bool(intra_option))
+                    capacity=S, intra=1 if intra_option else 0)
 
     def score() -> np.ndarray:
         policies = greedy_policy(st.Q.reshape(K * S, -1)).reshape(K, S)
