@@ -59,12 +59,19 @@ then skipped if every one of its steps got such an update (they already chain it
 option that was not updated at some step (stochastic policy, or the missing target) keeps its
 step-6 update. The random streams are untouched, so ``intra=0`` is the rule above exactly.
 
-``intra`` is 0 (off), 1 (every consistent option: SMDP Q over states, where the rule is exact) or
-2 (only the primitive action's own one-step column: a decision layer). On a block layer a
-multi-step option's one-step target is not its value: a step that stays inside the block gives
-``Q(d, o) = r + gamma Q(d, o)``, which drives ``Q(d, o)`` to ``r / (1 - gamma)`` (measured: the
-pipeline's 49-block three-floor layer, 0 of 10 runs within the bound with it, 7 of 10 without);
-one-step columns have no such problem.
+``intra`` is 0 (off), 1 (the one-step rule above: SMDP Q over states, where it is exact) or 2
+(a decision layer). On a block layer a multi-step option's one-step target is not its value: a step
+that stays inside the block gives ``Q(d, o) = r + gamma Q(d, o)``, which drives ``Q(d, o)`` to
+``r / (1 - gamma)`` (measured: the pipeline's 49-block three-floor layer, 0 of 10 runs within the
+bound with it). Mode 2 therefore runs *virtual executions*: every option offered in the block of
+``s`` whose deterministic policy takes ``a`` there, and that is not already running (actually or
+virtually), starts one at ``(block(s), G = 0, g = 1)``; each step it stays consistent with adds
+``g r`` to ``G`` and multiplies ``g`` by ``gamma``; where the option would end (``beta = 1``, a
+terminal state, the step cap) it gets the SMDP update of step 6 from its start block,
+``Q(b0, o) += alpha (G + g max Q(block(s'), .) - Q(b0, o))``; a step off its policy, or a
+termination probability strictly between 0 and 1, drops it. For a deterministic option this is
+exactly the update the option would have had had it been chosen in ``b0`` - off-policy, without
+importance weights. The running option keeps its own step-6 update.
 
 With every option a primitive action (``beta = 1``, deterministic) and the identity partition this
 is the flat kernel's rule operation for operation: ``G + g * best = (0 + 1 * r) + gamma * best``.
@@ -105,7 +112,8 @@ class SMDPLockStepState:
     action (-1: none); ``prim_adm`` (S, A) where each action may be taken; ``fired`` (K, 3).
 
     Intra-option learning: ``intra`` (0, 1 or 2); ``chained`` (K,) whether every step of the
-    running option so far got its one-step update.
+    running option so far got its one-step update; ``vr_on``/``vr_b0``/``vr_G``/``vr_g`` (K, O)
+    the virtual executions of mode 2 (running?, start block, return, discount).
 
     Sound inconsistency test (hierarchical): ``Ql`` (K, S, A) the grounded lower bound of the flat
     values, ``tsum``/``tsq`` (K, S, A) sums of its targets and their squares, ``succ0`` (K, S, A)
@@ -156,6 +164,10 @@ class SMDPLockStepState:
     succ0: np.ndarray
     lcb_z: float
     flat_explore: bool
+    vr_on: np.ndarray
+    vr_b0: np.ndarray
+    vr_G: np.ndarray
+    vr_g: np.ndarray
     state: np.ndarray
     episode: np.ndarray
     target: np.ndarray
@@ -201,7 +213,7 @@ class SMDPLockStepState:
             self.n_d, self.n_blocks, self.track_flat, self.Qf, self.nf, self.check_on,
             self.threshold, self.min_visits, self.prim_opt, self.prim_adm, self.fired,
             self.intra, self.chained, self.Ql, self.tsum, self.tsq, self.succ0, self.lcb_z,
-            self.flat_explore, self.state,
+            self.flat_explore, self.vr_on, self.vr_b0, self.vr_G, self.vr_g, self.state,
             self.episode,
             self.target, self.t_ep, self.d_ep, self.ret, self.dret, self.gpow, self.cur, self.s0,
             self.b0, self.G, self.g, self.alpha_ep, self.eps_ep, self.U, self.W, self.cursor,
@@ -213,7 +225,7 @@ def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, h
              a_scale, a_rate, a_omega, a_floor, e_scale, e_rate, e_omega, e_floor,
              pol_act, pol_cdf, beta, labels, adm, Q, n_o, n_d, n_blocks, track_flat, Qf, nf,
              check_on, threshold, min_visits, prim_opt, prim_adm, fired, intra, chained,
-             Ql, tsum, tsq, succ0, lcb_z, flat_explore, state,
+             Ql, tsum, tsq, succ0, lcb_z, flat_explore, vr_on, vr_b0, vr_G, vr_g, state,
              episode, target,
              t_ep,
              d_ep, ret, dret, gpow, cur, s0, b0, G, g, alpha_ep, eps_ep, U, W, cursor,
@@ -365,7 +377,45 @@ def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, h
                         succ0[k, s, a] = s2
                     elif succ0[k, s, a] != s2:
                         succ0[k, s, a] = -2
-            if intra:
+            if intra == 2:
+                d = labels[k, s]
+                d2 = labels[k, s2]
+                best2 = 0.0
+                if not done:
+                    best2 = Q[k, d2, 0]
+                    for oo in range(1, O):
+                        best2 = max(best2, Q[k, d2, oo])
+                ends = done or t_ep[k] + 1 == horizon
+                for oo in range(O):
+                    if vr_on[k, oo]:
+                        if pol_act[oo, s] != a:
+                            vr_on[k, oo] = False  # the step left the option's policy
+                            continue
+                    elif oo != cur[k] and adm[k, d, oo] and pol_act[oo, s] == a:
+                        vr_on[k, oo] = True
+                        vr_b0[k, oo] = d
+                        vr_G[k, oo] = 0.0
+                        vr_g[k, oo] = 1.0
+                    else:
+                        continue
+                    vr_G[k, oo] += vr_g[k, oo] * r
+                    vr_g[k, oo] *= gamma
+                    bt = beta[oo, s2]
+                    if ends or bt >= 1.0:
+                        b = vr_b0[k, oo]
+                        n_o[k, b, oo] += 1
+                        alpha = alpha_ep[k]
+                        if a_omega != 0.0:
+                            alpha = alpha * math.pow(float(n_o[k, b, oo]), -a_omega)
+                        alpha = max(a_floor, alpha)
+                        tdv = vr_G[k, oo] + (0.0 if done else vr_g[k, oo] * best2)
+                        old = Q[k, b, oo]
+                        Q[k, b, oo] = old + alpha * (tdv - old)
+                        vr_on[k, oo] = False
+                    elif bt > 0.0:
+                        vr_on[k, oo] = False  # a random termination: no single outcome
+                chained[k] = False
+            elif intra == 1:
                 d = labels[k, s]
                 d2 = labels[k, s2]
                 best2 = neg_inf
@@ -377,8 +427,6 @@ def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, h
                 for oo in range(O):
                     if not adm[k, d, oo] or pol_act[oo, s] != a:
                         continue
-                    if intra == 2 and oo != prim_opt[a]:
-                        continue  # a block layer: one-step columns only
                     if done:
                         tdi = r
                     else:

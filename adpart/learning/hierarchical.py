@@ -346,10 +346,9 @@ def hierarchical_learning(
         runs, episodes, seed, alpha, max_steps_per_episode, eval_every, reference_values,
         progress, q_init, kernel: as :func:`adpart.learning.smdp_q.smdp_q_learning`;
         epsilon_greedy: the exploration schedule (``epsilon`` is the partition's).
-        intra_option: every primitive step also updates the current block's column of that
-            primitive action where the block offers it (block-level intra-option learning for
-            the one-step options; multi-step ones have no valid one-step target on a block
-            layer, :mod:`adpart.learning._smdp_kernels`).
+        intra_option: every option offered where the agent's steps follow its policy gets
+            the SMDP update it would have had had it been chosen there (virtual executions,
+            :mod:`adpart.learning._smdp_kernels`), so the layer learns from flat exploration.
 
     Returns:
         A :class:`HierarchicalResult`.
@@ -455,6 +454,7 @@ def hierarchical_learning(
         st.adm[k, :B_new], st.adm[k, B_new:] = new.admissible, False
         st.labels[k] = new.labels
         st.n_blocks[k] = B_new
+        st.vr_on[k] = False  # virtual executions started in the old blocks are dropped
         parts[k] = new
         events.append({"run": k, "episode": int(st.episode[k]), "state": s, "block": b,
                        "action": a, "blocks_before": B_old, "blocks_after": B_new})

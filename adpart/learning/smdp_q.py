@@ -221,6 +221,10 @@ def make_state(
         fired=np.full((K, 3), -1, dtype=np.int64),
         intra=int(intra),
         chained=np.ones(K, dtype=bool),
+        vr_on=np.zeros((K, O), dtype=bool),
+        vr_b0=np.zeros((K, O), dtype=np.int64),
+        vr_G=np.zeros((K, O)),
+        vr_g=np.ones((K, O)),
         Ql=np.broadcast_to(np.where(mdp.admissible, float(lower_bound), -np.inf)
                            if check else np.zeros((1, A)), flat_shape if check else (1, 1, A)
                            ).copy(),

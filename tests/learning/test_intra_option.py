@@ -95,3 +95,31 @@ def test_kernels_agree_with_intra_option_updates():
     np.testing.assert_array_equal(a.visits, b.visits)
     plain = smdp_q_learning(mdp, opts, kernel="numba", **{**kw, "intra_option": False})
     assert a.visits.sum() > plain.visits.sum()  # options learn from steps they did not take
+
+
+def test_block_layer_virtual_executions_by_hand():
+    """Mode 2 (decision layers): an option the agent's steps follow gets its SMDP update.
+
+    Singleton blocks on the chain, no test, greedy: the agent runs "whole" from 0 to the goal.
+    "tail" (offered on 3..5) is never chosen, but the steps from 3 follow its policy, so it is
+    executed virtually from 3 and gets the SMDP return of its three steps, -(1 + g + g^2).
+    """
+    from adpart.learning.hierarchical import hierarchical_learning
+    from adpart.partition import Partition
+
+    mdp = right_chain()
+    whole = go_right(mdp, "whole", [0, 1, 2, 3, 4, 5])
+    tail = go_right(mdp, "tail", [3, 4, 5])
+    admissible = np.stack([whole.initiation, tail.initiation], axis=1)
+    admissible[6] = True
+    layer = Partition(np.arange(7), admissible)
+    kw = {"runs": 1, "episodes": 1, "seed": 0, "alpha": 1.0, "epsilon_greedy": 0.0,
+          "eval_every": 1, "threshold": np.inf, "flat_explore": False}
+    res = hierarchical_learning(mdp, [whole, tail], layer, intra_option=True, **kw)
+    Q = res.block_Q[0]
+    A = mdp.n_actions
+    assert Q[0, A] == pytest.approx(truncated_cost(6))  # the option run
+    assert Q[3, A + 1] == pytest.approx(truncated_cost(3))  # its virtual execution from 3
+    assert Q[4, A + 1] == 0.0 and Q[5, A + 1] == 0.0  # one virtual run at a time
+    plain = hierarchical_learning(mdp, [whole, tail], layer, intra_option=False, **kw)
+    assert plain.block_Q[0][3, A + 1] == 0.0
