@@ -118,7 +118,9 @@ class SMDPLockStepState:
     Sound inconsistency test (hierarchical): ``Ql`` (K, S, A) the grounded lower bound of the flat
     values, ``tsum``/``tsq`` (K, S, A) sums of its targets and their squares, ``succ0`` (K, S, A)
     the first successor seen (-1 none yet, -2 more than one), ``lcb_z`` the z of its lower
-    confidence bound; ``flat_explore``: take the optimistic flat action where it beats the block.
+    confidence bound; ``flat_explore``: take the optimistic flat action where it beats the block;
+    ``ref_model``/``Vref`` (K, Bcap): compare with the block's point-model value ``Vref`` instead
+    of its learned ``max_o Q``.
 
     Agents: ``state``, ``episode``, ``target``, ``t_ep``, ``d_ep``, ``ret``, ``dret``, ``gpow``,
     ``cur`` (running option or -1), ``s0``, ``b0``, ``G``, ``g``, ``alpha_ep``, ``eps_ep``;
@@ -168,6 +170,8 @@ class SMDPLockStepState:
     vr_b0: np.ndarray
     vr_G: np.ndarray
     vr_g: np.ndarray
+    ref_model: bool
+    Vref: np.ndarray
     state: np.ndarray
     episode: np.ndarray
     target: np.ndarray
@@ -213,7 +217,8 @@ class SMDPLockStepState:
             self.n_d, self.n_blocks, self.track_flat, self.Qf, self.nf, self.check_on,
             self.threshold, self.min_visits, self.prim_opt, self.prim_adm, self.fired,
             self.intra, self.chained, self.Ql, self.tsum, self.tsq, self.succ0, self.lcb_z,
-            self.flat_explore, self.vr_on, self.vr_b0, self.vr_G, self.vr_g, self.state,
+            self.flat_explore, self.vr_on, self.vr_b0, self.vr_G, self.vr_g, self.ref_model,
+            self.Vref, self.state,
             self.episode,
             self.target, self.t_ep, self.d_ep, self.ret, self.dret, self.gpow, self.cur, self.s0,
             self.b0, self.G, self.g, self.alpha_ep, self.eps_ep, self.U, self.W, self.cursor,
@@ -225,7 +230,8 @@ def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, h
              a_scale, a_rate, a_omega, a_floor, e_scale, e_rate, e_omega, e_floor,
              pol_act, pol_cdf, beta, labels, adm, Q, n_o, n_d, n_blocks, track_flat, Qf, nf,
              check_on, threshold, min_visits, prim_opt, prim_adm, fired, intra, chained,
-             Ql, tsum, tsq, succ0, lcb_z, flat_explore, vr_on, vr_b0, vr_G, vr_g, state,
+             Ql, tsum, tsq, succ0, lcb_z, flat_explore, vr_on, vr_b0, vr_G, vr_g, ref_model,
+             Vref, state,
              episode, target,
              t_ep,
              d_ep, ret, dret, gpow, cur, s0, b0, G, g, alpha_ep, eps_ep, U, W, cursor,
@@ -273,9 +279,12 @@ def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, h
                         oa = prim_opt[best_a]
                         if oa >= 0 and not adm[k, d, oa]:
                             vp = neg_inf
-                            for o in range(O):
-                                if adm[k, d, o] and Q[k, d, o] > vp:
-                                    vp = Q[k, d, o]
+                            if ref_model:
+                                vp = Vref[k, d]
+                            else:
+                                for o in range(O):
+                                    if adm[k, d, o] and Q[k, d, o] > vp:
+                                        vp = Q[k, d, o]
                             if vl - vp > threshold:
                                 fired[k, 0] = s
                                 fired[k, 1] = d

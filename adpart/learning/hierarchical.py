@@ -69,12 +69,12 @@ from adpart.learning.schedules import Schedule, constant, visit_count
 from adpart.learning.settings import count, run_settings
 from adpart.learning.smdp_q import drive, kernel_function, make_state, option_set
 from adpart.mdp.model import FiniteMDP, SMDPModel
-from adpart.mdp.solvers import greedy_policy
+from adpart.mdp.solvers import greedy_policy, solve
 from adpart.options.models import OptionModel, option_models
 from adpart.options.option import Option
 from adpart.options.subgoal_options import subgoal_option
 from adpart.partition._validate import DEFAULT_ATOL, masked_rows
-from adpart.partition.bpsmdp import theorem_4_5_bound
+from adpart.partition.bpsmdp import point_model, theorem_4_5_bound
 from adpart.partition.multiphase import MultiPhasePartitioner
 from adpart.partition.partition import (
     Partition,
@@ -96,6 +96,7 @@ __all__ = [
 ]
 
 MODES = ("inconsistency", "action-refinement", "reward-variation")
+REFERENCES = ("model", "learned")
 #: Default fraction of |V*(start)| used as the inconsistency threshold (module docstring).
 THRESHOLD_SCALE = 0.025
 #: Default z of the lower confidence bound of stochastic flat pairs (module docstring).
@@ -311,6 +312,7 @@ def hierarchical_learning(
     min_visits: int = MIN_VISITS,
     lcb_z: float = LCB_Z,
     flat_explore: bool = True,
+    reference: str = "model",
     models: Sequence[OptionModel] | None = None,
     runs: int = 10,
     episodes: int = 500,
@@ -339,6 +341,9 @@ def hierarchical_learning(
         threshold_scale: the ``|V*(start)|`` fraction of the default threshold.
         min_visits: visits of the flat pair and of the block before the test may fire.
         lcb_z: standard errors subtracted from a stochastic pair's lower-bound flat value.
+        reference: what the grounded flat value is compared with: ``"model"``, the block's
+            value ``V*_P(b)`` in the layer's point model (recomputed after every refinement), or
+            ``"learned"``, its learned ``max_o Q_P(b, o)``.
         flat_explore: at a greedy decision take the optimistic flat action where it beats
             the block's best value (exploration for goals that are no subgoal; ``inconsistency``
             mode only - the other modes make the goal reachable on the layer).
@@ -401,6 +406,12 @@ def hierarchical_learning(
     L = default_threshold(v_star, scale=threshold_scale) if threshold is None else float(threshold)
     B0 = part0.n_blocks
     capacity = min(S, max(2 * B0, B0 + 64))
+    if reference not in REFERENCES:
+        raise TaskError(f"reference = {reference!r}; choose one of {list(REFERENCES)}")
+
+    def layer_values(partition: Partition) -> np.ndarray:
+        """``V*_P`` per block: the optimum of the layer's point model (section 4.2.2)."""
+        return solve(point_model(partition, smdp), 1e-8).V
     st = make_state(
         mdp, full, np.broadcast_to(part0.labels, (K, S)),
         np.broadcast_to(part0.admissible, (K, B0, len(full))), episodes=N, horizon=H,
@@ -408,6 +419,7 @@ def hierarchical_learning(
         track_flat=True, threshold=L if check else np.inf, min_visits=V, prim_opt=prims,
         intra=2 if intra_option else 0, lower_bound=flat_lower_bound(mdp, H), lcb_z=lcb_z,
         flat_explore=flat_explore and check,
+        block_values=layer_values(part0) if check and reference == "model" else None,
     )
     parts = [part0] * K
     events: list[dict[str, int]] = []
@@ -422,6 +434,7 @@ def hierarchical_learning(
         st.adm = np.concatenate([st.adm, np.zeros((K, pad, st.adm.shape[2]), bool)], axis=1)
         st.n_o = np.concatenate([st.n_o, np.zeros((K, pad, st.n_o.shape[2]), np.int64)], axis=1)
         st.n_d = np.concatenate([st.n_d, np.zeros((K, pad), np.int64)], axis=1)
+        st.Vref = np.concatenate([st.Vref, np.zeros((K, pad))], axis=1)
 
     def on_fire(k: int) -> None:
         s, b, a = (int(x) for x in st.fired[k])
@@ -455,6 +468,8 @@ def hierarchical_learning(
         st.labels[k] = new.labels
         st.n_blocks[k] = B_new
         st.vr_on[k] = False  # virtual executions started in the old blocks are dropped
+        if reference == "model":
+            st.Vref[k, :B_new] = layer_values(new)
         parts[k] = new
         events.append({"run": k, "episode": int(st.episode[k]), "state": s, "block": b,
                        "action": a, "blocks_before": B_old, "blocks_after": B_new})
@@ -477,6 +492,7 @@ def hierarchical_learning(
         f"{threshold_scale} x |V*(start)|",
         "theorem_4_5_bound": theorem_bound(mdp, epsilon=epsilon, delta=delta),
         "lcb_z": float(lcb_z), "flat_explore": bool(flat_explore and check),
+        "test_reference": reference,
         "flat_lower_bound": flat_lower_bound(mdp, H),
         "min_visits": V, "alpha": alpha_s.to_dict(), "epsilon_greedy": eps_s.to_dict(),
         "max_steps_per_episode": H, "eval_every": M, "q_init": float(q_init),

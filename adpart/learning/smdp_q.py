@@ -177,6 +177,7 @@ def make_state(
     mu: np.ndarray, capacity: int, track_flat: bool = False, threshold: float = np.inf,
     min_visits: int = 0, prim_opt: np.ndarray | None = None, intra: int = 0,
     lower_bound: float = -np.inf, lcb_z: float = 0.0, flat_explore: bool = False,
+    block_values: np.ndarray | None = None,
 ) -> kernels.SMDPLockStepState:
     """Kernel state for K runs on decision layers ``labels`` (K, S) / ``block_adm`` (K, B, O)."""
     K, S = labels.shape
@@ -225,6 +226,10 @@ def make_state(
         vr_b0=np.zeros((K, O), dtype=np.int64),
         vr_G=np.zeros((K, O)),
         vr_g=np.ones((K, O)),
+        ref_model=block_values is not None,
+        Vref=np.zeros((K, capacity)) if block_values is None else np.pad(
+            np.broadcast_to(block_values, (K, block_values.shape[-1])),
+            ((0, 0), (0, capacity - block_values.shape[-1]))).astype(np.float64),
         Ql=np.broadcast_to(np.where(mdp.admissible, float(lower_bound), -np.inf)
                            if check else np.zeros((1, A)), flat_shape if check else (1, 1, A)
                            ).copy(),
