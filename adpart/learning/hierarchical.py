@@ -58,7 +58,8 @@ from adpart.options.option import Option
 from adpart.options.subgoal_options import subgoal_option
 from adpart.partition._validate import DEFAULT_ATOL, masked_rows
 from adpart.partition.bpsmdp import theorem_4_5_bound
-from adpart.partition.multiphase import MultiPhasePartitioner
+from adpart.partition.layer import resolve_baseline
+from adpart.partition.multiphase import MultiPhasePartitioner, PhaseResult
 from adpart.partition.partition import (
     Partition,
     block_all,
@@ -70,7 +71,9 @@ from adpart.partition.refine import delta_refine, reward_split
 
 __all__ = [
     "MODES",
+    "DecisionLayer",
     "HierarchicalResult",
+    "build_decision_layer",
     "decision_layer",
     "default_threshold",
     "hierarchical_learning",
@@ -160,19 +163,54 @@ def reward_states(mdp: FiniteMDP, *, arrivals: bool = False) -> np.ndarray:
     return found
 
 
-def decision_layer(
+@dataclass(frozen=True, eq=False)
+class DecisionLayer:
+    """What :func:`build_decision_layer` returns.
+
+    Attributes:
+        partition: every state's block, over the learner's columns (primitives first): the
+            decision layer's blocks, the task's terminal states as one block, and the states the
+            task cannot reach as one block per pattern of admissible options.
+        options: the learner's columns (the primitive one-step options, then ``options``).
+        model: their stacked models on the task's MDP.
+        phases: the :class:`~adpart.partition.multiphase.PhaseResult` (masks, counts, seconds).
+    """
+
+    partition: Partition
+    options: list[Option]
+    model: SMDPModel
+    phases: PhaseResult
+
+    @property
+    def unreachable(self) -> np.ndarray | None:
+        """``(S,)`` the non-terminal states the task cannot reach from its start states."""
+        return self.phases.unreachable
+
+    def counts(self) -> dict[str, object]:
+        """Blocks per phase: reachable (the decision layer), terminal and unreachable."""
+        return self.phases.layer_counts()
+
+
+def build_decision_layer(
     mdp: FiniteMDP, options: Sequence[Option], *, delta: float = 0.0,
     epsilon: float | None = 0.0, models: Sequence[OptionModel] | None = None,
-) -> tuple[Partition, list[Option], SMDPModel]:
+    reward_baseline: str | float | None = "min",
+) -> DecisionLayer:
     """The multi-phase partition (section 4.2.1.2) over ``options`` for the learner's columns.
 
     Phase 1 starts each option from {beta = 1, rest of I, outside I}; phase 2 intersects and
     refines for all options; phase 3 (when ``epsilon`` is not None) splits by the options'
-    discounted rewards within ``epsilon``. Primitive actions are columns ``0..A-1`` of the
-    result but offered nowhere.
+    rewards within ``epsilon``. Primitive actions are columns ``0..A-1`` of the result but offered
+    nowhere. Every phase runs on ``mdp``'s model (:mod:`adpart.partition.layer`): its terminal
+    states are one absorbing block, and the states it cannot reach from its start distribution
+    (with any primitive action, since refinement may offer any of them) are left out. They form
+    one block per pattern of admissible options, which the learner never visits; such a block
+    that no option may start offers the primitive actions, so every block offers a column.
+    Phase 3 compares the rewards beyond the constant step reward
+    ``reward_baseline`` (``"min"``: the smallest step reward, section 4.3.1; ``"none"``: ``R``
+    itself; or a number), as :func:`adpart.partition.layer.decision_rewards` derives.
 
-    Returns:
-        ``(partition, learner options, stacked model)`` with the primitives first.
+    ``models`` must be the options' models on ``mdp`` (the new task's), not another task's.
     """
     full, smdp = option_set(mdp, options, include_primitives=True, models=models)
     A = mdp.n_actions
@@ -180,9 +218,30 @@ def decision_layer(
         raise ModelError("a decision layer needs at least one option besides the primitives")
     termination = np.zeros(smdp.R.shape, dtype=bool)
     termination[:, A:] = np.stack([o.beta >= 1.0 for o in full[A:]], axis=1)
-    partitioner = MultiPhasePartitioner(smdp, termination, delta=delta)
-    result = partitioner.run(np.arange(A, len(full)), epsilon=epsilon)
-    return result.final, full, smdp
+    baseline = resolve_baseline(reward_baseline, mdp.R, mdp.admissible, mdp.terminal)
+    partitioner = MultiPhasePartitioner(smdp, termination, delta=delta, terminal=mdp.terminal)
+    result = partitioner.run(np.arange(A, len(full)), epsilon=epsilon,
+                             start=start_distribution(mdp), through=mdp,
+                             reward_baseline=baseline, gamma=mdp.gamma)
+    partition = result.final
+    idle = ~partition.admissible.any(axis=1)
+    if idle.any():  # unreachable states no option may start: offer the primitive actions
+        adm = partition.admissible.copy()
+        prims = block_all(partition.labels, partition.n_blocks, smdp.admissible[:, :A])
+        adm[idle, :A] = prims[idle]
+        partition = partition.with_admissible(adm)
+    return DecisionLayer(partition, full, smdp, result)
+
+
+def decision_layer(
+    mdp: FiniteMDP, options: Sequence[Option], *, delta: float = 0.0,
+    epsilon: float | None = 0.0, models: Sequence[OptionModel] | None = None,
+    reward_baseline: str | float | None = "min",
+) -> tuple[Partition, list[Option], SMDPModel]:
+    """:func:`build_decision_layer` as ``(partition, learner options, stacked model)``."""
+    layer = build_decision_layer(mdp, options, delta=delta, epsilon=epsilon, models=models,
+                                 reward_baseline=reward_baseline)
+    return layer.partition, layer.options, layer.model
 
 
 def refine_block(

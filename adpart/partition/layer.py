@@ -134,6 +134,27 @@ def step_baseline(R: np.ndarray, admissible: np.ndarray, terminal: np.ndarray) -
     return float(R[live].min())
 
 
+#: The named choices of :func:`resolve_baseline`.
+REWARD_BASELINES = ("min", "none")
+
+
+def resolve_baseline(reward_baseline: object, R: np.ndarray, admissible: np.ndarray,
+                     terminal: np.ndarray) -> float | None:
+    """The constant step reward phase 3 takes out: ``"min"`` (:func:`step_baseline` of the task's
+    primitive ``R``), ``"none"``/None (compare ``R`` itself), or a number."""
+    if reward_baseline is None or (isinstance(reward_baseline, str) and reward_baseline == "none"):
+        return None
+    if isinstance(reward_baseline, str) and reward_baseline == "min":
+        return step_baseline(R, admissible, terminal)
+    if isinstance(reward_baseline, (int, float, np.floating)) and not isinstance(
+            reward_baseline, bool) and np.isfinite(reward_baseline):
+        return float(reward_baseline)
+    raise ModelError(
+        f"reward_baseline = {reward_baseline!r}; use 'min' (the task's smallest step reward, "
+        "sections 4.3.1-4.3.2), 'none' (compare R(s, o) itself) or a finite number"
+    )
+
+
 def decision_rewards(model: SMDPModel | object, gamma: float, baseline: float,
                      terminal: np.ndarray | None = None) -> np.ndarray:
     """``(S, O)``: ``R~(s, o) = R(s, o) - c (1 - sum_s' F(s'|s, o)) / (1 - gamma)`` (module doc).
@@ -227,11 +248,13 @@ def decision_view(partition: Partition, unreachable: np.ndarray | None) -> Parti
 
 
 __all__ = [
+    "REWARD_BASELINES",
     "as_mask",
     "decision_rewards",
     "decision_view",
     "layer_counts",
     "reachable_states",
+    "resolve_baseline",
     "start_mask",
     "step_baseline",
     "zero_rows",

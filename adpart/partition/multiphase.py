@@ -163,7 +163,22 @@ def _phase2(smdp: SMDPModel, phase1_partitions: Mapping[int, Partition], options
         )
     labels = combine_labels(*(phase1_partitions[int(o)].labels for o in sel))
     start = Partition.from_labels(_one_block(labels, unreachable), smdp.admissible)
-    return refine(start, smdp, options=sel, delta=delta, epsilon=None, atol=atol)
+    if unreachable is None:
+        return refine(start, smdp, options=sel, delta=delta, epsilon=None, atol=atol)
+    _require_cover_reachable(smdp, sel, unreachable)
+    return refine(start, smdp, options=sel, delta=delta, epsilon=None, atol=atol,
+                  require_admissible=False)
+
+
+def _require_cover_reachable(smdp: SMDPModel, sel: np.ndarray, unreachable: np.ndarray) -> None:
+    """Every reachable state needs a selected admissible option (unreachable ones need not)."""
+    orphan = np.flatnonzero(~smdp.admissible[:, sel].any(axis=1) & ~unreachable)
+    if orphan.size:
+        raise ModelError(
+            f"the option set {sel.tolist()} leaves {orphan.size} reachable state(s) with no "
+            f"admissible option (first: state {int(orphan[0])}); add an option whose initiation "
+            "set covers them, or the primitive actions"
+        )
 
 
 def phase3(
@@ -175,12 +190,17 @@ def phase3(
     delta: float = 0.0,
     rewards: np.ndarray | None = None,
     atol: float = DEFAULT_ATOL,
+    require_admissible: bool = True,
 ) -> Partition:
-    """Phase 3: split by the task's rewards within epsilon (eq. 4.7), refine to delta-stability."""
+    """Phase 3: split by the task's rewards within epsilon (eq. 4.7), refine to delta-stability.
+
+    ``require_admissible=False`` allows states with no admissible option (unreachable states
+    kept apart by phase 2).
+    """
     if epsilon is None:
         raise ModelError("phase 3 needs the task's epsilon (a number >= 0)")
     return refine(partition, model, options=options, delta=delta, epsilon=epsilon,
-                  rewards=rewards, atol=atol)
+                  rewards=rewards, atol=atol, require_admissible=require_admissible)
 
 
 @dataclass
@@ -350,7 +370,8 @@ class MultiPhasePartitioner:
         """Phase 3 on the layer model: split ``partition`` by ``rewards`` (from
         :meth:`decision_rewards`) within ``epsilon``, refine again."""
         return phase3(self._model_without(unreachable), partition, options, epsilon=epsilon,
-                      delta=self.delta, rewards=rewards, atol=self.atol)
+                      delta=self.delta, rewards=rewards, atol=self.atol,
+                      require_admissible=unreachable is None)
 
     def run(self, options: Sequence[int], *, epsilon: float | None = None,
             rewards: np.ndarray | None = None, start: object | None = None,

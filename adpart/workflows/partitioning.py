@@ -38,7 +38,7 @@ from adpart.options.models import OptionModel, option_models
 from adpart.options.smdp import stack_models
 from adpart.partition import MultiPhasePartitioner, Partition, check_stability, value_gap
 from adpart.partition._validate import check_delta, check_epsilon
-from adpart.partition.layer import decision_view, layer_counts, step_baseline
+from adpart.partition.layer import decision_view, layer_counts, resolve_baseline
 from adpart.workflows.options import OptionSet, resolve_option_set
 from adpart.workflows.resolve import resolve_domain
 
@@ -433,23 +433,9 @@ def _task_model(
     return stacked, models, True
 
 
-REWARD_BASELINES = ("min", "none")
-
-
 def _baseline(reward_baseline: object, mdp: FiniteMDP) -> float | None:
-    """The constant step reward phase 3 takes out (``min``: r_min of 4.3.1; ``none``; a number)."""
-    if reward_baseline is None or reward_baseline == "none":
-        return None
-    if reward_baseline == "min":
-        return step_baseline(mdp.R, mdp.admissible, mdp.terminal)
-    if isinstance(reward_baseline, (int, float)) and not isinstance(reward_baseline, bool):
-        if not np.isfinite(reward_baseline):
-            raise ModelError(f"reward baseline {reward_baseline!r} must be finite")
-        return float(reward_baseline)
-    raise ModelError(
-        f"reward_baseline = {reward_baseline!r}; use 'min' (the task's smallest step reward), "
-        "'none' (compare R itself) or a number"
-    )
+    """The constant step reward phase 3 takes out of ``mdp``'s rewards (``resolve_baseline``)."""
+    return resolve_baseline(reward_baseline, mdp.R, mdp.admissible, mdp.terminal)
 
 
 def _start_states(mdp: FiniteMDP) -> np.ndarray:
