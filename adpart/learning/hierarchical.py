@@ -194,7 +194,7 @@ class DecisionLayer:
 def build_decision_layer(
     mdp: FiniteMDP, options: Sequence[Option], *, delta: float = 0.0,
     epsilon: float | None = 0.0, models: Sequence[OptionModel] | None = None,
-    reward_baseline: str | float | None = "min",
+    reward_baseline: str | float | None = "mode",
 ) -> DecisionLayer:
     """The multi-phase partition (section 4.2.1.2) over ``options`` for the learner's columns.
 
@@ -207,8 +207,9 @@ def build_decision_layer(
     one block per pattern of admissible options, which the learner never visits; such a block
     that no option may start offers the primitive actions, so every block offers a column.
     Phase 3 compares the rewards beyond the constant step reward
-    ``reward_baseline`` (``"min"``: the smallest step reward, section 4.3.1; ``"none"``: ``R``
-    itself; or a number), as :func:`adpart.partition.layer.decision_rewards` derives.
+    ``reward_baseline`` (``"mode"``: the step reward most pairs pay; ``"min"``: the smallest,
+    section 4.3.1; ``"none"``: ``R`` itself; or a number), as
+    :func:`adpart.partition.layer.decision_rewards` derives.
 
     ``models`` must be the options' models on ``mdp`` (the new task's), not another task's.
     """
@@ -236,7 +237,7 @@ def build_decision_layer(
 def decision_layer(
     mdp: FiniteMDP, options: Sequence[Option], *, delta: float = 0.0,
     epsilon: float | None = 0.0, models: Sequence[OptionModel] | None = None,
-    reward_baseline: str | float | None = "min",
+    reward_baseline: str | float | None = "mode",
 ) -> tuple[Partition, list[Option], SMDPModel]:
     """:func:`build_decision_layer` as ``(partition, learner options, stacked model)``."""
     layer = build_decision_layer(mdp, options, delta=delta, epsilon=epsilon, models=models,

@@ -39,10 +39,12 @@ block included. Applying eq. 4.7 to ``R`` itself bounds the duration a second ti
 finely: ``epsilon (1 - gamma) / |c|`` of mass, 0.1 at the seed's ``epsilon = 10``,
 ``gamma = 0.99``, ``c = -1``, against ``delta = 0.3``. That is what cuts blocks into bands about
 ten steps long. adpart therefore applies eq. 4.7 to ``R~`` (:func:`decision_rewards`). The constant
-is ``c = r_min``, the smallest reward of an admissible non-terminal pair (:func:`step_baseline`).
-That is the ``r_min`` of sections 4.3.1-4.3.2: the seed treats rewards at ``r_min`` as ones that
-"neither help finding a goal state nor make a significant change". When ``c = 0``, as in the
-seed's 5.1.3 reward model (no step cost), ``R~ = R`` and nothing changes.
+``c`` is by default the step reward most admissible non-terminal pairs pay (:func:`step_baseline`,
+``"mode"``). On every domain with one step cost that is the ``r_min`` of sections 4.3.1-4.3.2,
+which the seed treats as rewards that "neither help finding a goal state nor make a significant
+change" (``"min"`` selects it). Where a few actions are penalised (Taxi's -10 for an illegal
+pick-up, under -1 a step), the mode keeps the penalty as a reward that matters. When ``c = 0``, as
+in the seed's 5.1.3 reward model (no step cost), ``R~ = R`` and nothing changes.
 """
 
 from __future__ import annotations
@@ -120,38 +122,47 @@ def reachable_states(model: SMDPModel | object, start: object,
     return out[:S]
 
 
-def step_baseline(R: np.ndarray, admissible: np.ndarray, terminal: np.ndarray) -> float:
-    """``r_min = min R(s, a)`` over admissible non-terminal pairs (sections 4.3.1-4.3.2).
+def step_baseline(R: np.ndarray, admissible: np.ndarray, terminal: np.ndarray, *,
+                  rule: str = "mode") -> float:
+    """The per-step constant ``c`` of :func:`decision_rewards`, from the primitive MDP's rewards.
 
-    Pass the primitive MDP's ``R``, ``admissible`` and ``terminal``: the per-step constant ``c``
-    of :func:`decision_rewards`.
+    Over the admissible non-terminal pairs: ``rule="mode"``, the reward most pairs pay (ties to
+    the smaller value); ``rule="min"``, ``r_min = min R(s, a)`` of sections 4.3.1-4.3.2. They agree
+    on every domain with one step cost. Where a few actions are penalised (Taxi's -10 for an
+    illegal pick-up), the mode keeps the penalty a reward that matters and the step the baseline.
     """
     R = np.asarray(R, dtype=np.float64)
     live = np.asarray(admissible, dtype=bool) & ~np.asarray(terminal, dtype=bool)[:, None]
     if not live.any():
         raise ModelError("no admissible non-terminal state-action pair: no step reward to take "
                          "as the baseline")
-    return float(R[live].min())
+    if rule == "min":
+        return float(R[live].min())
+    if rule != "mode":
+        raise ModelError(f"baseline rule {rule!r}; use 'mode' or 'min'")
+    values, counts = np.unique(R[live], return_counts=True)
+    return float(values[np.argmax(counts)])  # np.unique sorts: the first maximum is the smaller
 
 
 #: The named choices of :func:`resolve_baseline`.
-REWARD_BASELINES = ("min", "none")
+REWARD_BASELINES = ("mode", "min", "none")
 
 
 def resolve_baseline(reward_baseline: object, R: np.ndarray, admissible: np.ndarray,
                      terminal: np.ndarray) -> float | None:
-    """The constant step reward phase 3 takes out: ``"min"`` (:func:`step_baseline` of the task's
-    primitive ``R``), ``"none"``/None (compare ``R`` itself), or a number."""
+    """The constant step reward phase 3 takes out: ``"mode"`` or ``"min"`` (:func:`step_baseline`
+    of the task's primitive ``R``), ``"none"``/None (compare ``R`` itself), or a number."""
     if reward_baseline is None or (isinstance(reward_baseline, str) and reward_baseline == "none"):
         return None
-    if isinstance(reward_baseline, str) and reward_baseline == "min":
-        return step_baseline(R, admissible, terminal)
+    if isinstance(reward_baseline, str) and reward_baseline in ("mode", "min"):
+        return step_baseline(R, admissible, terminal, rule=reward_baseline)
     if isinstance(reward_baseline, (int, float, np.floating)) and not isinstance(
             reward_baseline, bool) and np.isfinite(reward_baseline):
         return float(reward_baseline)
     raise ModelError(
-        f"reward_baseline = {reward_baseline!r}; use 'min' (the task's smallest step reward, "
-        "sections 4.3.1-4.3.2), 'none' (compare R(s, o) itself) or a finite number"
+        f"reward_baseline = {reward_baseline!r}; use 'mode' (the step reward most pairs pay), "
+        "'min' (the smallest, sections 4.3.1-4.3.2), 'none' (compare R(s, o) itself) or a "
+        "finite number"
     )
 
 

@@ -459,7 +459,7 @@ def partition_environment(
     task: str | None = None,
     executor: Executor | None = None,
     check: bool = True,
-    reward_baseline: str | float | None = "min",
+    reward_baseline: str | float | None = "mode",
 ) -> PartitionOutcome:
     """Phases 1-3 of section 4.2.1.2 for ``env_name`` over a stored option set, stored in ``kb``.
 
@@ -476,8 +476,9 @@ def partition_environment(
         executor: runs the option-model computations when a task needs them recomputed.
         check: run the independent checker on the final decision layer.
         reward_baseline: the constant step reward phase 3 takes out of the rewards before eq.
-            4.7: ``"min"`` (the task's smallest step reward, sections 4.3.1-4.3.2), ``"none"``
-            (compare ``R(s, o)`` itself) or a number.
+            4.7: ``"mode"`` (the step reward most pairs pay), ``"min"`` (the smallest, sections
+            4.3.1-4.3.2), ``"none"`` (compare ``R(s, o)`` itself) or a number
+            (:mod:`adpart.partition.layer`).
 
     Raises:
         ModelError: delta or epsilon out of range, or an option set leaving a state with no

@@ -231,11 +231,18 @@ def test_a_constant_step_cost_no_longer_cuts_path_length_bands():
 def test_baseline_choices():
     mdp = corridor()
     args = (mdp.R, mdp.admissible, mdp.terminal)
-    assert resolve_baseline("min", *args) == -1.0
+    assert resolve_baseline("min", *args) == -1.0 == resolve_baseline("mode", *args)
     assert resolve_baseline("none", *args) is None and resolve_baseline(None, *args) is None
     assert resolve_baseline(-2, *args) == -2.0
-    with pytest.raises(ModelError, match="use 'min'"):
-        resolve_baseline("mode", *args)
+    with pytest.raises(ModelError, match="use 'mode'"):
+        resolve_baseline("median", *args)
+    # a few penalised pairs: the mode stays the step cost, the minimum is the penalty
+    R = np.full((5, 2), -1.0)
+    R[0, 1] = -10.0
+    live = np.ones((5, 2), dtype=bool)
+    none_terminal = np.zeros(5, dtype=bool)
+    assert step_baseline(R, live, none_terminal) == -1.0
+    assert step_baseline(R, live, none_terminal, rule="min") == -10.0
     smdp = mdp.as_smdp()
     with pytest.raises(ModelError, match="needs 0 < gamma < 1"):
         decision_rewards(smdp, 1.0, -1.0)
