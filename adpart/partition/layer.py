@@ -195,12 +195,13 @@ def decision_rewards(model: SMDPModel | object, gamma: float, baseline: float,
     return rel
 
 
-def zero_rows(model: SMDPModel, states: np.ndarray, *, offer_all: np.ndarray | None = None
+def zero_rows(model: SMDPModel, states: np.ndarray, *, admissible_row: np.ndarray | None = None
               ) -> SMDPModel:
     """The model with zero ``F`` and ``R`` rows at ``states`` (every column's row).
 
-    ``offer_all`` (a subset of ``states``) also becomes admissible for every column, as terminal
-    states are. Phases refine on this model (module doc); learners keep the real one.
+    ``admissible_row`` (``(O,)`` bool), when given, becomes the admissibility of all ``states``, so
+    that they share one admissibility pattern (the terminal block). Phases refine on this model
+    (module doc); learners keep the real one.
     """
     n_cols = model.R.shape[1]
     states = np.asarray(states, dtype=bool)
@@ -213,9 +214,20 @@ def zero_rows(model: SMDPModel, states: np.ndarray, *, offer_all: np.ndarray | N
     F.eliminate_zeros()
     R = np.where(states[:, None], 0.0, model.R)
     adm = model.admissible.copy()
-    if offer_all is not None:
-        adm[np.asarray(offer_all, dtype=bool)] = True
+    if admissible_row is not None:
+        adm[states] = np.asarray(admissible_row, dtype=bool)
     return SMDPModel(R=R, F=F, admissible=adm)
+
+
+def terminal_columns(admissible: np.ndarray, terminal: np.ndarray) -> np.ndarray:
+    """``(O,)`` the columns the terminal block offers: those every terminal state admits.
+
+    ``stack_models`` admits every option at terminal states; a primitive MDP keeps its own
+    admissibility there. If the terminal states admit no column in common, every column is offered
+    (terminal rows are zero, so no value depends on it).
+    """
+    common = np.asarray(admissible, dtype=bool)[np.asarray(terminal, dtype=bool)].all(axis=0)
+    return common if common.any() else np.ones_like(common)
 
 
 def layer_counts(partition: Partition, terminal: np.ndarray | None = None,
@@ -268,5 +280,6 @@ __all__ = [
     "resolve_baseline",
     "start_mask",
     "step_baseline",
+    "terminal_columns",
     "zero_rows",
 ]

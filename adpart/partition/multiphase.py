@@ -45,6 +45,7 @@ from adpart.partition.layer import (
     decision_view,
     layer_counts,
     reachable_states,
+    terminal_columns,
     zero_rows,
 )
 from adpart.partition.partition import Partition, canonical_labels, combine_labels
@@ -73,10 +74,10 @@ def _one_block(labels: np.ndarray, states: np.ndarray | None) -> np.ndarray:
 
 
 def _terminal_model(smdp: SMDPModel, terminal: np.ndarray | None) -> SMDPModel:
-    """Terminal states absorbing with zero reward, every column offered (module docstring)."""
-    if terminal is None:
+    """Terminal states absorbing with zero reward, one admissibility pattern (module docstring)."""
+    if terminal is None or not terminal.any():
         return smdp
-    return zero_rows(smdp, terminal, offer_all=terminal)
+    return zero_rows(smdp, terminal, admissible_row=terminal_columns(smdp.admissible, terminal))
 
 
 def phase1(
