@@ -3,23 +3,28 @@
 The numeric phases are :mod:`adpart.partition.multiphase` (section 4.2.1.2); this workflow adds
 what the dissertation's "knowledge base" promises (section 4.2.1.2, chapter 6):
 
+* **The task's model.** Every phase runs on the model of the task asked for
+  (:mod:`adpart.partition.layer`). Stored option models carry the rewards and the terminal states
+  of the task they were built under. For another task they are recomputed on that task's MDP
+  (:func:`adpart.options.models.option_models`) *before* phase 1. Its terminal states are one
+  absorbing block, and the states it cannot reach from its start states are kept apart. Without a
+  task, phases 1-2 run on the model the options were built under.
 * **Phase 1** per option is reward-independent: it is stored as a ``per-option`` partition and
-  *reused* whenever the knowledge base already holds one for the same option and delta (epsilon
-  plays no part in phase 1, so it is not part of the key). Changing the option set therefore
-  re-runs phases 2-3 only.
+  *reused* whenever the knowledge base already holds one for the same option, delta, terminal set
+  and gamma (the model it ran on; epsilon and the rewards play no part). Changing the option set
+  therefore re-runs phases 2-3 only.
 * **Phase 2** (intersection + refinement for the whole set) is stored as ``intersected`` with the
-  phase-1 partitions as parents.
-* **Phase 3** (a task's rewards within epsilon, eq. 4.7) is stored as ``reward-refined`` with the
-  phase-2 partition as parent. Stored option models carry the rewards (and the terminal states)
-  of the task they were built under; for another task they are recomputed on that task's MDP
-  (:func:`adpart.options.models.option_models`) and phase 3 refines against the recomputed model,
-  so the final partition is epsilon,delta-stable for the task actually asked for.
+  phase-1 partitions as parents (key: also the start states).
+* **Phase 3** (a task's rewards beyond its constant step reward within epsilon, eq. 4.7) is
+  stored as ``reward-refined`` with the phase-2 partition as parent (key: also the task, epsilon
+  and the reward baseline).
 
 The artifact of each record is the block labels ``(S,)``; ``block_actions`` is the ``(B, K)``
 mask of the options offered per block over the record's action set (the options in order, or the
-primitive actions for ``--options primitive``). The final partition is verified by the
-independent checker (:func:`adpart.partition.check_stability`), and with a task the measured
-``||V* - V*_P||_inf`` of the point model is reported next to theorem 4.5's bound
+primitive actions for ``--options primitive``). The final decision layer (the unreachable blocks
+offering nothing) is verified by the independent checker
+(:func:`adpart.partition.check_stability`), and with a task the measured ``||V* - V*_P||_inf`` of
+the point model over the layer's states is reported next to theorem 4.5's bound
 (:func:`adpart.partition.value_gap`).
 """
 
