@@ -8,6 +8,7 @@ import click
 
 from adpart.cli.common import echo_json, kb_location_options, registry
 from adpart.errors import TaskError
+from adpart.options.subgoal_options import LOCAL_RADIUS
 from adpart.store.location import KBLocation
 from adpart.workflows.options import INITIATIONS, options_for_subgoals
 from adpart.workflows.refs import get_ref
@@ -25,9 +26,25 @@ from adpart.workflows.refs import get_ref
 @click.option(
     "--initiation",
     type=click.Choice(INITIATIONS),
-    default="basin",
+    default="local",
     show_default=True,
-    help="Initiation set: the subgoal's basin, or every state that can reach it.",
+    help="Initiation set: local (the basin's states within --radius steps of the subgoal), "
+    "the whole basin, or every state that can reach it.",
+)
+@click.option(
+    "--radius",
+    type=float,
+    default=LOCAL_RADIUS,
+    show_default=True,
+    help="Steps of a local initiation set: states whose option reaches the subgoal with "
+    "E[gamma^tau] >= gamma^radius.",
+)
+@click.option(
+    "--cover/--no-cover",
+    default=True,
+    show_default=True,
+    help="With local initiation, also offer each state far from every subgoal the option to "
+    "its nearest one (a decision layer needs every state covered).",
 )
 @click.option(
     "--executor",
@@ -41,6 +58,8 @@ def options_cmd(
     env: str,
     subgoals_ref: str,
     initiation: str,
+    radius: float,
+    cover: bool,
     executor: str,
     as_json: bool,
     kb_path: str | None,
@@ -49,7 +68,8 @@ def options_cmd(
     """Learn an option to every subgoal of a subgoal set of ENV; store options and models.
 
     \b
-    Each option's initiation set is the subgoal's basin (or every state that reaches it), it
+    Each option's initiation set holds the states of the subgoal's basin within --radius steps of
+    it (or the whole basin, or every state that reaches it), it
     terminates at the subgoal and outside its initiation set, and its policy is solved by value
     iteration on the pseudo-reward task. Its exact multi-time model (R, discounted F) is computed
     by one sparse LU factorisation. Options already stored for these subgoals are reused.
@@ -66,7 +86,8 @@ def options_cmd(
             )
         start = time.perf_counter()
         with registry().get("executor", executor).create() as ex:
-            stored = options_for_subgoals(kb, subgoal_set, initiation=initiation, executor=ex)
+            stored = options_for_subgoals(kb, subgoal_set, initiation=initiation,
+                                          radius=radius, cover=cover, executor=ex)
         seconds = time.perf_counter() - start
     finally:
         kb.close()
@@ -84,6 +105,8 @@ def options_cmd(
         "env": env,
         "subgoal_set": subgoal_set.ref,
         "initiation": initiation,
+        "radius": radius if initiation == "local" else None,
+        "cover": cover if initiation == "local" else None,
         "reused": stored.reused,
         "seconds": round(seconds, 3),
         "options": rows,

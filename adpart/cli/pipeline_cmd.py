@@ -9,6 +9,8 @@ from typing import Any
 import click
 
 from adpart.cli.common import CLIError, dumps, echo_json, kb_location_options, run_options
+from adpart.options.subgoal_options import INITIATION_CHOICES as INITIATIONS
+from adpart.options.subgoal_options import LOCAL_RADIUS
 from adpart.store.location import KBLocation
 
 
@@ -74,10 +76,17 @@ def _say(quiet: bool):  # type: ignore[no-untyped-def]
 )
 @click.option(
     "--initiation",
-    type=click.Choice(["basin", "reachable"]),
-    default="basin",
+    type=click.Choice(INITIATIONS),
+    default="local",
     show_default=True,
-    help="Initiation sets of the subgoal options.",
+    help="Initiation sets of the subgoal options (see `adpart options --help`).",
+)
+@click.option(
+    "--radius",
+    type=float,
+    default=LOCAL_RADIUS,
+    show_default=True,
+    help="Steps of a local initiation set.",
 )
 @click.option(
     "--delta",
@@ -140,6 +149,7 @@ def pipeline_cmd(
     detector: str,
     detector_opt: tuple[str, ...],
     initiation: str,
+    radius: float,
     delta: float,
     epsilon: float,
     runs: int,
@@ -177,6 +187,7 @@ def pipeline_cmd(
         detector=detector,
         detector_params=_key_values(detector_opt, "--detector-opt"),
         initiation=initiation,
+        radius=radius,
         delta=delta,
         epsilon=epsilon,
         runs=runs,

@@ -402,8 +402,12 @@ def maxq_parr(config: ExperimentConfig) -> ExperimentReport:
     goal_cells = np.flatnonzero(mdp.terminal & entered)
     states = np.unique(np.r_[sub, goal_cells[:1]])
     config.progress(f"{sub.size} subgoals; options and models")
-    options = subgoal_options(mdp, states, initiation="basin")
+    # SMDP Q (primitives everywhere) gets the options near their subgoals only; the decision
+    # layer needs every state covered, so far states also get their nearest subgoal's option
+    options = subgoal_options(mdp, states, initiation="local")
     models = option_models(mdp, options, duration=False)
+    layer_options = subgoal_options(mdp, states, initiation="local", cover=True)
+    layer_models = option_models(mdp, layer_options, duration=False)
     st = found.stats
     report.data["first_task"] = {
         "goal": goal, "episodes": s["first"],
@@ -427,7 +431,8 @@ def maxq_parr(config: ExperimentConfig) -> ExperimentReport:
                            epsilon=EPSILON, **common)
     v_star = float(smdp.v_star_start)
     config.progress("maze task: hierarchical learner on the multi-phase partition")
-    hier = hierarchical_learning(mdp, options, models=models, delta=0.3, epsilon=10.0,
+    hier = hierarchical_learning(mdp, layer_options, models=layer_models, delta=0.3,
+                                 epsilon=10.0,
                                  epsilon_greedy=EPSILON, **common)
     config.progress("maze task: MAXQ-Q (hierarchical greedy rollouts)")
     m_steps, m_gaps, m_ev = _maxq_parr(mdp, s, config.seed, v_star)

@@ -126,6 +126,7 @@ def _transfer(config: ExperimentConfig, setup: _Setup, report: ExperimentReport
     from adpart.envs.registry import get_domain
     from adpart.learning.curves import plot_curves
     from adpart.learning.hierarchical import hierarchical_learning
+    from adpart.options.models import option_models
     from adpart.workflows.pipeline import PipelineConfig, run_pipeline
 
     out = Path(config.out)
@@ -150,6 +151,8 @@ def _transfer(config: ExperimentConfig, setup: _Setup, report: ExperimentReport
         kb.close()
     report.figures += pipe.figures
     mdp = get_domain(s.env).mdp(s.new)
+    # the stored models are the first task's; the learners below work on the new one
+    models = option_models(mdp, options, duration=False)
     common = {"runs": s.runs, "episodes": s.episodes, "seed": config.seed,
               "alpha": s.alpha,
               "eval_every": s.eval_every, "max_steps_per_episode": s.horizon}

@@ -44,6 +44,21 @@ flat learner's exactly, :mod:`adpart.learning._kernels`):
 7. the episode ends on arrival in a terminal state or after ``horizon`` steps; the next start
    state is the first whose cumulative start probability exceeds ``u[3]``.
 
+**Intra-option learning** (``intra``; Sutton, Precup & Singh 1999, section 5, "intra-option
+Q-learning"), after step 4: every option ``o'`` offered in the block ``d`` of ``s`` whose policy is
+deterministic and takes ``a`` in ``s`` (so it is *consistent* with the step; the primitive one-step
+option of ``a`` always is) gets the one-step update
+
+    Q(d, o') += alpha (r + gamma U(s', o') - Q(d, o')),
+    U(s', o') = (1 - beta_o'(s')) Q(block(s'), o') + beta_o'(s') max_o'' Q(block(s'), o''),
+
+with ``U = 0`` when ``s'`` is terminal, ``n(d, o') += 1`` for its step size, and no update when
+``o'`` would continue in ``s'`` (``beta < 1``) but is not offered in ``block(s')`` (a block-level
+layer may drop it there: no valid one-step target). The running option's SMDP update of step 6 is
+then skipped if every one of its steps got such an update (they already chain its value); an
+option that was not updated at some step (stochastic policy, or the missing target) keeps its
+step-6 update. The random streams are untouched, so ``intra=False`` is the rule above exactly.
+
 With every option a primitive action (``beta = 1``, deterministic) and the identity partition this
 is the flat kernel's rule operation for operation: ``G + g * best = (0 + 1 * r) + gamma * best``.
 """
@@ -82,6 +97,14 @@ class SMDPLockStepState:
     ``check_on``, ``threshold``, ``min_visits``, ``prim_opt`` (A,) option index of each primitive
     action (-1: none); ``prim_adm`` (S, A) where each action may be taken; ``fired`` (K, 3).
 
+    Intra-option learning: ``intra``; ``chained`` (K,) whether every step of the running option
+    so far got its one-step update.
+
+    Sound inconsistency test (hierarchical): ``Ql`` (K, S, A) the grounded lower bound of the flat
+    values, ``tsum``/``tsq`` (K, S, A) sums of its targets and their squares, ``succ0`` (K, S, A)
+    the first successor seen (-1 none yet, -2 more than one), ``lcb_z`` the z of its lower
+    confidence bound; ``flat_explore``: take the optimistic flat action where it beats the block.
+
     Agents: ``state``, ``episode``, ``target``, ``t_ep``, ``d_ep``, ``ret``, ``dret``, ``gpow``,
     ``cur`` (running option or -1), ``s0``, ``b0``, ``G``, ``g``, ``alpha_ep``, ``eps_ep``;
     uniforms ``U`` (K, B, 4), ``W`` (K, B, 2), ``cursor`` (K,).
@@ -118,6 +141,14 @@ class SMDPLockStepState:
     prim_opt: np.ndarray
     prim_adm: np.ndarray
     fired: np.ndarray
+    intra: bool
+    chained: np.ndarray
+    Ql: np.ndarray
+    tsum: np.ndarray
+    tsq: np.ndarray
+    succ0: np.ndarray
+    lcb_z: float
+    flat_explore: bool
     state: np.ndarray
     episode: np.ndarray
     target: np.ndarray
@@ -161,7 +192,9 @@ class SMDPLockStepState:
             self.last_start, self.gamma, self.horizon, *self.alpha, *self.eps,
             self.pol_act, self.pol_cdf, self.beta, self.labels, self.adm, self.Q, self.n_o,
             self.n_d, self.n_blocks, self.track_flat, self.Qf, self.nf, self.check_on,
-            self.threshold, self.min_visits, self.prim_opt, self.prim_adm, self.fired, self.state,
+            self.threshold, self.min_visits, self.prim_opt, self.prim_adm, self.fired,
+            self.intra, self.chained, self.Ql, self.tsum, self.tsq, self.succ0, self.lcb_z,
+            self.flat_explore, self.state,
             self.episode,
             self.target, self.t_ep, self.d_ep, self.ret, self.dret, self.gpow, self.cur, self.s0,
             self.b0, self.G, self.g, self.alpha_ep, self.eps_ep, self.U, self.W, self.cursor,
@@ -172,7 +205,9 @@ class SMDPLockStepState:
 def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, horizon,
              a_scale, a_rate, a_omega, a_floor, e_scale, e_rate, e_omega, e_floor,
              pol_act, pol_cdf, beta, labels, adm, Q, n_o, n_d, n_blocks, track_flat, Qf, nf,
-             check_on, threshold, min_visits, prim_opt, prim_adm, fired, state, episode, target,
+             check_on, threshold, min_visits, prim_opt, prim_adm, fired, intra, chained,
+             Ql, tsum, tsq, succ0, lcb_z, flat_explore, state,
+             episode, target,
              t_ep,
              d_ep, ret, dret, gpow, cur, s0, b0, G, g, alpha_ep, eps_ep, U, W, cursor,
              out_steps, out_dec, out_ret, out_dret, out_blocks):
@@ -200,22 +235,29 @@ def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, h
             s = state[k]
             if cur[k] < 0:
                 d = labels[k, s]
-                if check_on:
+                if check_on and n_d[k, d] >= min_visits:
                     best_a = -1
-                    vf = neg_inf
+                    vl = neg_inf
                     for a in range(A):
-                        if Qf[k, s, a] > vf:
-                            vf = Qf[k, s, a]
+                        n = nf[k, s, a]
+                        if not prim_adm[s, a] or n < min_visits or n == 0:
+                            continue
+                        lb = Ql[k, s, a]
+                        if succ0[k, s, a] == -2 and n > 1:  # more than one successor seen
+                            mean = tsum[k, s, a] / n
+                            var = max(0.0, (tsq[k, s, a] - n * mean * mean) / (n - 1))
+                            lb -= lcb_z * math.sqrt(var / n)
+                        if lb > vl:
+                            vl = lb
                             best_a = a
                     if best_a >= 0:
                         oa = prim_opt[best_a]
-                        if (oa >= 0 and not adm[k, d, oa] and nf[k, s, best_a] >= min_visits
-                                and n_d[k, d] >= min_visits):
+                        if oa >= 0 and not adm[k, d, oa]:
                             vp = neg_inf
                             for o in range(O):
                                 if adm[k, d, o] and Q[k, d, o] > vp:
                                     vp = Q[k, d, o]
-                            if vf - vp > threshold:
+                            if vl - vp > threshold:
                                 fired[k, 0] = s
                                 fired[k, 1] = d
                                 fired[k, 2] = best_a
@@ -255,11 +297,21 @@ def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, h
                                 o_sel = o
                                 break
                             j -= 1
+                if flat_explore and u0 >= eps:
+                    vf = neg_inf
+                    af = -1
+                    for a in range(A):
+                        if prim_adm[s, a] and Qf[k, s, a] > vf:
+                            vf = Qf[k, s, a]
+                            af = a
+                    if af >= 0 and vf > Q[k, d, o_sel]:
+                        o_sel = af  # the optimistic flat action beats the block's best
                 cur[k] = o_sel
                 s0[k] = s
                 b0[k] = d
                 G[k] = 0.0
                 g[k] = 1.0
+                chained[k] = True
                 d_ep[k] += 1
             o = cur[k]
             p = pol_act[o, s]
@@ -290,6 +342,55 @@ def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, h
                     tdf = r + gamma * bn
                 old = Qf[k, s, a]
                 Qf[k, s, a] = old + alpha * (tdf - old)
+                if check_on:
+                    if done:
+                        tdl = r
+                    else:
+                        bl = Ql[k, s2, 0]
+                        for b in range(1, A):
+                            bl = max(bl, Ql[k, s2, b])
+                        tdl = r + gamma * bl
+                    old = Ql[k, s, a]
+                    Ql[k, s, a] = old + alpha * (tdl - old)
+                    tsum[k, s, a] += tdl
+                    tsq[k, s, a] += tdl * tdl
+                    if succ0[k, s, a] == -1:
+                        succ0[k, s, a] = s2
+                    elif succ0[k, s, a] != s2:
+                        succ0[k, s, a] = -2
+            if intra:
+                d = labels[k, s]
+                d2 = labels[k, s2]
+                best2 = neg_inf
+                if not done:
+                    best2 = Q[k, d2, 0]
+                    for oo in range(1, O):
+                        best2 = max(best2, Q[k, d2, oo])
+                updated = False
+                for oo in range(O):
+                    if not adm[k, d, oo] or pol_act[oo, s] != a:
+                        continue
+                    if done:
+                        tdi = r
+                    else:
+                        bt = beta[oo, s2]
+                        if bt >= 1.0:
+                            tdi = r + gamma * best2
+                        elif adm[k, d2, oo]:
+                            tdi = r + gamma * ((1.0 - bt) * Q[k, d2, oo] + bt * best2)
+                        else:
+                            continue
+                    n_o[k, d, oo] += 1
+                    alpha = alpha_ep[k]
+                    if a_omega != 0.0:
+                        alpha = alpha * math.pow(float(n_o[k, d, oo]), -a_omega)
+                    alpha = max(a_floor, alpha)
+                    old = Q[k, d, oo]
+                    Q[k, d, oo] = old + alpha * (tdi - old)
+                    if oo == cur[k]:
+                        updated = True
+                if not updated:
+                    chained[k] = False
             G[k] += g[k] * r
             g[k] *= gamma
             ret[k] += r
@@ -299,6 +400,8 @@ def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, h
             cut = t_ep[k] == horizon
             if (done or cut or W[k, c, 1] < beta[o, s2]) and not adm[k, b0[k], o]:
                 cur[k] = -1  # an exploratory primitive action not offered in the block
+            elif (done or cut or W[k, c, 1] < beta[o, s2]) and intra and chained[k]:
+                cur[k] = -1  # its value was updated at every step (intra-option)
             elif done or cut or W[k, c, 1] < beta[o, s2]:
                 b = b0[k]
                 n_o[k, b, o] += 1

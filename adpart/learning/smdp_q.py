@@ -175,7 +175,8 @@ def make_state(
     mdp: FiniteMDP, options: Sequence[Option], labels: np.ndarray, block_adm: np.ndarray,
     *, episodes: int, horizon: int, alpha: Schedule, epsilon: Schedule, q_init: float,
     mu: np.ndarray, capacity: int, track_flat: bool = False, threshold: float = np.inf,
-    min_visits: int = 0, prim_opt: np.ndarray | None = None,
+    min_visits: int = 0, prim_opt: np.ndarray | None = None, intra: bool = False,
+    lower_bound: float = -np.inf, lcb_z: float = 0.0, flat_explore: bool = False,
 ) -> kernels.SMDPLockStepState:
     """Kernel state for K runs on decision layers ``labels`` (K, S) / ``block_adm`` (K, B, O)."""
     K, S = labels.shape
@@ -186,6 +187,7 @@ def make_state(
     adm[:, :block_adm.shape[1]] = block_adm
     Q = np.where(adm, float(q_init), -np.inf)
     flat_shape = (K, S, A) if track_flat else (K, 1, A)
+    check = bool(track_flat and np.isfinite(threshold))
     Qf = np.where(mdp.admissible, float(q_init), -np.inf) if track_flat else np.zeros((1, A))
     st = kernels.SMDPLockStepState(
         keys=mdp.sampler_arrays[0],
@@ -211,12 +213,22 @@ def make_state(
         track_flat=bool(track_flat),
         Qf=np.broadcast_to(Qf, flat_shape).copy(),
         nf=np.zeros(flat_shape, dtype=np.int64),
-        check_on=bool(track_flat and np.isfinite(threshold)),
+        check_on=check,
         threshold=float(threshold),
         min_visits=int(min_visits),
         prim_opt=np.full(A, -1, dtype=np.int64) if prim_opt is None else prim_opt.astype(np.int64),
         prim_adm=np.ascontiguousarray(mdp.admissible, dtype=bool),
         fired=np.full((K, 3), -1, dtype=np.int64),
+        intra=bool(intra),
+        chained=np.ones(K, dtype=bool),
+        Ql=np.broadcast_to(np.where(mdp.admissible, float(lower_bound), -np.inf)
+                           if check else np.zeros((1, A)), flat_shape if check else (1, 1, A)
+                           ).copy(),
+        tsum=np.zeros(flat_shape if check else (1, 1, A)),
+        tsq=np.zeros(flat_shape if check else (1, 1, A)),
+        succ0=np.full(flat_shape if check else (1, 1, A), -1, dtype=np.int64),
+        lcb_z=float(lcb_z),
+        flat_explore=bool(flat_explore and track_flat),
         state=np.zeros(K, dtype=np.int64),
         episode=np.zeros(K, dtype=np.int64),
         target=np.zeros(K, dtype=np.int64),
@@ -308,6 +320,7 @@ def smdp_q_learning(
     progress: Callable[[int, int], object] | None = None,
     q_init: float = 0.0,
     kernel: str | None = None,
+    intra_option: bool = False,
 ) -> SMDPQResult:
     """Learn ``mdp`` over ``options`` with ``runs`` independent SMDP Q-learners in lock-step.
 
@@ -320,6 +333,8 @@ def smdp_q_learning(
         reference_values, progress, q_init: as :func:`adpart.learning.q_learning` (``alpha``
             counts updates of ``(s, o)``, ``epsilon`` decisions in ``s``).
         kernel: ``"numba"`` or ``"python"`` (identical results).
+        intra_option: also update every option consistent with each primitive step
+            (intra-option Q-learning, Sutton, Precup & Singh 1999; :mod:`._smdp_kernels`).
 
     Returns:
         An :class:`SMDPQResult`.
@@ -341,7 +356,7 @@ def smdp_q_learning(
     labels = np.broadcast_to(np.arange(S, dtype=np.int64), (K, S))
     st = make_state(mdp, full, labels, np.broadcast_to(state_adm, (K, S, len(full))),
                     episodes=N, horizon=H, alpha=alpha_s, epsilon=eps_s, q_init=q_init, mu=mu,
-                    capacity=S)
+                    capacity=S, intra=bool(intra_option))
 
     def score() -> np.ndarray:
         policies = greedy_policy(st.Q.reshape(K * S, -1)).reshape(K, S)
@@ -354,6 +369,7 @@ def smdp_q_learning(
         "runs": K, "episodes": N, "seed": root_seed, "alpha": alpha_s.to_dict(),
         "epsilon": eps_s.to_dict(), "max_steps_per_episode": H, "eval_every": M,
         "q_init": float(q_init), "kernel": name, "include_primitives": bool(include_primitives),
+        "intra_option": bool(intra_option),
         "options": list(names), "reference": "given" if reference_values is not None else "solved",
     }
     curve = LearningCurve.from_matrices(

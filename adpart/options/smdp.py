@@ -8,9 +8,13 @@ admissible mask is the initiation sets. Primitive actions may be put in front (c
 ``0..A-1``, the MDP's own one-step models), so that ``adpart.mdp.solvers.solve`` solves either
 set unchanged.
 
-Terminal states of the MDP get zero rows and every option admissible (value 0, as in
-:meth:`FiniteMDP.as_smdp`). A non-terminal state where no option is admissible would get the
-value ``-inf``; stacking refuses it and names the state.
+Terminal states of the MDP get zero rows - ``R`` *and* ``F``, in every column - and every option
+admissible (value 0, as in :meth:`FiniteMDP.as_smdp`). Zeroing ``F`` matters when the models were
+computed under another task, whose terminal states differ: a row left there would let the value
+of the new goal depend on the column a policy picks at it. Models for a new task should be that
+task's (:func:`adpart.options.models.option_models` on the new MDP); the zeroing is the guard.
+A non-terminal state where no option is admissible would get the value ``-inf``; stacking
+refuses it and names the state.
 """
 
 from __future__ import annotations
@@ -78,7 +82,8 @@ def stack_models(
     if not R_cols:
         raise ModelError("no options to stack; give option models or include_primitives=True")
     R = np.concatenate(R_cols, axis=1)
-    F = sp.vstack(F_blocks, format="csr")
+    live = sp.diags_array(np.tile(~mdp.terminal, R.shape[1]).astype(np.float64))
+    F = sp.csr_array(live @ sp.vstack(F_blocks, format="csr"))
     F.eliminate_zeros()
     admissible = np.concatenate(adm_cols, axis=1)
     admissible[mdp.terminal] = True

@@ -4,7 +4,21 @@ For a subgoal ``g`` the option is built in three parts:
 
 * **Initiation set** ``I`` (``initiation=``):
 
-  - ``"basin"`` (default): the states, other than ``g`` and not terminal, from which ``g`` can be
+  - ``"local"`` (default): the states of the basin (below) from which the option's own policy
+    reaches ``g`` within about ``radius`` steps, read off the pseudo-reward value:
+    ``I = {s in basin : V_g(s) >= pseudo_gamma**(radius - 1)}``, where ``V_g(s) =
+    E[pseudo_gamma^(tau - 1) ; the option ends at g]`` is the value the policy is solved for
+    (below; the +1 is paid on arrival, at step ``tau``). In a deterministic
+    domain this is exactly "shortest path to ``g`` inside the basin has at most ``radius`` steps"
+    (tested against a breadth-first search); in a stochastic one it is the certainty-equivalent
+    horizon, so a state whose route is long *or* unreliable is left out. This is the seed's
+    "options terminate when they reach the subgoal in the same room" (chapter 6) without a
+    map: an option is offered only where its subgoal is near. ``radius`` defaults to
+    :data:`LOCAL_RADIUS`, chosen by measurement (docs/options.md: three-floor, Parr's maze,
+    urban). The whole basin was measured to make SMDP Q-learning 11.9x slower than flat on
+    three-floor: there an untried option (Q = 0 is optimistic against -1 a step) carries the
+    agent 25-67 steps back towards the old task's subgoal.
+  - ``"basin"``: the states, other than ``g`` and not terminal, from which ``g`` can be
     reached (with positive probability, under some policy) by a path whose intermediate states
     are neither other subgoals nor terminal. Other subgoals belong to ``I`` as *start* states
     only (a path may start in one), so that an agent that has reached one subgoal can take the
@@ -13,15 +27,17 @@ For a subgoal ``g`` the option is built in three parts:
   - a ``(S,)`` bool mask given by the caller.
 
   ``g`` itself is never in ``I`` (an option to where the agent already is would be pointless).
-* **Termination** ``beta``: 1 at ``g``, outside ``I`` and, for ``"basin"``, at the other subgoals
-  (the basin's paths never cross them); 0 elsewhere.
+* **Termination** ``beta``: 1 at ``g``, outside ``I`` and, for ``"basin"`` and ``"local"``, at the
+  other subgoals (the basin's paths never cross them); 0 elsewhere.
 * **Policy**: greedy for the *pseudo-reward task* "reach ``g``": reward +1 on arrival at ``g``,
   0 otherwise, every state where the option terminates is absorbing with value 0, discounted by
   ``pseudo_gamma`` (the MDP's gamma if it is below 1, else 0.99). Its value is
-  ``E[pseudo_gamma^tau ; the option ends at g]``, so the policy reaches ``g`` as fast and as
-  surely as possible without leaving the region where the option runs. It is task-independent:
-  the MDP's own rewards play no part. Solved by modified policy iteration
-  (:func:`adpart.mdp.solvers.solve`) to ``epsilon``; ties go to the lowest action index.
+  ``E[pseudo_gamma^(tau - 1) ; the option ends at g]`` (the +1 comes on arrival), so the policy
+  reaches ``g`` as fast and as surely as possible without leaving the region where the option
+  runs. It is task-independent: the MDP's own rewards play no part. Solved by modified policy
+  iteration (:func:`adpart.mdp.solvers.solve`) to ``epsilon``; ties go to the lowest action
+  index. For ``"local"`` the policy is the basin's (solved once); the option simply ends where
+  it leaves ``I``, which on the policy's own route happens only in a stochastic domain.
 """
 
 from __future__ import annotations
@@ -44,7 +60,12 @@ if TYPE_CHECKING:
 UNDISCOUNTED_PSEUDO_GAMMA = 0.99
 #: Solver accuracy of the pseudo-reward task (its values lie in [0, 1]).
 PSEUDO_EPSILON = 1e-10
-INITIATION_CHOICES = ("basin", "reachable")
+INITIATION_CHOICES = ("local", "basin", "reachable")
+#: Default radius (steps) of ``"local"`` initiation sets (module docstring; docs/options.md).
+LOCAL_RADIUS = 30
+#: Relative slack of the ``"local"`` test ``V_g >= gamma**radius``, so that a state exactly
+#: ``radius`` steps away is kept despite the solver's rounding.
+RADIUS_RTOL = 1e-9
 
 
 def transition_graph(mdp: FiniteMDP) -> sp.csr_array:
@@ -114,6 +135,26 @@ def reachable_set(mdp: FiniteMDP, subgoal: int) -> np.ndarray:
     return found & ~mdp.terminal
 
 
+def pseudo_discount(mdp: FiniteMDP, pseudo_gamma: float | None = None) -> float:
+    """The pseudo-reward task's discount: ``pseudo_gamma``, else the MDP's gamma < 1, else 0.99."""
+    g = float(pseudo_gamma if pseudo_gamma is not None else (
+        mdp.gamma if mdp.gamma < 1.0 else UNDISCOUNTED_PSEUDO_GAMMA))
+    if not 0.0 < g < 1.0:
+        raise ModelError(f"pseudo_gamma = {g!r} must lie in (0, 1)")
+    return g
+
+
+def check_radius(radius: object) -> float:
+    """``radius`` as a float >= 1 (``inf`` allowed), else a :class:`ModelError` naming it."""
+    try:
+        r = float(radius)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        r = float("nan")
+    if not r >= 1.0:  # NaN fails too
+        raise ModelError(f"radius = {radius!r} must be a number of steps >= 1 (--radius)")
+    return r
+
+
 def policy_to(
     mdp: FiniteMDP,
     subgoal: int,
@@ -128,24 +169,41 @@ def policy_to(
         stop: ``(S,)`` bool, states where the option ends (value 0); ``subgoal`` must be one.
 
     Returns:
-        ``(policy (S,) int64, V (S,))``: V is ``E[pseudo_gamma^tau ; end at subgoal]`` of the
+        ``(policy (S,) int64, V (S,))``: V is ``E[pseudo_gamma^(tau-1) ; end at subgoal]`` of the
         policy when continuing, i.e. 0 on ``stop``; the policy is greedy in every state,
-        ``stop`` states included (an option started there takes one step first).
+        ``stop`` states included (an option started there takes one step first). The value of
+        *starting* in a ``stop`` state is :func:`start_value` ``(mdp, subgoal, V, ...)``.
     """
-    S, A = mdp.n_states, mdp.n_actions
-    g = float(pseudo_gamma if pseudo_gamma is not None else (
-        mdp.gamma if mdp.gamma < 1.0 else UNDISCOUNTED_PSEUDO_GAMMA))
-    if not 0.0 < g < 1.0:
-        raise ModelError(f"pseudo_gamma = {g!r} must lie in (0, 1)")
-    arrive = np.asarray(mdp.P[:, [subgoal]].toarray()).reshape(A, S).T
+    g = pseudo_discount(mdp, pseudo_gamma)
     terminal = stop | mdp.terminal
-    pseudo = FiniteMDP(mdp.P, arrive, g, terminal=terminal, admissible=mdp.admissible,
-                       name=f"{mdp.name}/reach-{subgoal}")
+    pseudo = FiniteMDP(mdp.P, _arrivals(mdp, subgoal), g, terminal=terminal,
+                       admissible=mdp.admissible, name=f"{mdp.name}/reach-{subgoal}")
     V = solve(pseudo, epsilon, method="mpi").V
     V = np.where(terminal, 0.0, V)
-    Q = arrive + g * (mdp.P @ V).reshape(A, S).T
-    Q = np.where(mdp.admissible, Q, -np.inf)
-    return np.argmax(Q, axis=1).astype(np.int64), V
+    return np.argmax(_reach_q(mdp, subgoal, V, g), axis=1).astype(np.int64), V
+
+
+def _arrivals(mdp: FiniteMDP, subgoal: int) -> np.ndarray:
+    """``(S, A)`` probability that ``(s, a)`` arrives in ``subgoal`` (the pseudo-reward)."""
+    S, A = mdp.n_states, mdp.n_actions
+    return np.asarray(mdp.P[:, [subgoal]].toarray()).reshape(A, S).T
+
+
+def _reach_q(mdp: FiniteMDP, subgoal: int, V: np.ndarray, g: float) -> np.ndarray:
+    """``(S, A)`` pseudo-reward action values from the continuation values ``V``."""
+    S, A = mdp.n_states, mdp.n_actions
+    Q = _arrivals(mdp, subgoal) + g * (mdp.P @ V).reshape(A, S).T
+    return np.where(mdp.admissible, Q, -np.inf)
+
+
+def start_value(mdp: FiniteMDP, subgoal: int, V: np.ndarray,
+                pseudo_gamma: float | None = None) -> np.ndarray:
+    """``(S,)`` ``E[pseudo_gamma^(tau-1) ; end at subgoal]`` of an option *started* in each state.
+
+    Equal to ``V`` where the option continues; in a stop state (another subgoal that is a start
+    state of the basin) it is the one-step look-ahead of the greedy action.
+    """
+    return _reach_q(mdp, subgoal, V, pseudo_discount(mdp, pseudo_gamma)).max(axis=1)
 
 
 def subgoal_option(
@@ -153,19 +211,22 @@ def subgoal_option(
     subgoal: int,
     *,
     subgoals: object = (),
-    initiation: str | np.ndarray = "basin",
+    initiation: str | np.ndarray = "local",
+    radius: float = LOCAL_RADIUS,
     pseudo_gamma: float | None = None,
     name: str | None = None,
 ) -> Option:
     """The option to ``subgoal`` (module docstring for ``I``, ``beta`` and the policy).
 
     Args:
-        subgoals: all subgoals (ids or mask); with ``"basin"`` the others bound the basin.
-        initiation: ``"basin"``, ``"reachable"`` or an ``(S,)`` bool mask.
+        subgoals: all subgoals (ids or mask); with ``"basin"`` and ``"local"`` the others bound
+            the basin.
+        initiation: ``"local"``, ``"basin"``, ``"reachable"`` or an ``(S,)`` bool mask.
+        radius: steps of a ``"local"`` initiation set (a number >= 1; ``inf`` is the basin).
 
     Raises:
-        ModelError: unknown ``initiation``, an empty initiation set, or (with a given mask) an
-            initiation state from which the subgoal cannot be reached inside the mask.
+        ModelError: unknown ``initiation``, a bad ``radius``, an empty initiation set, or (with a
+            given mask) an initiation state from which the subgoal cannot be reached inside it.
     """
     S = mdp.n_states
     if not isinstance(subgoal, (int, np.integer)) or not 0 <= subgoal < S:
@@ -174,8 +235,9 @@ def subgoal_option(
     label = name or f"to-{subgoal}"
     others = _subgoal_mask(subgoals, S)
     others[subgoal] = False
+    radius = check_radius(radius)
     if isinstance(initiation, str):
-        if initiation == "basin":
+        if initiation in ("basin", "local"):
             init = basin(mdp, subgoal, others)
             stop = ~init | others
         elif initiation == "reachable":
@@ -203,6 +265,17 @@ def subgoal_option(
             f"reach it); choose another subgoal or initiation"
         )
     policy, V = policy_to(mdp, subgoal, stop, pseudo_gamma=pseudo_gamma)
+    if isinstance(initiation, str) and initiation == "local" and np.isfinite(radius):
+        reach = start_value(mdp, subgoal, V, pseudo_gamma)
+        within = pseudo_discount(mdp, pseudo_gamma) ** (radius - 1.0) * (1.0 - RADIUS_RTOL)
+        init = init & (reach >= within)
+        stop = stop | ~init
+        stop[subgoal] = True
+        if not init.any():
+            raise ModelError(
+                f"option {label!r}: no state reaches subgoal {subgoal} within radius {radius:g}; "
+                "raise the radius (--radius) or use initiation 'basin'"
+            )
     if not isinstance(initiation, str):
         dead = np.flatnonzero(init & ~stop & (V <= 0.0))
         if dead.size:
@@ -213,21 +286,69 @@ def subgoal_option(
             )
     beta = stop.astype(np.float64)
     kind = initiation if isinstance(initiation, str) else "mask"
-    return Option(label, init, policy, beta, subgoal=subgoal,
-                  meta={"kind": "subgoal", "initiation": kind})
+    meta: dict[str, object] = {"kind": "subgoal", "initiation": kind}
+    if kind == "local":
+        meta["radius"] = radius
+    return Option(label, init, policy, beta, subgoal=subgoal, meta=meta)
 
 
 def subgoal_options(
     mdp: FiniteMDP,
     subgoals: Sequence[int] | np.ndarray,
     *,
-    initiation: str = "basin",
+    initiation: str = "local",
+    radius: float = LOCAL_RADIUS,
+    cover: bool = False,
     pseudo_gamma: float | None = None,
 ) -> list[Option]:
-    """One option per subgoal (in increasing state order), each bounded by the others' basins."""
+    """One option per subgoal (in increasing state order), each bounded by the others' basins.
+
+    With ``initiation="local"`` and ``cover=True`` a state that lies in no option's ball (no
+    subgoal within ``radius`` steps) but in some basin is added to the initiation set of the
+    option that reaches its subgoal most surely and soonest (the highest ``E[gamma^(tau-1)]``;
+    the lowest subgoal on ties): the *nearest* subgoal. Every state that can reach a subgoal
+    then has an option - which a decision layer needs, since its blocks must offer one - while
+    a state near subgoals is offered only theirs. The option still ends where it leaves its
+    initiation set, so from a far state it walks towards its subgoal until it enters another
+    subgoal's ball or its own: the basin cut where a neighbouring subgoal's region begins.
+    """
     mask = _subgoal_mask(subgoals, mdp.n_states)
-    return [
-        subgoal_option(mdp, int(g), subgoals=mask, initiation=initiation,
-                       pseudo_gamma=pseudo_gamma)
-        for g in np.flatnonzero(mask)
-    ]
+    goals = np.flatnonzero(mask)
+    if not (cover and isinstance(initiation, str) and initiation == "local"):
+        return [
+            subgoal_option(mdp, int(g), subgoals=mask, initiation=initiation, radius=radius,
+                           pseudo_gamma=pseudo_gamma)
+            for g in goals
+        ]
+    radius = check_radius(radius)
+    parts = [_basin_parts(mdp, int(g), mask, pseudo_gamma) for g in goals]
+    if not parts:
+        return []
+    within = pseudo_discount(mdp, pseudo_gamma) ** (radius - 1.0) * (1.0 - RADIUS_RTOL)
+    basins = np.stack([p[0] for p in parts])  # (G, S)
+    reach = np.where(basins, np.stack([p[3] for p in parts]), -1.0)
+    balls = basins & (reach >= within)
+    far = basins.any(axis=0) & ~balls.any(axis=0)
+    nearest = np.argmax(reach, axis=0)  # first maximum: the lowest subgoal on ties
+    options = []
+    for i, (g, (_, stop, policy, _)) in enumerate(zip(goals, parts, strict=True)):
+        init = balls[i] | (far & (nearest == i))
+        beta = (stop | ~init).astype(np.float64)
+        beta[g] = 1.0
+        options.append(Option(f"to-{int(g)}", init, policy, beta, subgoal=int(g),
+                              meta={"kind": "subgoal", "initiation": "local",
+                                    "radius": radius, "cover": True}))
+    return options
+
+
+def _basin_parts(mdp: FiniteMDP, subgoal: int, subgoals: np.ndarray,
+                 pseudo_gamma: float | None) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                      np.ndarray]:
+    """``(basin, stop, policy, reach)`` of the basin option to ``subgoal`` (module docstring)."""
+    others = subgoals.copy()
+    others[subgoal] = False
+    init = basin(mdp, subgoal, others)
+    stop = ~init | others
+    stop[subgoal] = True
+    policy, V = policy_to(mdp, subgoal, stop, pseudo_gamma=pseudo_gamma)
+    return init, stop, policy, start_value(mdp, subgoal, V, pseudo_gamma)

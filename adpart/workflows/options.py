@@ -13,15 +13,20 @@ from typing import Any
 
 import numpy as np
 
-from adpart.errors import TaskError
+from adpart.errors import ModelError, TaskError
 from adpart.execution import Executor
 from adpart.mdp.model import FiniteMDP
 from adpart.options.models import OptionModel, option_models
 from adpart.options.option import Option
-from adpart.options.subgoal_options import subgoal_options
+from adpart.options.subgoal_options import (
+    INITIATION_CHOICES,
+    LOCAL_RADIUS,
+    check_radius,
+    subgoal_options,
+)
 from adpart.workflows.resolve import resolve_domain
 
-INITIATIONS = ("basin", "reachable")
+INITIATIONS = INITIATION_CHOICES
 
 
 @dataclass(frozen=True, eq=False)
@@ -62,16 +67,33 @@ def options_for_subgoals(
     kb: Any,
     subgoal_set: Any,
     *,
-    initiation: str = "basin",
+    initiation: str = "local",
+    radius: float = LOCAL_RADIUS,
+    cover: bool = True,
     executor: Executor | None = None,
 ) -> StoredOptions:
     """Get-or-build the options to every subgoal of ``subgoal_set`` with exact models.
 
-    Options already in the knowledge base for these subgoals with the same initiation rule are
-    loaded instead of rebuilt (``reused=True``).
+    Stored options serve decision layers, whose blocks must each offer an option, so ``local``
+    sets are extended by default to cover every state that can reach a subgoal (``cover``,
+    :func:`adpart.options.subgoal_options.subgoal_options`): without it, the states far from
+    every subgoal fall back to primitive actions and phases 1-2 cut them into near-singletons
+    (three-floor: 1,039 blocks against 63).
+
+    Options already in the knowledge base for these subgoals with the same initiation rule (and,
+    for ``local``, the same radius and cover) are loaded instead of rebuilt (``reused=True``).
     """
     if initiation not in INITIATIONS:
-        raise TaskError(f"initiation {initiation!r} is not one of {', '.join(INITIATIONS)}")
+        raise TaskError(
+            f"initiation {initiation!r} is not one of {', '.join(INITIATIONS)} (--initiation)")
+    try:
+        radius = check_radius(radius)
+    except ModelError as exc:
+        raise TaskError(str(exc)) from None
+    rule: dict[str, Any] = {"initiation": initiation}
+    if initiation == "local":
+        rule["radius"] = radius
+        rule["cover"] = bool(cover)
     task_id = source_task_id(kb, subgoal_set)
     env, _, mdp = environment_and_mdp(kb, subgoal_set.environment_id, task_id)
     wanted = dict(zip(subgoal_set.subgoal_ids, subgoal_set.states, strict=True))
@@ -79,7 +101,7 @@ def options_for_subgoals(
         o
         for o in kb.options_for(env)
         if o.subgoal_id in wanted
-        and o.provenance.parameters.get("initiation") == initiation
+        and all(o.provenance.parameters.get(k) == v for k, v in rule.items())
         and o.provenance.parameters.get("task_id") == task_id
     ]
     if wanted and {o.subgoal_id for o in existing} == set(wanted):
@@ -88,7 +110,8 @@ def options_for_subgoals(
         options, models = load_options(kb, records)
         return StoredOptions(records, options, models, reused=True)
     states = np.asarray(subgoal_set.states, dtype=np.int64)
-    options = subgoal_options(mdp, states, initiation=initiation)
+    options = subgoal_options(mdp, states, initiation=initiation, radius=radius,
+                              cover=bool(cover))
     models = option_models(mdp, options, executor=executor, duration=False)
     records = []
     subgoal_of_state = {int(s): i for i, s in wanted.items()}
@@ -106,7 +129,7 @@ def options_for_subgoals(
                 subgoal=subgoal_of_state[int(option.subgoal)],
                 plugin="adpart.options",
                 parameters={
-                    "initiation": initiation,
+                    **rule,
                     "task_id": task_id,
                     "subgoal_set": subgoal_set.id,
                     "subgoal_state": int(option.subgoal),

@@ -27,6 +27,7 @@ import numpy as np
 from adpart.errors import TaskError
 from adpart.experiments.stats import episodes_to_threshold
 from adpart.learning.curves import LearningCurve, plot_curves
+from adpart.options.subgoal_options import LOCAL_RADIUS
 from adpart.workflows.discovery import discover_subgoals
 from adpart.workflows.learning import (
     LearnRequest,
@@ -48,7 +49,8 @@ class PipelineConfig:
         env: environment name.
         tasks: the task sequence; the first is learned flat, the others on the decision layer.
         detector, detector_params: the subgoal detector plugin and its parameters.
-        initiation: initiation sets of the subgoal options (``basin`` or ``reachable``).
+        initiation, radius: initiation sets of the subgoal options (``local`` with its radius in
+            steps, ``basin`` or ``reachable``; :mod:`adpart.options.subgoal_options`).
         delta, epsilon: the partition's delta (eq. 4.6) and reward epsilon (eq. 4.7).
         runs, episodes, first_episodes: runs per learner, episodes per later task, episodes of
             the first (flat) task.
@@ -67,7 +69,8 @@ class PipelineConfig:
     tasks: tuple[str, ...]
     detector: str = "count-exhaustive"
     detector_params: dict[str, Any] = field(default_factory=dict)
-    initiation: str = "basin"
+    initiation: str = "local"
+    radius: float = LOCAL_RADIUS
     delta: float = 0.3
     epsilon: float = 10.0
     runs: int = 10
@@ -355,7 +358,8 @@ def run_pipeline(
 
     say(f"learning options to {found.result.subgoals.size} subgoals")
     start = time.perf_counter()
-    stored = options_for_subgoals(kb, found.record, initiation=config.initiation)
+    stored = options_for_subgoals(kb, found.record, initiation=config.initiation,
+                                  radius=config.radius)
     report.stages.append(
         Stage(
             "options",

@@ -132,3 +132,34 @@ def test_stacking_refuses_uncovered_states():
         np.ones(get_domain("two-rooms").n_states)))
     with pytest.raises(ModelError, match="model of option 'x' covers"):
         stack_models(mdp, [bad])
+
+
+def test_models_of_another_task_cannot_make_the_new_goal_pay():
+    """Models computed under the first task, stacked for a new one: its goal's rows are empty.
+
+    The independent check: every state's value under any policy is the value of the same policy
+    with the new goal made absorbing by hand (column 0 chosen there), so which column a policy
+    picks at the goal cannot matter. Before the fix, the option columns kept their first-task F
+    rows at the new goal and the start value ranged from -34 to +172 with the column.
+    """
+    from adpart.learning.curves import start_distribution, start_values
+    from adpart.options import subgoal_options
+
+    domain = get_domain("three-floor")
+    first, new = domain.mdp("reach-goal"), domain.mdp("reach-top-west")
+    goal = np.flatnonzero(new.terminal)
+    assert not first.terminal[goal].any()
+    hubs = np.flatnonzero(np.asarray(new.features["doorway"]) == 1)[:6]
+    options = subgoal_options(first, hubs, initiation="basin")
+    stale = stack_models(new, option_models(first, options, duration=False),
+                         include_primitives=True)
+    assert stale.F[np.r_[[o * new.n_states + goal for o in range(stale.n_actions)]].ravel()
+                   ].nnz == 0
+    policy = solve(stale).policy
+    mu = start_distribution(new)
+    values = []
+    for column in range(stale.n_actions):
+        at_goal = policy.copy()
+        at_goal[goal] = column
+        values.append(start_values(stale, at_goal[None], mu)[0])
+    np.testing.assert_allclose(values, values[0], rtol=0, atol=1e-9)

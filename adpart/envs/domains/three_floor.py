@@ -9,9 +9,18 @@ time.
 deterministic moves GoNorth/GoEast/GoSouth/GoWest plus GoUp/GoDown on the stair cells (``H``;
 each joins the same (x, y) on the floor above or below). The doorways (``D``) and the stair cells
 are the hand-designed subgoals drawn black in Fig. 5.1; they carry the features ``doorway`` and
-``stair``. Reward -1 per action and +100 on arrival at the goal; gamma = 0.99 (not stated in the
-dissertation; shortest paths to the goal run up to 129 steps, so a smaller gamma would
-hide the goal).
+``stair``. Two reward models, each task in both:
+
+* ``reach-...`` (the default): -1 per action and +100 on arrival at the goal;
+* ``reach-...-goal-only``: +100 on arrival at the goal and nothing else - the model of section
+  5.1.3, whose minimum reward is 0 (the seed states "let the minimum reward be r = 0" for this
+  domain; 5.1.1 gives only the goal's +100).
+
+The default keeps the step cost because it is the usual shortest-path formulation and every
+earlier figure of this project was measured on it; the goal-only model is the seed's, under
+which Q = 0 is a true lower bound instead of an optimistic guess (docs/environments/grid.md).
+gamma = 0.99 for both (not stated in the dissertation; shortest paths to the goal run up to 129
+steps, so a smaller gamma would hide the goal).
 
 ``three-floor-arm`` (section 5.1.4, Fig. 5.6): three 20 x 17 floors with obstacles, 600 free
 cells; the state is cell x arm (closed/open) x object (at its source site 0, at the destination
@@ -198,6 +207,8 @@ THREE_FLOOR_ARM_MAP = """
 
 GAMMA = 0.99
 GOAL_REWARD = 100.0
+#: Suffix of the tasks in section 5.1.3's reward model (no step cost, +100 at the goal).
+GOAL_ONLY = "-goal-only"
 
 
 class ThreeFloor(GridDomain):
@@ -215,15 +226,21 @@ class ThreeFloor(GridDomain):
         return dataclasses.replace(dyn, features={**dyn.features, "doorway": dyn.features["door"]})
 
     def tasks(self) -> Mapping[str, TaskFactory | GoalSpec]:
-        def reach(name: str, goal: Mapping[str, int]) -> GoalSpec:
-            return GoalSpec(goal=goal, goal_reward=GOAL_REWARD, gamma=GAMMA, name=name)
-
-        return {
-            "reach-goal": reach("reach-goal", {"goal": 1}),
-            "reach-ground-east": reach("reach-ground-east", {"x": 37, "y": 1, "floor": 0}),
-            "reach-middle-south": reach("reach-middle-south", {"x": 1, "y": 30, "floor": 1}),
-            "reach-top-west": reach("reach-top-west", {"x": 1, "y": 1, "floor": 2}),
+        goals = {
+            "reach-goal": {"goal": 1},
+            "reach-ground-east": {"x": 37, "y": 1, "floor": 0},
+            "reach-middle-south": {"x": 1, "y": 30, "floor": 1},
+            "reach-top-west": {"x": 1, "y": 1, "floor": 2},
         }
+        free = (0.0,) * len(self.dynamics().action_names)
+        tasks: dict[str, TaskFactory | GoalSpec] = {}
+        for name, goal in goals.items():
+            tasks[name] = GoalSpec(goal=goal, goal_reward=GOAL_REWARD, gamma=GAMMA, name=name)
+        for name, goal in goals.items():
+            tasks[f"{name}{GOAL_ONLY}"] = GoalSpec(
+                goal=goal, goal_reward=GOAL_REWARD, gamma=GAMMA, step_costs=free,
+                name=f"{name}{GOAL_ONLY}")
+        return tasks
 
 
 class ThreeFloorArm(GridDomain):

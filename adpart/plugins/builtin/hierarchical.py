@@ -28,14 +28,18 @@ class SMDPQLearner:
         ALPHA,
         EPSILON,
         Param("primitives", "bool", False, "offer the primitive actions beside the options"),
+        Param("intra-option", "bool", False,
+              "update every option consistent with each step (Sutton, Precup & Singh 1999)"),
         MAX_STEPS,
         q_init("Q(s, o)"),
         kernel("numba", "python"),
     )
 
     def __init__(self, alpha: str = "1/n^0.8", epsilon: str = "0.1", primitives: bool = False,
-                 max_steps: int = 1000, q_init: float = 0.0, kernel: str = "auto") -> None:
+                 intra_option: bool = False, max_steps: int = 1000, q_init: float = 0.0,
+                 kernel: str = "auto") -> None:
         self.alpha, self.epsilon, self.primitives = alpha, epsilon, bool(primitives)
+        self.intra_option = bool(intra_option)
         self.max_steps, self.q_init = max_steps, q_init
         self.kernel = None if kernel == "auto" else kernel
 
@@ -51,7 +55,7 @@ class SMDPQLearner:
             mdp, opts, include_primitives=self.primitives or not opts, runs=runs,
             episodes=episodes, seed=seed, alpha=self.alpha, epsilon=self.epsilon,
             max_steps_per_episode=self.max_steps, eval_every=eval_every, progress=progress,
-            q_init=self.q_init, kernel=self.kernel,
+            q_init=self.q_init, kernel=self.kernel, intra_option=self.intra_option,
         )
 
 
@@ -66,10 +70,15 @@ class HierarchicalLearner:
         Param("delta", "float", 0.0, "delta of eq. 4.6 for building/refining blocks", min=0.0),
         Param("partition-epsilon", "float", 0.0, "epsilon of eq. 4.7 (reward split)", min=0.0),
         Param("threshold", "float", -1.0, "inconsistency threshold L; < 0 = scale-aware default"),
-        Param("threshold-scale", "float", 0.5, "default L = min(thm 4.5, scale x reward span)",
-              min=0.0),
+        Param("threshold-scale", "float", 0.025, "default L = scale x |V*(start)|", min=0.0),
+        Param("lcb-z", "float", 2.0,
+              "standard errors off a stochastic pair's lower-bound flat value", min=0.0),
+        Param("flat-explore", "bool", True,
+              "take the optimistic flat action where it beats the block's best"),
         Param("min-visits", "int", 2, "visits of the flat pair and block before a test fires",
               min=0),
+        Param("intra-option", "bool", False,
+              "update every offered option consistent with each step (block level)"),
         ALPHA,
         EPSILON,
         MAX_STEPS,
@@ -78,8 +87,12 @@ class HierarchicalLearner:
 
     def __init__(self, mode: str = "inconsistency", delta: float = 0.0,
                  partition_epsilon: float = 0.0, threshold: float = -1.0,
-                 threshold_scale: float = 0.5, min_visits: int = 2, alpha: str = "1/n^0.8",
-                 epsilon: str = "0.1", max_steps: int = 1000, kernel: str = "auto") -> None:
+                 threshold_scale: float = 0.025, lcb_z: float = 2.0, flat_explore: bool = True,
+                 min_visits: int = 2, intra_option: bool = False,
+                 alpha: str = "1/n^0.8", epsilon: str = "0.1", max_steps: int = 1000,
+                 kernel: str = "auto") -> None:
+        self.intra_option = bool(intra_option)
+        self.lcb_z, self.flat_explore = lcb_z, bool(flat_explore)
         self.mode, self.delta, self.partition_epsilon = mode, delta, partition_epsilon
         self.threshold = None if threshold < 0 else threshold
         self.threshold_scale, self.min_visits = threshold_scale, min_visits
@@ -99,10 +112,11 @@ class HierarchicalLearner:
         return hierarchical_learning(
             mdp, list(options), partition, mode=self.mode, delta=self.delta,
             epsilon=self.partition_epsilon, threshold=self.threshold,
-            threshold_scale=self.threshold_scale, min_visits=self.min_visits, runs=runs,
+            threshold_scale=self.threshold_scale, min_visits=self.min_visits, lcb_z=self.lcb_z,
+            flat_explore=self.flat_explore, runs=runs,
             episodes=episodes, seed=seed, alpha=self.alpha, epsilon_greedy=self.epsilon,
             max_steps_per_episode=self.max_steps, eval_every=eval_every, progress=progress,
-            kernel=self.kernel,
+            kernel=self.kernel, intra_option=self.intra_option,
         )
 
 
