@@ -104,6 +104,9 @@ def reachable_states(model: SMDPModel | object, start: object,
     src = start_mask(start, S)
     sel = select_options(smdp, options)
     adm = smdp.admissible if admissible is None else np.asarray(admissible, dtype=bool)
+    if adm.shape != smdp.admissible.shape:
+        raise ModelError(f"admissible has shape {adm.shape}; expected (S, O) = "
+                         f"{smdp.admissible.shape}")
     F = sp.csr_array(smdp.F)
     rows = (sel[:, None] * S + np.arange(S)[None, :]).ravel()
     sub = F[rows]
@@ -115,7 +118,8 @@ def reachable_states(model: SMDPModel | object, start: object,
     # one extra node S: the virtual source, linked to every start state
     tail = np.r_[tail, np.full(int(src.sum()), S)]
     head = np.r_[head, np.flatnonzero(src)]
-    graph = sp.csr_array((np.ones(tail.size, dtype=np.int8), (tail, head)), shape=(S + 1, S + 1))
+    # float weights: duplicate edges (several columns, s -> t) are summed, never wrap around
+    graph = sp.csr_array((np.ones(tail.size), (tail, head)), shape=(S + 1, S + 1))
     order = csgraph.breadth_first_order(graph, S, directed=True, return_predecessors=False)
     out = np.zeros(S + 1, dtype=bool)
     out[order] = True
