@@ -1,13 +1,13 @@
 """Partition sizes of the transfer setting (section 5.1) and their reasons (issue 15, item 3).
 
-Options are stored under the first task (basin initiation sets, the pipeline's), the layer is built
-for the new task by :func:`partition_environment`. The subgoals are those the pipeline's detector
-found in a flat-learned first-task policy (seed 0): ``count-exhaustive`` on three-floor's
+Options are stored under the first task (the pipeline's default initiation sets), the layer is
+built for the new task by :func:`partition_environment`. The subgoals are those the pipeline's
+detector found in a flat-learned first-task policy (seed 0): ``count-exhaustive`` on three-floor's
 reach-goal, ``count-mc`` on urban's navigate-2.
 
-* three-floor -> reach-top-west: before, phase 2 gave 27 blocks and the epsilon = 10 reward split
-  78 (R(s, o) with -1 a step is the discounted path length); the split on the rewards beyond the
-  step reward adds no block.
+* three-floor -> reach-top-west: before, phase 2 gave 26-27 blocks and the epsilon = 10 reward
+  split 56-78 (R(s, o) with -1 a step is the discounted path length; local or basin initiation
+  sets); the split on the rewards beyond the step reward adds no block.
 * urban -> navigate-pickup: before, the 6,668 load-2 states the task cannot reach were 6,668
   singletons and its 6,668 terminal states sat in 6,665 blocks; the decision layer now counts only
   reachable, non-terminal blocks. The oracle for reachability is a plain BFS over the task's
