@@ -41,7 +41,16 @@ from adpart.workflows.partitioning import partition_environment, plot_partition
     show_default=True,
     help="Eq. 4.7: largest spread of a block's option rewards R(s, o), >= 0 (phase 3).",
 )
-@click.option("--task", help="Task for phase 3 (reward refinement); omitted: phases 1-2 only.")
+@click.option("--task", help="Task for phase 3 (reward refinement); omitted: phases 1-2 only. "
+              "Every phase then runs on this task's model (its terminal and start states).")
+@click.option(
+    "--reward-baseline",
+    default="mode",
+    show_default=True,
+    metavar="mode|min|none|NUMBER",
+    help="Constant step reward taken out of R(s, o) before eq. 4.7: mode (the step reward most "
+    "state-action pairs pay), min (the smallest), none (compare R itself) or a number.",
+)
 @click.option(
     "--executor",
     default="serial",
@@ -63,6 +72,7 @@ def partition_cmd(
     delta: float,
     epsilon: float,
     task: str | None,
+    reward_baseline: str,
     executor: str,
     plot_path: Path | None,
     no_check: bool,
@@ -82,6 +92,7 @@ def partition_cmd(
     """
     from adpart.store import KnowledgeBase
 
+    baseline = _baseline_value(reward_baseline)
     kb = KnowledgeBase.open(KBLocation.resolve(kb_path, kb_artifacts))
     try:
         with registry().get("executor", executor).create() as ex:
@@ -94,6 +105,7 @@ def partition_cmd(
                 task=task,
                 executor=ex,
                 check=not no_check,
+                reward_baseline=baseline,
             )
     finally:
         kb.close()
@@ -109,6 +121,25 @@ def partition_cmd(
     _print(summary)
 
 
+def _baseline_value(text: str) -> str | float:
+    if text in ("mode", "min", "none"):
+        return text
+    try:
+        return float(text)
+    except ValueError:
+        raise click.BadParameter(
+            f"{text!r}; use mode, min, none or a number", param_hint="--reward-baseline"
+        ) from None
+
+
+def _split(layer: dict | None) -> str:
+    """``N reachable + 1 terminal + M unreachable`` for one phase's layer counts."""
+    if not layer:
+        return ""
+    return (f" ({layer['reachable']} reachable + {layer['terminal']} terminal + "
+            f"{layer['unreachable']} unreachable, {layer['unreachable_states']} states)")
+
+
 def _print(summary: dict) -> None:
     p1, secs = summary["phase1"], summary["seconds"]
     task = f", task {summary['task']}" if summary["task"] else ""
@@ -121,14 +152,19 @@ def _print(summary: dict) -> None:
         f"{p1['blocks_max']} blocks each ({p1['computed']} computed, {p1['reused']} reused)"
         f"  {secs['phase1']:.2f} s"
     )
+    layer = summary.get("layer") or {}
     click.echo(
-        f"  phase 2  {summary['phase2']['blocks']} blocks  {secs['phase2']:.2f} s  "
-        f"{summary['phase2']['id']}"
+        f"  phase 2  {summary['phase2']['blocks']} blocks{_split(layer.get('phase2'))}  "
+        f"{secs['phase2']:.2f} s  {summary['phase2']['id']}"
     )
     if summary["phase3"] is not None:
         p3 = summary["phase3"]
         note = " (option models recomputed for the task)" if p3["recomputed_option_models"] else ""
-        click.echo(f"  phase 3  {p3['blocks']} blocks  {secs['phase3']:.2f} s  {p3['id']}{note}")
+        click.echo(f"  phase 3  {p3['blocks']} blocks{_split(layer.get('phase3'))}  "
+                   f"{secs['phase3']:.2f} s  {p3['id']}{note}")
+        base = summary.get("reward_baseline")
+        if base is not None:
+            click.echo(f"  eq. 4.7 on the rewards beyond a step reward of {base:g}")
     check = summary["check"]
     if check["ran"]:
         verdict = "stable" if check["ok"] else f"NOT stable ({check['violations']} violations)"

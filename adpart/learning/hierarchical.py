@@ -75,7 +75,8 @@ from adpart.options.option import Option
 from adpart.options.subgoal_options import subgoal_option
 from adpart.partition._validate import DEFAULT_ATOL, masked_rows
 from adpart.partition.bpsmdp import point_model, theorem_4_5_bound
-from adpart.partition.multiphase import MultiPhasePartitioner
+from adpart.partition.layer import resolve_baseline
+from adpart.partition.multiphase import MultiPhasePartitioner, PhaseResult
 from adpart.partition.partition import (
     Partition,
     block_all,
@@ -87,11 +88,14 @@ from adpart.partition.refine import delta_refine, reward_split
 
 __all__ = [
     "MODES",
+    "DecisionLayer",
     "HierarchicalResult",
+    "build_decision_layer",
     "decision_layer",
     "default_threshold",
     "hierarchical_learning",
     "refine_block",
+    "refinement_model",
     "reward_states",
 ]
 
@@ -180,19 +184,55 @@ def reward_states(mdp: FiniteMDP, *, arrivals: bool = False) -> np.ndarray:
     return found
 
 
-def decision_layer(
+@dataclass(frozen=True, eq=False)
+class DecisionLayer:
+    """What :func:`build_decision_layer` returns.
+
+    Attributes:
+        partition: every state's block, over the learner's columns (primitives first): the
+            decision layer's blocks, the task's terminal states as one block, and the states the
+            task cannot reach as one block per pattern of admissible options.
+        options: the learner's columns (the primitive one-step options, then ``options``).
+        model: their stacked models on the task's MDP.
+        phases: the :class:`~adpart.partition.multiphase.PhaseResult` (masks, counts, seconds).
+    """
+
+    partition: Partition
+    options: list[Option]
+    model: SMDPModel
+    phases: PhaseResult
+
+    @property
+    def unreachable(self) -> np.ndarray | None:
+        """``(S,)`` the non-terminal states the task cannot reach from its start states."""
+        return self.phases.unreachable
+
+    def counts(self) -> dict[str, object]:
+        """Blocks per phase: reachable (the decision layer), terminal and unreachable."""
+        return self.phases.layer_counts()
+
+
+def build_decision_layer(
     mdp: FiniteMDP, options: Sequence[Option], *, delta: float = 0.0,
     epsilon: float | None = 0.0, models: Sequence[OptionModel] | None = None,
-) -> tuple[Partition, list[Option], SMDPModel]:
+    reward_baseline: str | float | None = "mode",
+) -> DecisionLayer:
     """The multi-phase partition (section 4.2.1.2) over ``options`` for the learner's columns.
 
     Phase 1 starts each option from {beta = 1, rest of I, outside I}; phase 2 intersects and
     refines for all options; phase 3 (when ``epsilon`` is not None) splits by the options'
-    discounted rewards within ``epsilon``. Primitive actions are columns ``0..A-1`` of the
-    result but offered nowhere.
+    rewards within ``epsilon``. Primitive actions are columns ``0..A-1`` of the result but offered
+    nowhere. Every phase runs on ``mdp``'s model (:mod:`adpart.partition.layer`): its terminal
+    states are one absorbing block, and the states it cannot reach from its start distribution
+    (with any primitive action, since refinement may offer any of them) are left out. They form
+    one block per pattern of admissible options, which the learner never visits; such a block
+    that no option may start offers the primitive actions, so every block offers a column.
+    Phase 3 compares the rewards beyond the constant step reward
+    ``reward_baseline`` (``"mode"``: the step reward most pairs pay; ``"min"``: the smallest,
+    section 4.3.1; ``"none"``: ``R`` itself; or a number), as
+    :func:`adpart.partition.layer.decision_rewards` derives.
 
-    Returns:
-        ``(partition, learner options, stacked model)`` with the primitives first.
+    ``models`` must be the options' models on ``mdp`` (the new task's), not another task's.
     """
     full, smdp = option_set(mdp, options, include_primitives=True, models=models)
     A = mdp.n_actions
@@ -200,9 +240,30 @@ def decision_layer(
         raise ModelError("a decision layer needs at least one option besides the primitives")
     termination = np.zeros(smdp.R.shape, dtype=bool)
     termination[:, A:] = np.stack([o.beta >= 1.0 for o in full[A:]], axis=1)
-    partitioner = MultiPhasePartitioner(smdp, termination, delta=delta)
-    result = partitioner.run(np.arange(A, len(full)), epsilon=epsilon)
-    return result.final, full, smdp
+    baseline = resolve_baseline(reward_baseline, mdp.R, mdp.admissible, mdp.terminal)
+    partitioner = MultiPhasePartitioner(smdp, termination, delta=delta, terminal=mdp.terminal)
+    result = partitioner.run(np.arange(A, len(full)), epsilon=epsilon,
+                             start=start_distribution(mdp), through=mdp,
+                             reward_baseline=baseline, gamma=mdp.gamma)
+    partition = result.final
+    idle = ~partition.admissible.any(axis=1)
+    if idle.any():  # unreachable states no option may start: offer the primitive actions
+        adm = partition.admissible.copy()
+        prims = block_all(partition.labels, partition.n_blocks, smdp.admissible[:, :A])
+        adm[idle, :A] = prims[idle]
+        partition = partition.with_admissible(adm)
+    return DecisionLayer(partition, full, smdp, result)
+
+
+def decision_layer(
+    mdp: FiniteMDP, options: Sequence[Option], *, delta: float = 0.0,
+    epsilon: float | None = 0.0, models: Sequence[OptionModel] | None = None,
+    reward_baseline: str | float | None = "mode",
+) -> tuple[Partition, list[Option], SMDPModel]:
+    """:func:`build_decision_layer` as ``(partition, learner options, stacked model)``."""
+    layer = build_decision_layer(mdp, options, delta=delta, epsilon=epsilon, models=models,
+                                 reward_baseline=reward_baseline)
+    return layer.partition, layer.options, layer.model
 
 
 def refine_block(
@@ -241,6 +302,20 @@ def theorem_bound(mdp: FiniteMDP, *, epsilon: float | None, delta: float) -> flo
     if mdp.gamma >= 1.0:
         return float("inf")
     return float(theorem_4_5_bound(mdp.gamma, 0.0 if epsilon is None else epsilon, delta))
+
+
+def refinement_model(mdp: FiniteMDP, smdp: SMDPModel,
+                     reward_baseline: str | float | None = "mode") -> SMDPModel:
+    """``smdp`` with the decision rewards ``R~`` that phase 3 split by (eq. 4.7 on the rewards
+    beyond the constant step reward, :func:`adpart.partition.layer.decision_rewards`), so that a
+    refinement during learning splits by the same criterion as the layer was built with."""
+    from adpart.partition.layer import decision_rewards
+
+    baseline = resolve_baseline(reward_baseline, mdp.R, mdp.admissible, mdp.terminal)
+    if baseline is None or not 0.0 < mdp.gamma < 1.0:
+        return smdp
+    rewards = decision_rewards(smdp, mdp.gamma, baseline, mdp.terminal)
+    return SMDPModel(R=rewards, F=smdp.F, admissible=smdp.admissible)
 
 
 def default_threshold(v_star_start: float, *, scale: float = THRESHOLD_SCALE) -> float:
@@ -394,12 +469,13 @@ def hierarchical_learning(
         full, smdp = option_set(mdp, options, include_primitives=True, models=models)
         part0 = partition
     part0 = _pad_partition(part0, A, len(full), smdp)
+    refiner = refinement_model(mdp, smdp)
     prims = np.arange(A)
     if mode == "action-refinement":
         for s in np.flatnonzero(reward_states(mdp)):  # few reward states, each one block
             b = int(part0.labels[s])
             if not part0.admissible[b, :A].all():
-                part0 = refine_block(part0, b, prims, smdp, delta=delta, epsilon=epsilon)
+                part0 = refine_block(part0, b, prims, refiner, delta=delta, epsilon=epsilon)
     check = mode == "inconsistency"
     mu = start_distribution(mdp)
     v_star = optimal_start_value(mdp, mu, reference_values)
@@ -439,7 +515,7 @@ def hierarchical_learning(
     def on_fire(k: int) -> None:
         s, b, a = (int(x) for x in st.fired[k])
         old = parts[k]
-        new = refine_block(old, b, [a], smdp, delta=delta, epsilon=epsilon)
+        new = refine_block(old, b, [a], refiner, delta=delta, epsilon=epsilon)
         B_old, B_new = old.n_blocks, new.n_blocks
         grow(B_new)
         parent = new.parent_map(old)

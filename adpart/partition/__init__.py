@@ -4,7 +4,9 @@
 * :func:`refine` - delta-stability (eq. 4.6) and epsilon reward homogeneity (eq. 4.7);
 * :func:`exact_lumping` - the delta = epsilon = 0 case by a splitter worklist;
 * :func:`check_stability` - an independent checker of definition 4.4;
-* :class:`MultiPhasePartitioner` - phases 1-3 of section 4.2.1.2;
+* :class:`MultiPhasePartitioner` - phases 1-3 of section 4.2.1.2, on the new task's model;
+* :func:`reachable_states`, :func:`decision_rewards`, :func:`layer_counts` - partition hygiene
+  (:mod:`adpart.partition.layer`: terminal block, unreachable states, eq. 4.7's rewards);
 * :class:`BPSMDP` - interval models, interval value iteration and a point model (3.2.1, 4.3.3).
 """
 
@@ -16,6 +18,7 @@ from adpart.partition.bpsmdp import (
     value_gap,
 )
 from adpart.partition.checker import StabilityReport, check_stability
+from adpart.partition.layer import decision_rewards, layer_counts, reachable_states
 from adpart.partition.lumping import exact_lumping
 from adpart.partition.multiphase import MultiPhasePartitioner, phase1, phase2, phase3
 from adpart.partition.partition import Partition, canonical_labels, combine_labels
@@ -30,11 +33,14 @@ __all__ = [
     "canonical_labels",
     "check_stability",
     "combine_labels",
+    "decision_rewards",
     "exact_lumping",
+    "layer_counts",
     "phase1",
     "phase2",
     "phase3",
     "point_model",
+    "reachable_states",
     "refine",
     "theorem_4_5_bound",
     "value_gap",

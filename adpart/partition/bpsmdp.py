@@ -305,11 +305,15 @@ def value_gap(
     options: Sequence[int] | None = None,
     weights: np.ndarray | None = None,
     solver_epsilon: float = 1e-9,
+    states: np.ndarray | None = None,
 ) -> dict[str, float]:
     """Measured ``||V* - V*_P||_inf`` (point model, values lifted to states) next to theorem 4.5.
 
     ``V*`` is the optimal value of the original SMDP restricted to the options used; also reported
-    is whether ``V*`` lies inside the interval values of the BPSMDP (it must).
+    is whether ``V*`` lies inside the interval values of the BPSMDP (it must). ``states``
+    (``(S,)`` bool) restricts the maximum and the fraction to those states, e.g. the decision
+    layer's (reachable and terminal) states; the states outside are lumped without regard to
+    stability (:mod:`adpart.partition.layer`).
     """
     smdp = as_model(model)
     sel = _offered(partition, smdp, options)
@@ -325,10 +329,14 @@ def value_gap(
     lifted = VP[partition.labels]
     slack = 1e-6 * max(1.0, float(np.max(np.abs(V))))
     inside = (iv.lower[partition.labels] <= V + slack) & (V <= iv.upper[partition.labels] + slack)
+    keep = np.ones(smdp.n_states, dtype=bool) if states is None else np.asarray(states, bool)
+    if keep.shape != (smdp.n_states,) or not keep.any():
+        raise ModelError(f"states must be a non-empty boolean mask of shape ({smdp.n_states},)")
+    width = (iv.upper - iv.lower)[partition.labels]
     return {
-        "measured": float(np.max(np.abs(V - lifted))),
+        "measured": float(np.max(np.abs(V - lifted)[keep])),
         "bound": theorem_4_5_bound(smdp.modulus, epsilon, delta),
         "gamma": smdp.modulus,
-        "interval_width": float(np.max(iv.upper - iv.lower)),
-        "inside_interval": float(inside.mean()),
+        "interval_width": float(np.max(width[keep])),
+        "inside_interval": float(inside[keep].mean()),
     }

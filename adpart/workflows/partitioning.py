@@ -3,23 +3,28 @@
 The numeric phases are :mod:`adpart.partition.multiphase` (section 4.2.1.2); this workflow adds
 what the dissertation's "knowledge base" promises (section 4.2.1.2, chapter 6):
 
+* **The task's model.** Every phase runs on the model of the task asked for
+  (:mod:`adpart.partition.layer`). Stored option models carry the rewards and the terminal states
+  of the task they were built under. For another task they are recomputed on that task's MDP
+  (:func:`adpart.options.models.option_models`) *before* phase 1. Its terminal states are one
+  absorbing block, and the states it cannot reach from its start states are kept apart. Without a
+  task, phases 1-2 run on the model the options were built under.
 * **Phase 1** per option is reward-independent: it is stored as a ``per-option`` partition and
-  *reused* whenever the knowledge base already holds one for the same option and delta (epsilon
-  plays no part in phase 1, so it is not part of the key). Changing the option set therefore
-  re-runs phases 2-3 only.
+  *reused* whenever the knowledge base already holds one for the same option, delta, terminal set
+  and gamma (the model it ran on; epsilon and the rewards play no part). Changing the option set
+  therefore re-runs phases 2-3 only.
 * **Phase 2** (intersection + refinement for the whole set) is stored as ``intersected`` with the
-  phase-1 partitions as parents.
-* **Phase 3** (a task's rewards within epsilon, eq. 4.7) is stored as ``reward-refined`` with the
-  phase-2 partition as parent. Stored option models carry the rewards (and the terminal states)
-  of the task they were built under; for another task they are recomputed on that task's MDP
-  (:func:`adpart.options.models.option_models`) and phase 3 refines against the recomputed model,
-  so the final partition is epsilon,delta-stable for the task actually asked for.
+  phase-1 partitions as parents (key: also the start states).
+* **Phase 3** (a task's rewards beyond its constant step reward within epsilon, eq. 4.7) is
+  stored as ``reward-refined`` with the phase-2 partition as parent (key: also the task, epsilon
+  and the reward baseline).
 
 The artifact of each record is the block labels ``(S,)``; ``block_actions`` is the ``(B, K)``
 mask of the options offered per block over the record's action set (the options in order, or the
-primitive actions for ``--options primitive``). The final partition is verified by the
-independent checker (:func:`adpart.partition.check_stability`), and with a task the measured
-``||V* - V*_P||_inf`` of the point model is reported next to theorem 4.5's bound
+primitive actions for ``--options primitive``). The final decision layer (the unreachable blocks
+offering nothing) is verified by the independent checker
+(:func:`adpart.partition.check_stability`), and with a task the measured ``||V* - V*_P||_inf`` of
+the point model over the layer's states is reported next to theorem 4.5's bound
 (:func:`adpart.partition.value_gap`).
 """
 
@@ -36,8 +41,9 @@ from adpart.execution import Executor
 from adpart.mdp.model import FiniteMDP, SMDPModel
 from adpart.options.models import OptionModel, option_models
 from adpart.options.smdp import stack_models
-from adpart.partition import Partition, check_stability, phase1, phase2, phase3, value_gap
+from adpart.partition import MultiPhasePartitioner, Partition, check_stability, value_gap
 from adpart.partition._validate import check_delta, check_epsilon
+from adpart.partition.layer import decision_view, layer_counts, resolve_baseline
 from adpart.workflows.options import OptionSet, resolve_option_set
 from adpart.workflows.resolve import resolve_domain
 
@@ -94,6 +100,13 @@ class PartitionOutcome:
     environment_id: int
     task_id: int | None = None
     extra: dict[str, Any] = field(default_factory=dict)
+    terminal: np.ndarray | None = None
+    unreachable: np.ndarray | None = None
+
+    @property
+    def decision_blocks(self) -> int:
+        """Blocks of the decision layer: those holding a reachable non-terminal state."""
+        return layer_counts(self.final, self.terminal, self.unreachable)["reachable"]
 
     @property
     def final_record(self) -> PhaseRecord:
@@ -129,7 +142,10 @@ class PartitionOutcome:
                 "blocks": self.phase3.blocks,
                 "recomputed_option_models": self.recomputed_models,
             },
-            "final": {"id": self.final_record.ref, "blocks": self.final.n_blocks},
+            "final": {"id": self.final_record.ref, "blocks": self.final.n_blocks,
+                      "decision_blocks": self.decision_blocks},
+            "layer": self.extra.get("layer"),
+            "reward_baseline": self.extra.get("reward_baseline"),
             "seconds": {k: round(v, 4) for k, v in self.seconds.items()},
             "check": self.check,
             "value_gap": self.gap,
@@ -240,17 +256,21 @@ def _mask_key(column: np.ndarray) -> str:
     return hashlib.sha256(np.ascontiguousarray(column, dtype=bool).tobytes()).hexdigest()
 
 
-def _find_phase1(kb: Any, env: Any, base: _Base, column: int, delta: float) -> Any | None:
-    """A stored per-option partition of this column with this delta, or None."""
+def _find_phase1(kb: Any, env: Any, base: _Base, column: int, delta: float,
+                 key: dict[str, Any], admissible: np.ndarray) -> Any | None:
+    """A stored per-option partition of this column with this delta and model ``key``, or None.
+
+    ``key`` names the model phase 1 ran on (the task's terminal states and gamma): options'
+    models, and so their phase-1 partitions, depend on where episodes end.
+    """
     if base.is_primitive(column):
-        mask = _mask_key(base.smdp.admissible[:, column])
+        mask = _mask_key(admissible[:, column])
         candidates = [
             p
             for p in kb.records("partition", environment=env)
             if p.kind == "per-option"
             and not p.option_ids
             and p.provenance.parameters.get("action") == column
-            and p.provenance.parameters.get("model_hash") == base.mdp.content_hash
             and p.provenance.parameters.get("admissible", mask) == mask
         ]
     else:
@@ -260,8 +280,14 @@ def _find_phase1(kb: Any, env: Any, base: _Base, column: int, delta: float) -> A
             for p in kb.partitions_using([rec], exact=True, includes_primitives=False)
             if p.kind == "per-option"
         ]
-    matching = [p for p in candidates if abs(p.delta - delta) <= 1e-12]
+    matching = [p for p in candidates if abs(p.delta - delta) <= 1e-12
+                and _same_key(p.provenance.parameters, key)]
     return matching[-1] if matching else None
+
+
+def _same_key(parameters: dict[str, Any], key: dict[str, Any]) -> bool:
+    """Whether a stored record's parameters hold every entry of ``key``."""
+    return all(parameters.get(k) == v for k, v in key.items())
 
 
 def _find_later_phase(
@@ -274,6 +300,7 @@ def _find_later_phase(
     delta: float,
     epsilon: float | None = None,
     task_id: int | None = None,
+    key: dict[str, Any] | None = None,
 ) -> Any | None:
     """A stored phase-2/3 partition built from exactly these parents and settings, or None."""
     records = base.option_set.records
@@ -290,6 +317,7 @@ def _find_later_phase(
             and abs(p.delta - delta) <= 1e-12
             and (epsilon is None or abs(p.epsilon - epsilon) <= 1e-12)
             and (task_id is None or p.task_id == task_id)
+            and _same_key(p.provenance.parameters, key or {})
         ):
             return p
     return None
@@ -337,30 +365,27 @@ def _store(
 
 
 def _phase1_all(
-    kb: Any, env: Any, base: _Base, delta: float
+    kb: Any, env: Any, base: _Base, mp: MultiPhasePartitioner, key: dict[str, Any]
 ) -> tuple[dict[int, Partition], list[PhaseRecord], float]:
-    """Phase 1 of every column: loaded when stored, else computed and stored."""
-    smdp = base.smdp
+    """Phase 1 of every column on ``mp``'s model: loaded when stored, else computed and stored."""
+    smdp = mp.layer_model
     parts: dict[int, Partition] = {}
     rows: list[PhaseRecord] = []
     seconds = 0.0
     for o in range(smdp.n_actions):  # one refinement per option (each vectorised over states)
-        found = _find_phase1(kb, env, base, o, delta)
+        found = _find_phase1(kb, env, base, o, mp.delta, key, mp.model.admissible)
         if found is not None:
             labels = kb.load(found, "labels")
             parts[o] = Partition.from_labels(labels, _only(smdp.admissible, o))
+            mp.add_phase1(o, parts[o])
             rows.append(PhaseRecord("per-option", found.id, found.n_blocks, True, base.columns[o]))
             continue
         t0 = time.perf_counter()
-        part = phase1(smdp, o, base.termination[:, o], delta=delta)
+        part = mp.phase1(o)
         seconds += time.perf_counter() - t0
-        params: dict[str, Any] = {"phase": 1, "column": base.columns[o]}
+        params: dict[str, Any] = {"phase": 1, "column": base.columns[o], **key}
         if base.is_primitive(o):
-            params.update(
-                action=o,
-                model_hash=base.mdp.content_hash,
-                admissible=_mask_key(smdp.admissible[:, o]),
-            )
+            params.update(action=o, admissible=_mask_key(mp.model.admissible[:, o]))
         rec = _store(
             kb,
             env,
@@ -368,7 +393,7 @@ def _phase1_all(
             "per-option",
             part,
             np.array([o]),
-            delta=delta,
+            delta=mp.delta,
             epsilon=0.0,
             parents=[],
             parameters=params,
@@ -413,6 +438,22 @@ def _task_model(
     return stacked, models, True
 
 
+def _baseline(reward_baseline: object, mdp: FiniteMDP) -> float | None:
+    """The constant step reward phase 3 takes out of ``mdp``'s rewards (``resolve_baseline``)."""
+    return resolve_baseline(reward_baseline, mdp.R, mdp.admissible, mdp.terminal)
+
+
+def _start_states(mdp: FiniteMDP) -> np.ndarray:
+    """The task's start states: ``mdp.initial``'s support off the terminal states."""
+    start = (mdp.initial > 0) & ~mdp.terminal
+    if not start.any():
+        raise ModelError(
+            "the start distribution puts all its mass on terminal states; give the task an "
+            "initial distribution over non-terminal states"
+        )
+    return start
+
+
 def partition_environment(
     kb: Any,
     env_name: str,
@@ -423,15 +464,26 @@ def partition_environment(
     task: str | None = None,
     executor: Executor | None = None,
     check: bool = True,
+    reward_baseline: str | float | None = "mode",
 ) -> PartitionOutcome:
     """Phases 1-3 of section 4.2.1.2 for ``env_name`` over a stored option set, stored in ``kb``.
+
+    Every phase runs on the model of the task asked for (:mod:`adpart.partition.layer`): its
+    option models (recomputed on the task's MDP unless built under it), its terminal states as
+    one absorbing block, and only the states reachable from its start states refined (the others
+    kept apart, one block per admissibility pattern). Without a task, phases 1-2 run on the model
+    the options were built under, with that task's terminal and start states.
 
     Args:
         options: ``subgoal-set:N`` (its options), ``option:1,option:2``, or ``primitive``.
         delta: eq. 4.6 threshold in [0, 1]. epsilon: eq. 4.7 threshold >= 0 (phase 3 only).
         task: a task name or ``goal:...`` spec; None stops after phase 2.
         executor: runs the option-model computations when a task needs them recomputed.
-        check: run the independent checker on the final partition.
+        check: run the independent checker on the final decision layer.
+        reward_baseline: the constant step reward phase 3 takes out of the rewards before eq.
+            4.7: ``"mode"`` (the step reward most pairs pay), ``"min"`` (the smallest, sections
+            4.3.1-4.3.2), ``"none"`` (compare ``R(s, o)`` itself) or a number
+            (:mod:`adpart.partition.layer`).
 
     Raises:
         ModelError: delta or epsilon out of range, or an option set leaving a state with no
@@ -454,16 +506,34 @@ def partition_environment(
     all_cols = np.arange(base.smdp.n_actions)
     seconds: dict[str, float] = {}
 
-    p1, p1_rows, seconds["phase1"] = _phase1_all(kb, env, base, d)
+    # the model every phase runs on: the task's (module docstring of adpart.partition.layer)
+    model, recomputed, layer_mdp = base.smdp, False, base.mdp
+    if task_rec is not None:
+        t0 = time.perf_counter()
+        model, _, recomputed = _task_model(base, task_rec, task_mdp, executor)
+        seconds["models"] = time.perf_counter() - t0
+        layer_mdp = task_mdp
+    baseline = _baseline(reward_baseline, layer_mdp) if task_rec is not None else None
+    terminal = layer_mdp.terminal
+    start = _start_states(layer_mdp)
+    key = {"layer": 1, "terminal": _mask_key(terminal), "gamma": float(layer_mdp.gamma)}
+    mp = MultiPhasePartitioner(model, base.termination, delta=d, terminal=terminal)
 
+    _, p1_rows, seconds["phase1"] = _phase1_all(kb, env, base, mp, key)
+
+    t0 = time.perf_counter()
+    # what the task can reach with its primitive actions: refinement may offer any of them
+    unreachable = mp.unreachable(all_cols, start, through=layer_mdp)
+    seconds["reach"] = time.perf_counter() - t0
+    key2 = {**key, "start": _mask_key(start)}
     parent_ids = [r.id for r in p1_rows]
-    rec2 = _find_later_phase(kb, env, base, "intersected", parents=parent_ids, delta=d)
-    if rec2 is not None:  # the same phase-1 partitions and delta: phase 2 is already stored
-        p2 = Partition.from_labels(kb.load(rec2, "labels"), base.smdp.admissible)
+    rec2 = _find_later_phase(kb, env, base, "intersected", parents=parent_ids, delta=d, key=key2)
+    if rec2 is not None:  # the same phase-1 partitions, delta and start: phase 2 is stored
+        p2 = Partition.from_labels(kb.load(rec2, "labels"), mp.layer_model.admissible)
         seconds["phase2"] = 0.0
     else:
         t0 = time.perf_counter()
-        p2 = phase2(base.smdp, p1, all_cols, delta=d)
+        p2 = mp.phase2(all_cols, unreachable=unreachable)
         seconds["phase2"] = time.perf_counter() - t0
         rec2 = _store(
             kb,
@@ -475,15 +545,16 @@ def partition_environment(
             delta=d,
             epsilon=0.0,
             parents=parent_ids,
-            parameters={"phase": 2, "options": options},
+            parameters={"phase": 2, "options": options, **key2,
+                        "layer_counts": layer_counts(p2, terminal, unreachable)},
         )
     phase2_row = PhaseRecord("intersected", rec2.id, p2.n_blocks, reused=seconds["phase2"] == 0.0)
 
-    final, model, phase3_row, gap, recomputed = p2, base.smdp, None, None, False
+    final, phase3_row, gap, rewards = p2, None, None, None
     if task_rec is not None:
-        t0 = time.perf_counter()
-        model, _, recomputed = _task_model(base, task_rec, task_mdp, executor)
-        seconds["models"] = time.perf_counter() - t0
+        rewards = mp.decision_rewards(unreachable=unreachable, reward_baseline=baseline,
+                                      gamma=task_mdp.gamma)
+        key3 = {**key2, "reward_baseline": baseline}
         rec3 = _find_later_phase(
             kb,
             env,
@@ -493,13 +564,14 @@ def partition_environment(
             delta=d,
             epsilon=e,
             task_id=task_rec.id,
+            key=key3,
         )
         if rec3 is not None:
-            final = Partition.from_labels(kb.load(rec3, "labels"), model.admissible)
+            final = Partition.from_labels(kb.load(rec3, "labels"), mp.layer_model.admissible)
             seconds["phase3"] = 0.0
         else:
             t0 = time.perf_counter()
-            final = phase3(model, p2, all_cols, epsilon=e, delta=d)
+            final = mp.phase3(p2, all_cols, epsilon=e, rewards=rewards, unreachable=unreachable)
             seconds["phase3"] = time.perf_counter() - t0
         rec3 = rec3 or _store(
             kb,
@@ -517,20 +589,24 @@ def partition_environment(
                 "options": options,
                 "task": task_obj.name,
                 "recomputed_option_models": recomputed,
+                **key3,
+                "layer_counts": layer_counts(final, terminal, unreachable),
             },
         )
         phase3_row = PhaseRecord(
             "reward-refined", rec3.id, final.n_blocks, reused=seconds["phase3"] == 0.0
         )
         t0 = time.perf_counter()
-        gap = value_gap(final, model, epsilon=e, delta=d, options=all_cols)
+        gap = value_gap(final, model, epsilon=e, delta=d, options=all_cols,
+                        states=~unreachable)
         seconds["value_gap"] = time.perf_counter() - t0
 
     verdict: dict[str, Any] = {"ran": False}
     if check:
         t0 = time.perf_counter()
         report = check_stability(
-            final, model, options=all_cols, delta=d, epsilon=e if task_rec is not None else None
+            decision_view(final, unreachable), model, options=all_cols, delta=d,
+            epsilon=e if task_rec is not None else None, rewards=rewards,
         )
         seconds["check"] = time.perf_counter() - t0
         verdict = {
@@ -558,6 +634,16 @@ def partition_environment(
         recomputed_models=recomputed,
         environment_id=env.id,
         task_id=None if task_rec is None else task_rec.id,
+        extra={
+            "layer": {
+                "phase2": layer_counts(p2, terminal, unreachable),
+                "phase3": None if phase3_row is None
+                else layer_counts(final, terminal, unreachable),
+            },
+            "reward_baseline": baseline,
+        },
+        terminal=terminal,
+        unreachable=unreachable,
     )
 
 

@@ -305,3 +305,38 @@ def test_options_of_another_environment_and_uncovered_states(kb_with_options):
     )
     assert moved.exit_code == 0, moved.output
     assert json.loads(moved.output)["check"]["ok"]
+
+
+def test_phases_run_on_the_tasks_model_and_report_the_layer(kb_with_options):
+    """Phase 1 is keyed by the task's terminal states; blocks are split by reachability."""
+    kb_dir, subgoal_set, _ = kb_with_options
+    common = ("--delta", "0.3", "--epsilon", "10", "--kb", str(kb_dir))
+    first = run_json("partition", "two-rooms", "--options", subgoal_set, "--task", "reach-goal",
+                     *common)
+    mdp = resolve_domain("two-rooms").mdp("reach-goal")
+    for phase in ("phase2", "phase3"):
+        layer = first["layer"][phase]
+        assert layer["terminal"] == 1 and layer["terminal_states"] == int(mdp.terminal.sum())
+        assert layer["reachable"] + layer["terminal"] + layer["unreachable"] == layer["blocks"]
+    assert first["final"]["decision_blocks"] == first["layer"]["phase3"]["reachable"]
+    assert first["reward_baseline"] == -1.2  # two-rooms: half the moves cost 1.2 (a tie: smaller)
+    again = run_json("partition", "two-rooms", "--options", subgoal_set, "--task", "reach-goal",
+                     *common)
+    assert again["phase1"]["reused"] == 2 and again["phase3"]["id"] == first["phase3"]["id"]
+    # another goal: other terminal states, so other option models and other phase-1 partitions
+    other = run_json("partition", "two-rooms", "--options", subgoal_set, "--task",
+                     "goal:x=2,y=2", *common)
+    assert other["phase1"]["reused"] == 0 and other["layer"]["phase3"]["terminal"] == 1
+    assert other["phase3"]["recomputed_option_models"]
+    # the raw rewards: stored apart, and never fewer blocks than the decision rewards give
+    raw = run_json("partition", "two-rooms", "--options", subgoal_set, "--task", "reach-goal",
+                   "--reward-baseline", "none", *common)
+    assert raw["phase3"]["id"] != first["phase3"]["id"] and raw["reward_baseline"] is None
+    assert raw["phase3"]["blocks"] >= first["phase3"]["blocks"] and raw["check"]["ok"]
+    text = run("partition", "two-rooms", "--options", subgoal_set, "--task", "reach-goal",
+               *common)
+    assert text.exit_code == 0, text.output
+    assert "terminal" in text.output and "unreachable" in text.output
+    bad = run("partition", "two-rooms", "--options", subgoal_set, "--task", "reach-goal",
+              "--reward-baseline", "median", *common)
+    assert bad.exit_code == 2 and "use mode, min, none or a number" in bad.output

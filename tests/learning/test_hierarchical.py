@@ -18,6 +18,7 @@ from adpart.learning.hierarchical import (
     flat_lower_bound,
     hierarchical_learning,
     refine_block,
+    refinement_model,
     reward_states,
 )
 from adpart.mdp.model import FiniteMDP
@@ -214,6 +215,7 @@ def test_firings_on_three_floor_are_real_against_the_current_layer():
     part, _, smdp = decision_layer(mdp, opts, delta=0.3, epsilon=10.0, models=models)
     v_star = solve(mdp, 1e-10).V
     q_star = q_from_v(mdp, v_star)
+    refiner = refinement_model(mdp, smdp)
 
     def real_fraction(reference: str) -> float:
         res = hierarchical_learning(mdp, opts, part, models=models, delta=0.3, epsilon=10.0,
@@ -227,7 +229,7 @@ def test_firings_on_three_floor_are_real_against_the_current_layer():
             for e in [e for e in res.refinements if e["run"] == k][:25]:
                 v_p = solve(point_model(layer, smdp), 1e-8).V
                 real.append(q_star[e["state"], e["action"]] - v_p[layer.labels[e["state"]]] > L)
-                layer = refine_block(layer, e["block"], [e["action"]], smdp, delta=0.3,
+                layer = refine_block(layer, e["block"], [e["action"]], refiner, delta=0.3,
                                      epsilon=10.0)
         assert len(real) >= 2
         return float(np.mean(real))
