@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import sys
 import warnings
 from collections.abc import Callable
@@ -20,6 +21,40 @@ class CLIError(click.ClickException):
     """One line on stderr (``Error: ...``) and exit status 2: bad input the user can fix."""
 
     exit_code = 2
+
+
+class FiniteFloat(click.ParamType):
+    """A float option that must be finite (no ``nan``, ``inf``) and within ``[min, max]``.
+
+    ``click.FloatRange`` lets ``nan`` through (every comparison with NaN is false); this type
+    checks ``math.isfinite`` first, so ``--delta nan`` fails at parse time naming the option,
+    before anything is computed or stored.
+    """
+
+    name = "float"
+
+    def __init__(self, min: float | None = None, max: float | None = None,
+                 what: str = "") -> None:
+        self.min, self.max, self.what = min, max, what
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> float:
+        if isinstance(value, float) and math.isfinite(value):
+            out = value
+        else:
+            try:
+                out = float(value)
+            except (TypeError, ValueError):
+                self.fail(f"{value!r} is not a number", param, ctx)
+            if not math.isfinite(out):
+                self.fail(f"{value!r} is not a finite number (nan and inf are refused)", param,
+                          ctx)
+        if (self.min is not None and out < self.min) or (self.max is not None and out > self.max):
+            lo = "-inf" if self.min is None else f"{self.min:g}"
+            hi = "inf" if self.max is None else f"{self.max:g}"
+            what = f" ({self.what})" if self.what else ""
+            self.fail(f"{value!r} is not in [{lo}, {hi}]{what}", param, ctx)
+        return out
 
 
 class AdpartGroup(click.Group):

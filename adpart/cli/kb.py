@@ -19,7 +19,7 @@ import pyarrow as pa
 import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
 
-from adpart.cli.common import kb_location_options
+from adpart.cli.common import FiniteFloat, kb_location_options
 from adpart.errors import AdpartError
 from adpart.store.entities import RECORD_TYPES
 from adpart.store.kb import KnowledgeBase
@@ -38,6 +38,7 @@ _KIND_ALIASES = {
     "runs": "run",
     "artifacts": "artifact",
 }
+FINITE_SECONDS = FiniteFloat(min=0.0, what="seconds")
 _REF = re.compile(r"^(?P<kind>[a-z][a-z_-]*):(?P<id>[0-9]{1,18})$")
 _ART = re.compile(r"^artifact:(?P<hex>[0-9a-f]{4,64})$")
 
@@ -329,22 +330,46 @@ def check(kb_location: KBLocation, as_json: bool) -> None:
 @click.option("--yes", is_flag=True, help="Delete (default: only list what would be deleted)")
 @click.option(
     "--tmp-age",
+    type=FINITE_SECONDS,
     default=3600.0,
     show_default=True,
     help="Seconds after which a .tmp-* file counts as abandoned",
 )
+@click.option(
+    "--grace",
+    type=FINITE_SECONDS,
+    default=3600.0,
+    show_default=True,
+    help="Seconds an artifact file without a row is kept (a write may be about to commit it)",
+)
+@click.option("--orphans", is_flag=True,
+              help="Also delete orphan records (policies no run or subgoal set refers to)")
 @kb_option
 @_guard
-def gc(kb_location: KBLocation, yes: bool, tmp_age: float) -> None:
-    """Remove artifacts no record references (dry run unless --yes)."""
+def gc(kb_location: KBLocation, yes: bool, tmp_age: float, grace: float, orphans: bool) -> None:
+    """Remove artifacts no record references (dry run unless --yes).
+
+    Safe while other processes write: files are deleted only after the rows that referenced
+    them are gone, files without rows only after --grace seconds, symlinks are never followed
+    and files adpart did not write are reported, never deleted.
+    """
     with _open(kb_location) as base:
-        report = base.gc(delete=yes, temporary_age_s=tmp_age)
+        report = base.gc(delete=yes, temporary_age_s=tmp_age, grace_s=grace, orphans=orphans)
     verb = "deleted" if yes else "would delete"
     for sha, size in report.artifacts:
         click.echo(f"{verb} artifact {sha[:16]} ({size} bytes)")
     for rel, size in report.files:
         click.echo(f"{verb} file {rel} ({size} bytes)")
-    n = len(report.artifacts) + len(report.files)
+    for ref in report.records:
+        if orphans:
+            click.echo(f"{verb} orphan record {ref}")
+        else:
+            click.echo(f"orphan record {ref} (kept; pass --orphans to delete it)")
+    for rel in report.strays:
+        click.echo(f"stray file {rel} (not written by adpart; not touched)")
+    for rel in report.skipped:
+        click.echo(f"symlink {rel} (never followed; not touched)")
+    n = len(report.artifacts) + len(report.files) + (len(report.records) if orphans else 0)
     hint = "" if yes else "; pass --yes to delete"
     click.echo(f"{verb} {n} item(s), {report.bytes} bytes{hint}")
 
