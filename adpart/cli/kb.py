@@ -56,28 +56,36 @@ def _kind(name: str) -> str:
     return kind
 
 
-def kb_option(func: Callable[..., Any]) -> Callable[..., Any]:
+def kb_option(func: Callable[..., Any] | None = None, *,
+              read_only: bool = False) -> Any:
     """``--kb``/``--kb-artifacts`` (shared with every command) resolved before the command runs.
 
     The decorated command receives ``kb_location``, a :class:`~adpart.store.KBLocation`; call
-    ``KnowledgeBase.open(kb_location)`` when the command needs the knowledge base.
+    ``KnowledgeBase.open(kb_location)`` when the command needs the knowledge base. With
+    ``read_only`` (the reading commands) nothing is created: a location that holds no
+    knowledge base is an error, and a read-only one can be inspected.
     """
 
-    @kb_location_options
-    @functools.wraps(func)
-    def wrapper(*args: Any, kb_path: str | None, kb_artifacts: str | None, **kwargs: Any) -> Any:
-        try:
-            location = KBLocation.resolve(kb_path, kb_artifacts)
-        except AdpartError as exc:
-            raise KBError(str(exc)) from exc
-        return func(*args, kb_location=location, **kwargs)
+    def decorate(func: Callable[..., Any]) -> Callable[..., Any]:
+        @kb_location_options
+        @functools.wraps(func)
+        def wrapper(*args: Any, kb_path: str | None, kb_artifacts: str | None,
+                    **kwargs: Any) -> Any:
+            try:
+                location = KBLocation.resolve(kb_path, kb_artifacts, create=not read_only)
+            except AdpartError as exc:
+                raise KBError(str(exc)) from exc
+            return func(*args, kb_location=location, **kwargs)
 
-    return wrapper
+        return wrapper
+
+    return decorate(func) if func is not None else decorate
 
 
-def _open(location: KBLocation, *, verify: bool = True) -> KnowledgeBase:
+def _open(location: KBLocation, *, verify: bool = True, read_only: bool = False
+          ) -> KnowledgeBase:
     try:
-        return KnowledgeBase.open(location, verify=verify)
+        return KnowledgeBase.open(location, verify=verify, read_only=read_only)
     except AdpartError as exc:
         raise KBError(str(exc)) from exc
 
@@ -151,12 +159,12 @@ def kb() -> None:
 
 
 @kb.command("info")
-@kb_option
+@kb_option(read_only=True)
 @click.option("--json", "as_json", is_flag=True, help="Print JSON")
 @_guard
 def info(kb_location: KBLocation, as_json: bool) -> None:
     """Location, schema version, record counts and artifact bytes."""
-    with _open(kb_location) as base:
+    with _open(kb_location, read_only=True) as base:
         data = base.info()
     if as_json:
         click.echo(json.dumps(data, indent=2))
@@ -175,12 +183,12 @@ def info(kb_location: KBLocation, as_json: bool) -> None:
 @click.argument("kind", required=False, default=None)
 @click.option("--env", "env", metavar="NAME|ID", help="Only records of this environment")
 @click.option("--json", "as_json", is_flag=True, help="Print JSON")
-@kb_option
+@kb_option(read_only=True)
 @_guard
 def ls(kb_location: KBLocation, kind: str | None, env: str | None, as_json: bool) -> None:
     """List records of KIND (all kinds when omitted)."""
     kinds = [_kind(kind)] if kind else [k for k in RECORD_TYPES if k != "artifact"]
-    with _open(kb_location) as base:
+    with _open(kb_location, read_only=True) as base:
         env_id = None
         if env is not None:
             env_id = int(env) if env.isdigit() else base.find_environment(env).id
@@ -195,11 +203,11 @@ def ls(kb_location: KBLocation, kind: str | None, env: str | None, as_json: bool
 @kb.command("show")
 @click.argument("ref")
 @click.option("--json", "as_json", is_flag=True, help="Print JSON")
-@kb_option
+@kb_option(read_only=True)
 @_guard
 def show(kb_location: KBLocation, ref: str, as_json: bool) -> None:
     """Show one record (KIND:N or artifact:HEX) with its provenance."""
-    with _open(kb_location) as base:
+    with _open(kb_location, read_only=True) as base:
         record = _resolve(base, ref)
         data = _plain(record)
         if record.KIND == "artifact":
@@ -247,14 +255,14 @@ def _as_table(value: Any) -> pa.Table:
     default=None,
     help="Artifact field of a record (e.g. q, pi, labels, curve)",
 )
-@kb_option
+@kb_option(read_only=True)
 @_guard
 def export(kb_location: KBLocation, ref: str, out: Path, field_name: str | None) -> None:
     """Write an artifact (artifact:HEX, or a record's --field) as Parquet, CSV or JSON."""
     suffix = out.suffix.lower()
     if suffix not in (".parquet", ".csv", ".json"):
         raise click.BadParameter("the file must end in .parquet, .csv or .json", param_hint="--out")
-    with _open(kb_location) as base:
+    with _open(kb_location, read_only=True) as base:
         record = _resolve(base, ref)
         if record.KIND == "artifact":
             value = base.read_artifact(record)
@@ -294,11 +302,11 @@ def export(kb_location: KBLocation, ref: str, out: Path, field_name: str | None)
 
 @kb.command("check")
 @click.option("--json", "as_json", is_flag=True, help="Print JSON")
-@kb_option
+@kb_option(read_only=True)
 @_guard
 def check(kb_location: KBLocation, as_json: bool) -> None:
     """Verify every artifact's hash and every reference; exit 1 if anything is damaged."""
-    with _open(kb_location) as base:
+    with _open(kb_location, read_only=True) as base:
         report = base.check()
     if as_json:
         click.echo(
@@ -309,6 +317,10 @@ def check(kb_location: KBLocation, as_json: bool) -> None:
                     "problems": report.problems,
                     "orphan_files": report.orphan_files,
                     "temporary_files": report.temporary_files,
+                    "orphan_records": report.orphan_records,
+                    "stray_files": report.stray_files,
+                    "skipped_symlinks": report.skipped,
+                    "rows_checked": report.rows_checked,
                 },
                 indent=2,
             )
@@ -320,8 +332,16 @@ def check(kb_location: KBLocation, as_json: bool) -> None:
             click.echo(f"orphan file (no row; `adpart kb gc` removes it): {rel}")
         for rel in report.temporary_files:
             click.echo(f"leftover temporary file (`adpart kb gc` removes it): {rel}")
+        for ref in report.orphan_records:
+            click.echo(f"orphan record {ref} (nothing refers to it; `adpart kb gc --yes "
+                       "--orphans` removes it)")
+        for rel in report.stray_files:
+            click.echo(f"stray file (not adpart's; left alone): {rel}")
+        for rel in report.skipped:
+            click.echo(f"symlink under the artifact root (not followed): {rel}")
         status = "ok" if report.ok else f"{len(report.problems)} problem(s)"
-        click.echo(f"checked {report.artifacts_checked} artifacts: {status}")
+        click.echo(f"checked {report.rows_checked} rows and {report.artifacts_checked} "
+                   f"artifacts: {status}")
     if not report.ok:
         raise SystemExit(1)
 
@@ -372,6 +392,27 @@ def gc(kb_location: KBLocation, yes: bool, tmp_age: float, grace: float, orphans
     n = len(report.artifacts) + len(report.files) + (len(report.records) if orphans else 0)
     hint = "" if yes else "; pass --yes to delete"
     click.echo(f"{verb} {n} item(s), {report.bytes} bytes{hint}")
+
+
+@kb.command("rm")
+@click.argument("ref")
+@click.option("--yes", is_flag=True, help="Remove (default: only say what would be removed)")
+@kb_option
+@_guard
+def rm(kb_location: KBLocation, ref: str, yes: bool) -> None:
+    """Remove one record (KIND:N) so it can be re-created; a run takes its policies with it.
+
+    A record another record still refers to is refused (remove the referrer first). The
+    artifacts it leaves unreferenced are removed by `adpart kb gc --yes`.
+    """
+    with _open(kb_location) as base:
+        record = _resolve(base, ref)
+        if record.KIND == "artifact":
+            raise KBError("artifacts are removed by `adpart kb gc` once no record refers to "
+                          "them; remove the records instead")
+        removed = base.remove(record.KIND, record.id, dry_run=not yes)
+    verb = "removed" if yes else "would remove"
+    click.echo(f"{verb} {', '.join(removed)}" + ("" if yes else "; pass --yes to remove"))
 
 
 @kb.command("upgrade")

@@ -8,8 +8,41 @@ from typing import Any
 
 import click
 
-from adpart.cli.common import CLIError, dumps, echo_json, kb_location_options, run_options
+from adpart.cli.common import (
+    CLIError,
+    FiniteFloat,
+    dumps,
+    echo_json,
+    kb_location_options,
+    registry,
+    run_options,
+)
+from adpart.errors import AdpartError
 from adpart.store.location import KBLocation
+
+
+def _check_plugin_params(kind: str, name: str, params: dict[str, Any], option: str) -> None:
+    """Validate ``params`` against plugin ``name`` now, naming ``option`` in the message.
+
+    The pipeline stores a run, policies, subgoals and options before it reaches the later
+    steps; checking every step's parameters here means a bad value fails before anything is
+    computed or stored.
+    """
+    try:
+        registry().get(kind, name).resolve_params(params)
+    except AdpartError as exc:
+        raise CLIError(f"{option}: {exc}") from None
+
+
+def check_pipeline_options(config: Any) -> None:
+    """Every value of a pipeline's config checked up front (plugins, parameters, tasks)."""
+    _check_plugin_params("subgoal-detector", config.detector, config.detector_params,
+                         "--detector-opt")
+    _check_plugin_params("learner", "q-learning", config.flat_params, "--flat-opt")
+    _check_plugin_params("learner", "hierarchical", config.hierarchical_params, "--hier-opt")
+    if config.hierarchy is not None:
+        _check_plugin_params("hierarchy-estimator", config.hierarchy, config.hierarchy_params,
+                             "--hierarchy-opt")
 
 
 def _key_values(pairs: tuple[str, ...], option: str) -> dict[str, str]:
@@ -81,14 +114,14 @@ def _say(quiet: bool):  # type: ignore[no-untyped-def]
 )
 @click.option(
     "--delta",
-    type=float,
+    type=FiniteFloat(min=0.0, max=1.0, what="eq. 4.6's delta"),
     default=0.3,
     show_default=True,
     help="delta of eq. 4.6 (transition homogeneity) in [0, 1].",
 )
 @click.option(
     "--epsilon",
-    type=float,
+    type=FiniteFloat(min=0.0, what="eq. 4.7's epsilon"),
     default=10.0,
     show_default=True,
     help="epsilon of eq. 4.7 (reward homogeneity) >= 0.",
@@ -190,6 +223,7 @@ def pipeline_cmd(
         hierarchy=hierarchy,
         hierarchy_params=_key_values(hierarchy_opt, "--hierarchy-opt"),
     )
+    check_pipeline_options(config)
     out = out or Path("adpart-pipeline") / env.replace(":", "_")
     kb = KnowledgeBase.open(KBLocation.resolve(kb_path, kb_artifacts))
     try:

@@ -253,6 +253,45 @@ class Maintenance:
         return CheckReport(len(rows), problems, orphans, temps, orphan_records, scan.strays,
                            scan.skipped, rows_checked)
 
+    # ------------------------------------------------------------------ rm
+    def remove(self, kind: str, record_id: int, *, dry_run: bool = False) -> list[str]:
+        """Delete one record (a run with the policies it lists) in one transaction.
+
+        Returns the refs removed. A record that another still refers to is refused with a
+        :class:`StoreError` naming the fix; its artifacts stay until ``gc`` finds them unused.
+        """
+        from sqlalchemy.exc import IntegrityError
+
+        from adpart.store.queries import _SQL_OF
+
+        model = _SQL_OF[kind]
+        removed = [f"{kind}:{record_id}"]
+        try:
+            with self._session(write=True) as s:
+                row = s.get(model, int(record_id))
+                if row is None:
+                    raise StoreError(f"no {kind}:{record_id} in {self.label}; list them with "
+                                     f"`adpart kb ls {kind}`")
+                rows = [row]
+                if model is SqlRun:
+                    for pid in (row.parameters or {}).get("policies", []) or []:
+                        policy = s.get(SqlPolicy, pid) if isinstance(pid, int) else None
+                        if policy is not None:
+                            rows.append(policy)
+                            removed.append(f"policy:{pid}")
+                if dry_run:
+                    return removed
+                for item in rows:
+                    s.delete(item)
+                s.flush()
+        except StoreError as exc:
+            if isinstance(exc.__cause__, IntegrityError):
+                raise StoreError(f"{kind}:{record_id} is still referred to by other records "
+                                 "(e.g. a partition, option or run built from it); remove "
+                                 "those first") from exc
+            raise
+        return removed
+
     # ------------------------------------------------------------------ gc
     def gc(self, *, delete: bool = False, temporary_age_s: float = 3600.0,
            grace_s: float = 3600.0, orphans: bool = False) -> GcReport:
@@ -277,11 +316,10 @@ class Maintenance:
 
         records: list[str] = []
         with self._session(write=delete, exclusive=True) as s:
-            if orphans or not delete:
-                found = _orphan_policies(s)
-                records = [f"policy:{pid}" for pid in found]
-                if delete and orphans and found:
-                    s.execute(sql_delete(SqlPolicy).where(SqlPolicy.id.in_(found)))
+            found = _orphan_policies(s)
+            records = [f"policy:{pid}" for pid in found]
+            if delete and orphans and found:
+                s.execute(sql_delete(SqlPolicy).where(SqlPolicy.id.in_(found)))
             refs = _referrers(s)
             rows = s.execute(select(SqlArtifact.sha256, SqlArtifact.bytes,
                                     SqlArtifact.uri)).all()
