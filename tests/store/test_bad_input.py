@@ -16,7 +16,7 @@ from click.testing import CliRunner
 
 from adpart.cli import cli
 from adpart.cli.kb import kb as kb_group
-from adpart.store import KnowledgeBase
+from adpart.store import KnowledgeBase, StoreError
 from adpart.sweep import SweepConfigError, parse_config, plan_cells
 
 PIPELINE = ["pipeline", "three-floor", "--tasks", "reach-goal,reach-top-west", "--runs", "1",
@@ -120,9 +120,9 @@ def test_a_read_only_knowledge_base_can_be_inspected(tmp_path, monkeypatch):
         assert result.exit_code == 0, (args, result.output)
     assert (tmp_path / "curve.csv").exists()
     assert files() == before
-    with KnowledgeBase.open(tmp_path / "kb", read_only=True) as kb:
-        with pytest.raises(Exception, match="opened read-only"):
-            kb.put_run(task, "q")
+    with (KnowledgeBase.open(tmp_path / "kb", read_only=True) as kb,
+          pytest.raises(StoreError, match="opened read-only")):
+        kb.put_run(task, "q")
 
 
 # ---------------------------------------------------------------------- re-creating records
