@@ -27,8 +27,8 @@ class FiniteFloat(click.ParamType):
     """A float option that must be finite (no ``nan``, ``inf``) and within ``[min, max]``.
 
     ``click.FloatRange`` lets ``nan`` through (every comparison with NaN is false); this type
-    checks ``math.isfinite`` first, so ``--delta nan`` fails at parse time naming the option,
-    before anything is computed or stored.
+    checks ``math.isfinite`` first, so ``--delta nan`` fails at parse time, before anything is
+    computed or stored, with one line naming the option (``Error: --delta = nan ...``, exit 2).
     """
 
     name = "float"
@@ -39,21 +39,22 @@ class FiniteFloat(click.ParamType):
 
     def convert(self, value: Any, param: click.Parameter | None,
                 ctx: click.Context | None) -> float:
-        if isinstance(value, float) and math.isfinite(value):
-            out = value
-        else:
-            try:
-                out = float(value)
-            except (TypeError, ValueError):
-                self.fail(f"{value!r} is not a number", param, ctx)
-            if not math.isfinite(out):
-                self.fail(f"{value!r} is not a finite number (nan and inf are refused)", param,
-                          ctx)
-        if (self.min is not None and out < self.min) or (self.max is not None and out > self.max):
-            lo = "-inf" if self.min is None else f"{self.min:g}"
-            hi = "inf" if self.max is None else f"{self.max:g}"
-            what = f" ({self.what})" if self.what else ""
-            self.fail(f"{value!r} is not in [{lo}, {hi}]{what}", param, ctx)
+        option = (param.opts[0] if param is not None and param.opts else "the value")
+        what = f" ({self.what})" if self.what else ""
+        try:
+            out = float(value)
+        except (TypeError, ValueError):
+            raise CLIError(f"{option} = {value!r} is not a number{what}") from None
+        if not math.isfinite(out):
+            raise CLIError(f"{option} = {value} must be a finite number (nan and inf are "
+                           f"refused){what}")
+        if self.min is not None and self.max is not None:
+            if not self.min <= out <= self.max:
+                raise CLIError(f"{option} = {value} is outside [{self.min:g}, {self.max:g}]{what}")
+        elif self.min is not None and out < self.min:
+            raise CLIError(f"{option} = {value} must be >= {self.min:g}{what}")
+        elif self.max is not None and out > self.max:
+            raise CLIError(f"{option} = {value} must be <= {self.max:g}{what}")
         return out
 
 

@@ -104,8 +104,9 @@ def make_env(env_id: str, **make_kwargs: Any) -> gymnasium.Env:
             importlib.import_module(module)
         except ImportError as exc:
             raise UnknownNameError(
-                f"gym:{env_id}: cannot import module {module!r} ({exc}); install the package "
-                "that provides the environment, or write gym:Id-v0 for a registered id"
+                f"Gymnasium has no environment {env_id!r}: cannot import module {module!r} "
+                f"({exc}); install the package that provides it, or write gym:Id-v0 for a "
+                "registered id"
             ) from None
     try:
         gymnasium.spec(lookup)

@@ -16,6 +16,7 @@ from click.testing import CliRunner
 
 from adpart.cli import cli
 from adpart.cli.kb import kb as kb_group
+from adpart.errors import UnknownNameError
 from adpart.store import KnowledgeBase, StoreError
 from adpart.sweep import SweepConfigError, parse_config, plan_cells
 
@@ -28,9 +29,9 @@ def _cli(*args: str):
 
 
 @pytest.mark.parametrize(("args", "message"), [
-    (["--delta", "-0.1"], "Invalid value for '--delta': '-0.1' is not in [0, 1]"),
-    (["--delta", "nan"], "Invalid value for '--delta': 'nan' is not a finite number"),
-    (["--epsilon", "inf"], "Invalid value for '--epsilon': 'inf' is not a finite number"),
+    (["--delta", "-0.1"], "--delta = -0.1 is outside [0, 1]"),
+    (["--delta", "nan"], "--delta = nan must be a finite number (nan and inf are refused)"),
+    (["--epsilon", "inf"], "--epsilon = inf must be a finite number"),
     (["--hier-opt", "bogus=1"], "--hier-opt: learner 'hierarchical' has no parameter --bogus"),
     (["--hier-opt", "threshold-scale=nan"],
      "--hier-opt: learner 'hierarchical': --threshold-scale must be a finite number"),
@@ -68,7 +69,8 @@ def test_partition_delta_must_be_finite(tmp_path, value):
     result = _cli("partition", "two-rooms", "--options", "primitive", "--delta", value,
                   "--kb", str(tmp_path / "kb"))
     assert result.exit_code == 2
-    assert "Invalid value for '--delta'" in result.output
+    assert f"--delta = {value} " in result.output
+    assert len(result.output.strip().splitlines()) == 1
     assert not (tmp_path / "kb").exists()
 
 
@@ -82,7 +84,8 @@ def test_sweep_config_with_nan_fails_the_config_check():
 def test_gc_ages_must_be_finite(tmp_path):
     for option in ("--grace", "--tmp-age"):
         result = CliRunner().invoke(kb_group, ["gc", option, "nan", "--kb", str(tmp_path)])
-        assert result.exit_code == 2 and f"Invalid value for '{option}'" in result.output
+        assert result.exit_code == 2
+        assert f"{option} = nan must be a finite number" in result.output
 
 
 # ---------------------------------------------------------------------- reading commands
@@ -175,5 +178,5 @@ def test_gym_module_prefix_imports_the_module(tmp_path, monkeypatch):
     env = make_env("adpart_test_gym_mod:AdpartTestLake-v0")
     assert env.observation_space.n == 16
     env.close()
-    with pytest.raises(Exception, match="cannot import module 'no_such_module_x'"):
+    with pytest.raises(UnknownNameError, match="cannot import module 'no_such_module_x'"):
         make_env("no_such_module_x:Foo-v0")

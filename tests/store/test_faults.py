@@ -184,9 +184,12 @@ def test_unwritable_location_gives_a_clear_error(tmp_path):
     blocker.write_text("not a directory")
     with pytest.raises(StoreError, match=r"cannot create the knowledge base directory.*--kb"):
         KnowledgeBase.open(blocker / "kb")
-    result = CliRunner().invoke(kb_group, ["info", "--kb", str(blocker / "kb")])
+    result = CliRunner().invoke(kb_group, ["gc", "--kb", str(blocker / "kb")])
     assert result.exit_code == 2
     assert "cannot create" in result.output and "Traceback" not in result.output
+    result = CliRunner().invoke(kb_group, ["info", "--kb", str(blocker / "kb")])
+    assert result.exit_code == 2  # a reading command creates nothing: it says there is none
+    assert "no knowledge base directory" in result.output and "Traceback" not in result.output
     with pytest.raises(StoreError, match="artifact root"):
         KnowledgeBase.open(tmp_path / "kb2", artifacts=str(blocker / "art"))
 
