@@ -300,13 +300,15 @@ def transfer_cmd(
     from adpart.workflows.pipeline import task_row
     from adpart.workflows.refs import parse_ref
 
+    hier_params = _key_values(hier_opt, "--hier-opt")
+    _check_plugin_params("learner", "hierarchical", hier_params, "--hier-opt")
     out = out or Path("adpart-transfer") / f"{env.replace(':', '_')}_{task}"
     requests = {
         "hierarchical": LearnRequest(
             env=env,
             task=task,
             learner="hierarchical",
-            params=_key_values(hier_opt, "--hier-opt"),
+            params=hier_params,
             runs=runs,
             episodes=episodes,
             seed=seed,

@@ -51,6 +51,14 @@ def test_pipeline_refuses_bad_values_before_storing_anything(tmp_path, args, mes
     assert not kb_dir.exists()  # nothing opened, nothing stored
 
 
+def test_transfer_refuses_a_bad_hier_opt_before_opening_the_kb(tmp_path):
+    result = _cli("transfer", "three-floor", "--task", "reach-top-west", "--partition",
+                  "partition:1", "--hier-opt", "threshold-scale=nan", "--kb", str(tmp_path / "kb"))
+    assert result.exit_code == 2, result.output
+    assert "--hier-opt: learner 'hierarchical': --threshold-scale must be a finite" in result.output
+    assert not (tmp_path / "kb").exists()
+
+
 @pytest.mark.parametrize(("args", "message"), [
     (["--epsilon", "-1"], "learner 'q-learning': --epsilon '-1': schedule scale = -1.0 must be"),
     (["--alpha", "nan"], "learner 'q-learning': --alpha 'nan': cannot read a schedule"),
