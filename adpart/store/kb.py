@@ -92,7 +92,12 @@ def _read_only_sqlite(db_url: str, connect_args: dict[str, Any]) -> tuple[str, d
     if path in ("", ":memory:") or not os.path.isfile(path):
         raise StoreError(f"there is no knowledge base database {path or db_url}; check --kb / "
                          "ADPART_KB (reading commands never create one)")
-    return f"sqlite:///file:{os.path.abspath(path)}?mode=ro&uri=true", connect_args
+    path = os.path.abspath(path)
+    query = "mode=ro&uri=true"
+    if not os.access(os.path.dirname(path), os.W_OK) and not os.path.exists(f"{path}-wal"):
+        # nobody can write here (no -wal can be made), so SQLite need not make its -shm either
+        query += "&immutable=1"
+    return f"sqlite:///file:{path}?{query}", connect_args
 
 
 @dataclass

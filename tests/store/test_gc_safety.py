@@ -97,7 +97,7 @@ def _assert_nothing_lost(result: dict[str, int], per_writer: int) -> None:
 
 
 def test_concurrent_writers_and_gc_lose_nothing(where, tmp_path):
-    _assert_nothing_lost(_writers_against_gc(where, 25, tmp_path), 25)
+    _assert_nothing_lost(_writers_against_gc(where, 15, tmp_path), 15)
 
 
 @pytest.mark.slow
