@@ -457,7 +457,7 @@ class ArtifactStore:
                     out.append((info.path.removeprefix(self.base + "/"), int(info.size or 0),
                                 mtime, False))
             return out
-        for top, dirs, names, in _walk_no_links(self.base):
+        for top, dirs, names in os.walk(self.base, followlinks=False):
             rel_top = os.path.relpath(top, self.base)
             prefix = "" if rel_top == "." else rel_top.replace(os.sep, "/") + "/"
             for name in dirs + names:
@@ -519,7 +519,3 @@ class Scan:
     strays: list[str]  # anything else (notes.txt, ...): reported, never deleted
     skipped: list[str]  # symlinks: never followed, never deleted
 
-
-def _walk_no_links(base: str):  # type: ignore[no-untyped-def]
-    """``os.walk`` that never descends into symlinked directories (the default, made explicit)."""
-    return os.walk(base, followlinks=False)

@@ -6,6 +6,12 @@ plain values (numpy arrays, dicts, scipy.sparse matrices) and return frozen reco
 row that references them, so no row ever points at a missing file. Environments are get-or-put by
 model hash and tasks by spec hash, so pipelines rerun without duplicating them.
 
+Every write transaction holds the *store lock* from the moment it checks an artifact's row and
+file until it commits (SQLite: ``BEGIN IMMEDIATE``; PostgreSQL: a shared advisory lock), and
+garbage collection holds it exclusively, so a gc can never remove a file between a writer's
+check and its commit (docs/reliability.md). :meth:`KnowledgeBase.transaction` groups several
+puts into one transaction: a run and its policies are stored whole or not at all.
+
 This module opens the database and writes records; reads and queries are the
 :class:`~adpart.store.queries.Queries` mixin, audits and garbage collection the
 :class:`~adpart.store.maintenance.Maintenance` mixin.

@@ -1,7 +1,14 @@
-"""Knowledge-base maintenance: record counts, the full audit (``kb check``) and garbage collection.
+"""Knowledge-base maintenance: record counts, the full audit (``kb check``), removal of a record
+(``kb rm``) and garbage collection (``kb gc``).
 
 A mixin of :class:`adpart.store.kb.KnowledgeBase`: the methods use its session, artifact store and
 entity conversion, and add nothing to the record API itself.
+
+The audit sees everything: the engine's own integrity check, every row of every table against its
+content hash (:mod:`adpart.store.integrity`), every reference, every artifact's hashes and every
+file under the artifact root. Garbage collection is mark and sweep under the exclusive store lock,
+rows first and files only after that commit; it never follows a symlink and never deletes a file
+adpart did not write. docs/reliability.md states the guarantees and the tests that pin them.
 """
 
 from __future__ import annotations
