@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import sys
 import warnings
 from collections.abc import Callable
@@ -20,6 +21,41 @@ class CLIError(click.ClickException):
     """One line on stderr (``Error: ...``) and exit status 2: bad input the user can fix."""
 
     exit_code = 2
+
+
+class FiniteFloat(click.ParamType):
+    """A float option that must be finite (no ``nan``, ``inf``) and within ``[min, max]``.
+
+    ``click.FloatRange`` lets ``nan`` through (every comparison with NaN is false); this type
+    checks ``math.isfinite`` first, so ``--delta nan`` fails at parse time, before anything is
+    computed or stored, with one line naming the option (``Error: --delta = nan ...``, exit 2).
+    """
+
+    name = "float"
+
+    def __init__(self, min: float | None = None, max: float | None = None,
+                 what: str = "") -> None:
+        self.min, self.max, self.what = min, max, what
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> float:
+        option = (param.opts[0] if param is not None and param.opts else "the value")
+        what = f" ({self.what})" if self.what else ""
+        try:
+            out = float(value)
+        except (TypeError, ValueError):
+            raise CLIError(f"{option} = {value!r} is not a number{what}") from None
+        if not math.isfinite(out):
+            raise CLIError(f"{option} = {value} must be a finite number (nan and inf are "
+                           f"refused){what}")
+        if self.min is not None and self.max is not None:
+            if not self.min <= out <= self.max:
+                raise CLIError(f"{option} = {value} is outside [{self.min:g}, {self.max:g}]{what}")
+        elif self.min is not None and out < self.min:
+            raise CLIError(f"{option} = {value} must be >= {self.min:g}{what}")
+        elif self.max is not None and out > self.max:
+            raise CLIError(f"{option} = {value} must be <= {self.max:g}{what}")
+        return out
 
 
 class AdpartGroup(click.Group):

@@ -19,7 +19,7 @@ import pyarrow as pa
 import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
 
-from adpart.cli.common import kb_location_options
+from adpart.cli.common import FiniteFloat, kb_location_options
 from adpart.errors import AdpartError
 from adpart.store.entities import RECORD_TYPES
 from adpart.store.kb import KnowledgeBase
@@ -38,6 +38,7 @@ _KIND_ALIASES = {
     "runs": "run",
     "artifacts": "artifact",
 }
+FINITE_SECONDS = FiniteFloat(min=0.0, what="seconds")
 _REF = re.compile(r"^(?P<kind>[a-z][a-z_-]*):(?P<id>[0-9]{1,18})$")
 _ART = re.compile(r"^artifact:(?P<hex>[0-9a-f]{4,64})$")
 
@@ -55,28 +56,36 @@ def _kind(name: str) -> str:
     return kind
 
 
-def kb_option(func: Callable[..., Any]) -> Callable[..., Any]:
+def kb_option(func: Callable[..., Any] | None = None, *,
+              read_only: bool = False) -> Any:
     """``--kb``/``--kb-artifacts`` (shared with every command) resolved before the command runs.
 
     The decorated command receives ``kb_location``, a :class:`~adpart.store.KBLocation`; call
-    ``KnowledgeBase.open(kb_location)`` when the command needs the knowledge base.
+    ``KnowledgeBase.open(kb_location)`` when the command needs the knowledge base. With
+    ``read_only`` (the reading commands) nothing is created: a location that holds no
+    knowledge base is an error, and a read-only one can be inspected.
     """
 
-    @kb_location_options
-    @functools.wraps(func)
-    def wrapper(*args: Any, kb_path: str | None, kb_artifacts: str | None, **kwargs: Any) -> Any:
-        try:
-            location = KBLocation.resolve(kb_path, kb_artifacts)
-        except AdpartError as exc:
-            raise KBError(str(exc)) from exc
-        return func(*args, kb_location=location, **kwargs)
+    def decorate(func: Callable[..., Any]) -> Callable[..., Any]:
+        @kb_location_options
+        @functools.wraps(func)
+        def wrapper(*args: Any, kb_path: str | None, kb_artifacts: str | None,
+                    **kwargs: Any) -> Any:
+            try:
+                location = KBLocation.resolve(kb_path, kb_artifacts, create=not read_only)
+            except AdpartError as exc:
+                raise KBError(str(exc)) from exc
+            return func(*args, kb_location=location, **kwargs)
 
-    return wrapper
+        return wrapper
+
+    return decorate(func) if func is not None else decorate
 
 
-def _open(location: KBLocation, *, verify: bool = True) -> KnowledgeBase:
+def _open(location: KBLocation, *, verify: bool = True, read_only: bool = False
+          ) -> KnowledgeBase:
     try:
-        return KnowledgeBase.open(location, verify=verify)
+        return KnowledgeBase.open(location, verify=verify, read_only=read_only)
     except AdpartError as exc:
         raise KBError(str(exc)) from exc
 
@@ -150,12 +159,12 @@ def kb() -> None:
 
 
 @kb.command("info")
-@kb_option
+@kb_option(read_only=True)
 @click.option("--json", "as_json", is_flag=True, help="Print JSON")
 @_guard
 def info(kb_location: KBLocation, as_json: bool) -> None:
     """Location, schema version, record counts and artifact bytes."""
-    with _open(kb_location) as base:
+    with _open(kb_location, read_only=True) as base:
         data = base.info()
     if as_json:
         click.echo(json.dumps(data, indent=2))
@@ -174,12 +183,12 @@ def info(kb_location: KBLocation, as_json: bool) -> None:
 @click.argument("kind", required=False, default=None)
 @click.option("--env", "env", metavar="NAME|ID", help="Only records of this environment")
 @click.option("--json", "as_json", is_flag=True, help="Print JSON")
-@kb_option
+@kb_option(read_only=True)
 @_guard
 def ls(kb_location: KBLocation, kind: str | None, env: str | None, as_json: bool) -> None:
     """List records of KIND (all kinds when omitted)."""
     kinds = [_kind(kind)] if kind else [k for k in RECORD_TYPES if k != "artifact"]
-    with _open(kb_location) as base:
+    with _open(kb_location, read_only=True) as base:
         env_id = None
         if env is not None:
             env_id = int(env) if env.isdigit() else base.find_environment(env).id
@@ -194,11 +203,11 @@ def ls(kb_location: KBLocation, kind: str | None, env: str | None, as_json: bool
 @kb.command("show")
 @click.argument("ref")
 @click.option("--json", "as_json", is_flag=True, help="Print JSON")
-@kb_option
+@kb_option(read_only=True)
 @_guard
 def show(kb_location: KBLocation, ref: str, as_json: bool) -> None:
     """Show one record (KIND:N or artifact:HEX) with its provenance."""
-    with _open(kb_location) as base:
+    with _open(kb_location, read_only=True) as base:
         record = _resolve(base, ref)
         data = _plain(record)
         if record.KIND == "artifact":
@@ -246,14 +255,14 @@ def _as_table(value: Any) -> pa.Table:
     default=None,
     help="Artifact field of a record (e.g. q, pi, labels, curve)",
 )
-@kb_option
+@kb_option(read_only=True)
 @_guard
 def export(kb_location: KBLocation, ref: str, out: Path, field_name: str | None) -> None:
     """Write an artifact (artifact:HEX, or a record's --field) as Parquet, CSV or JSON."""
     suffix = out.suffix.lower()
     if suffix not in (".parquet", ".csv", ".json"):
         raise click.BadParameter("the file must end in .parquet, .csv or .json", param_hint="--out")
-    with _open(kb_location) as base:
+    with _open(kb_location, read_only=True) as base:
         record = _resolve(base, ref)
         if record.KIND == "artifact":
             value = base.read_artifact(record)
@@ -293,11 +302,11 @@ def export(kb_location: KBLocation, ref: str, out: Path, field_name: str | None)
 
 @kb.command("check")
 @click.option("--json", "as_json", is_flag=True, help="Print JSON")
-@kb_option
+@kb_option(read_only=True)
 @_guard
 def check(kb_location: KBLocation, as_json: bool) -> None:
     """Verify every artifact's hash and every reference; exit 1 if anything is damaged."""
-    with _open(kb_location) as base:
+    with _open(kb_location, read_only=True) as base:
         report = base.check()
     if as_json:
         click.echo(
@@ -308,6 +317,10 @@ def check(kb_location: KBLocation, as_json: bool) -> None:
                     "problems": report.problems,
                     "orphan_files": report.orphan_files,
                     "temporary_files": report.temporary_files,
+                    "orphan_records": report.orphan_records,
+                    "stray_files": report.stray_files,
+                    "skipped_symlinks": report.skipped,
+                    "rows_checked": report.rows_checked,
                 },
                 indent=2,
             )
@@ -319,8 +332,16 @@ def check(kb_location: KBLocation, as_json: bool) -> None:
             click.echo(f"orphan file (no row; `adpart kb gc` removes it): {rel}")
         for rel in report.temporary_files:
             click.echo(f"leftover temporary file (`adpart kb gc` removes it): {rel}")
+        for ref in report.orphan_records:
+            click.echo(f"orphan record {ref} (nothing refers to it; `adpart kb gc --yes "
+                       "--orphans` removes it)")
+        for rel in report.stray_files:
+            click.echo(f"stray file (not adpart's; left alone): {rel}")
+        for rel in report.skipped:
+            click.echo(f"symlink under the artifact root (not followed): {rel}")
         status = "ok" if report.ok else f"{len(report.problems)} problem(s)"
-        click.echo(f"checked {report.artifacts_checked} artifacts: {status}")
+        click.echo(f"checked {report.rows_checked} rows and {report.artifacts_checked} "
+                   f"artifacts: {status}")
     if not report.ok:
         raise SystemExit(1)
 
@@ -329,24 +350,69 @@ def check(kb_location: KBLocation, as_json: bool) -> None:
 @click.option("--yes", is_flag=True, help="Delete (default: only list what would be deleted)")
 @click.option(
     "--tmp-age",
+    type=FINITE_SECONDS,
     default=3600.0,
     show_default=True,
     help="Seconds after which a .tmp-* file counts as abandoned",
 )
+@click.option(
+    "--grace",
+    type=FINITE_SECONDS,
+    default=3600.0,
+    show_default=True,
+    help="Seconds an artifact file without a row is kept (a write may be about to commit it)",
+)
+@click.option("--orphans", is_flag=True,
+              help="Also delete orphan records (policies no run or subgoal set refers to)")
 @kb_option
 @_guard
-def gc(kb_location: KBLocation, yes: bool, tmp_age: float) -> None:
-    """Remove artifacts no record references (dry run unless --yes)."""
+def gc(kb_location: KBLocation, yes: bool, tmp_age: float, grace: float, orphans: bool) -> None:
+    """Remove artifacts no record references (dry run unless --yes).
+
+    Safe while other processes write: files are deleted only after the rows that referenced
+    them are gone, files without rows only after --grace seconds, symlinks are never followed
+    and files adpart did not write are reported, never deleted.
+    """
     with _open(kb_location) as base:
-        report = base.gc(delete=yes, temporary_age_s=tmp_age)
+        report = base.gc(delete=yes, temporary_age_s=tmp_age, grace_s=grace, orphans=orphans)
     verb = "deleted" if yes else "would delete"
     for sha, size in report.artifacts:
         click.echo(f"{verb} artifact {sha[:16]} ({size} bytes)")
     for rel, size in report.files:
         click.echo(f"{verb} file {rel} ({size} bytes)")
-    n = len(report.artifacts) + len(report.files)
+    for ref in report.records:
+        if orphans:
+            click.echo(f"{verb} orphan record {ref}")
+        else:
+            click.echo(f"orphan record {ref} (kept; pass --orphans to delete it)")
+    for rel in report.strays:
+        click.echo(f"stray file {rel} (not written by adpart; not touched)")
+    for rel in report.skipped:
+        click.echo(f"symlink {rel} (never followed; not touched)")
+    n = len(report.artifacts) + len(report.files) + (len(report.records) if orphans else 0)
     hint = "" if yes else "; pass --yes to delete"
     click.echo(f"{verb} {n} item(s), {report.bytes} bytes{hint}")
+
+
+@kb.command("rm")
+@click.argument("ref")
+@click.option("--yes", is_flag=True, help="Remove (default: only say what would be removed)")
+@kb_option
+@_guard
+def rm(kb_location: KBLocation, ref: str, yes: bool) -> None:
+    """Remove one record (KIND:N) so it can be re-created; a run takes its policies with it.
+
+    A record another record still refers to is refused (remove the referrer first). The
+    artifacts it leaves unreferenced are removed by `adpart kb gc --yes`.
+    """
+    with _open(kb_location) as base:
+        record = _resolve(base, ref)
+        if record.KIND == "artifact":
+            raise KBError("artifacts are removed by `adpart kb gc` once no record refers to "
+                          "them; remove the records instead")
+        removed = base.remove(record.KIND, record.id, dry_run=not yes)
+    verb = "removed" if yes else "would remove"
+    click.echo(f"{verb} {', '.join(removed)}" + ("" if yes else "; pass --yes to remove"))
 
 
 @kb.command("upgrade")

@@ -8,10 +8,12 @@ The work itself is :func:`adpart.workflows.run_learning`.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import click
 
 from adpart.cli.common import (
+    CLIError,
     dumps,
     echo_json,
     executor_options,
@@ -66,6 +68,9 @@ from adpart.workflows import (
     help="Decision layer for the hierarchical learner (partition:N, from the KB).",
 )
 @click.option("--no-store", is_flag=True, help="Do not record the run in the knowledge base.")
+@click.option("--force", is_flag=True,
+              help="Record the run again even if the knowledge base already holds it (e.g. to "
+              "re-create a damaged record).")
 @kb_location_options
 def learn_cmd(
     env: str,
@@ -85,6 +90,7 @@ def learn_cmd(
     options_ref: str | None,
     partition_ref: str | None,
     no_store: bool,
+    force: bool,
     kb_path: str | None,
     kb_artifacts: str | None,
     **plugin_options: str | None,
@@ -107,6 +113,7 @@ def learn_cmd(
     reg = registry()
     spec = reg.get("learner", learner)
     given = split_plugin_options(spec, plugin_options)
+    spec.resolve_params(given)  # every value checked (nan, ranges, schedules) before any work
     request = LearnRequest(
         env=env,
         task=task,
@@ -144,7 +151,9 @@ def learn_cmd(
         summary["files"] = write_learning_outputs(out, outcome)
         if not no_store and kb is not None:
             # Runs are deterministic in their request: one already recorded is not stored twice.
-            known = find_learning(kb, request)
+            known = None if force else find_learning(kb, request)
+            if known is not None:
+                _check_stored(kb, known)
             summary["kb"] = (
                 {**known, "already_stored": True} if known else record_learning(kb, outcome)
             )
@@ -170,3 +179,17 @@ def learn_cmd(
             f"{verb} in {ids['location']}: {ids['run']}, {ids['task']}, policies "
             f"{ids['policies'][0]} .. {ids['policies'][-1]}"
         )
+
+
+def _check_stored(kb: Any, known: dict[str, Any]) -> None:
+    """Refuse to report a damaged stored run as "already stored": say how to re-create it."""
+    from adpart.store import StoreError
+
+    kind, _, rid = known["run"].partition(":")
+    try:
+        kb.load(kb.get(kind, int(rid)), "curve")
+    except StoreError as exc:
+        raise CLIError(
+            f"{known['run']} is already stored but damaged ({exc}); re-create it with --force, "
+            f"or remove it with `adpart kb rm {known['run']} --yes` and run again"
+        ) from exc

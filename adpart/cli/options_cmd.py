@@ -6,7 +6,7 @@ import time
 
 import click
 
-from adpart.cli.common import echo_json, kb_location_options, registry
+from adpart.cli.common import FiniteFloat, echo_json, kb_location_options, registry
 from adpart.errors import TaskError
 from adpart.options.subgoal_options import LOCAL_RADIUS
 from adpart.store.location import KBLocation
@@ -33,7 +33,7 @@ from adpart.workflows.refs import get_ref
 )
 @click.option(
     "--radius",
-    type=float,
+    type=FiniteFloat(min=1.0, what="steps of a local initiation set"),
     default=LOCAL_RADIUS,
     show_default=True,
     help="Steps of a local initiation set: states whose option reaches the subgoal with "

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import click
 
-from adpart.cli.common import echo_json, registry
+from adpart.cli.common import FiniteFloat, echo_json, registry
 from adpart.cli.learn import kb_location_options
 from adpart.store.location import KBLocation
 from adpart.workflows.partitioning import partition_environment, plot_partition
@@ -29,14 +29,14 @@ from adpart.workflows.partitioning import partition_environment, plot_partition
 )
 @click.option(
     "--delta",
-    type=float,
+    type=FiniteFloat(min=0.0, max=1.0, what="eq. 4.6's delta"),
     default=0.3,
     show_default=True,
     help="Eq. 4.6: largest spread of a block's discounted mass into another block, in [0, 1].",
 )
 @click.option(
     "--epsilon",
-    type=float,
+    type=FiniteFloat(min=0.0, what="eq. 4.7's epsilon"),
     default=10.0,
     show_default=True,
     help="Eq. 4.7: largest spread of a block's option rewards R(s, o), >= 0 (phase 3).",

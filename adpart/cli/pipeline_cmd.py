@@ -8,10 +8,43 @@ from typing import Any
 
 import click
 
-from adpart.cli.common import CLIError, dumps, echo_json, kb_location_options, run_options
+from adpart.cli.common import (
+    CLIError,
+    FiniteFloat,
+    dumps,
+    echo_json,
+    kb_location_options,
+    registry,
+    run_options,
+)
+from adpart.errors import AdpartError
 from adpart.options.subgoal_options import INITIATION_CHOICES as INITIATIONS
 from adpart.options.subgoal_options import LOCAL_RADIUS
 from adpart.store.location import KBLocation
+
+
+def _check_plugin_params(kind: str, name: str, params: dict[str, Any], option: str) -> None:
+    """Validate ``params`` against plugin ``name`` now, naming ``option`` in the message.
+
+    The pipeline stores a run, policies, subgoals and options before it reaches the later
+    steps; checking every step's parameters here means a bad value fails before anything is
+    computed or stored.
+    """
+    try:
+        registry().get(kind, name).resolve_params(params)
+    except AdpartError as exc:
+        raise CLIError(f"{option}: {exc}") from None
+
+
+def check_pipeline_options(config: Any) -> None:
+    """Every value of a pipeline's config checked up front (plugins, parameters, tasks)."""
+    _check_plugin_params("subgoal-detector", config.detector, config.detector_params,
+                         "--detector-opt")
+    _check_plugin_params("learner", "q-learning", config.flat_params, "--flat-opt")
+    _check_plugin_params("learner", "hierarchical", config.hierarchical_params, "--hier-opt")
+    if config.hierarchy is not None:
+        _check_plugin_params("hierarchy-estimator", config.hierarchy, config.hierarchy_params,
+                             "--hierarchy-opt")
 
 
 def _key_values(pairs: tuple[str, ...], option: str) -> dict[str, str]:
@@ -83,21 +116,21 @@ def _say(quiet: bool):  # type: ignore[no-untyped-def]
 )
 @click.option(
     "--radius",
-    type=float,
+    type=FiniteFloat(min=1.0, what="steps of a local initiation set"),
     default=LOCAL_RADIUS,
     show_default=True,
     help="Steps of a local initiation set.",
 )
 @click.option(
     "--delta",
-    type=float,
+    type=FiniteFloat(min=0.0, max=1.0, what="eq. 4.6's delta"),
     default=0.3,
     show_default=True,
     help="delta of eq. 4.6 (transition homogeneity) in [0, 1].",
 )
 @click.option(
     "--epsilon",
-    type=float,
+    type=FiniteFloat(min=0.0, what="eq. 4.7's epsilon"),
     default=10.0,
     show_default=True,
     help="epsilon of eq. 4.7 (reward homogeneity) >= 0.",
@@ -201,6 +234,7 @@ def pipeline_cmd(
         hierarchy=hierarchy,
         hierarchy_params=_key_values(hierarchy_opt, "--hierarchy-opt"),
     )
+    check_pipeline_options(config)
     out = out or Path("adpart-pipeline") / env.replace(":", "_")
     kb = KnowledgeBase.open(KBLocation.resolve(kb_path, kb_artifacts))
     try:
@@ -277,13 +311,15 @@ def transfer_cmd(
     from adpart.workflows.pipeline import task_row
     from adpart.workflows.refs import parse_ref
 
+    hier_params = _key_values(hier_opt, "--hier-opt")
+    _check_plugin_params("learner", "hierarchical", hier_params, "--hier-opt")
     out = out or Path("adpart-transfer") / f"{env.replace(':', '_')}_{task}"
     requests = {
         "hierarchical": LearnRequest(
             env=env,
             task=task,
             learner="hierarchical",
-            params=_key_values(hier_opt, "--hier-opt"),
+            params=hier_params,
             runs=runs,
             episodes=episodes,
             seed=seed,

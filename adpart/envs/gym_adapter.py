@@ -32,6 +32,7 @@ distribution, with discount ``gamma`` (default 0.99).
 from __future__ import annotations
 
 import difflib
+import importlib
 from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cached_property
@@ -91,9 +92,24 @@ class GymModel:
 
 
 def make_env(env_id: str, **make_kwargs: Any) -> gymnasium.Env:
-    """``gymnasium.make(env_id, **make_kwargs)`` with adpart errors for unknown ids and bad args."""
+    """``gymnasium.make(env_id, **make_kwargs)`` with adpart errors for unknown ids and bad args.
+
+    ``module:Id-v0`` imports ``module`` first (which registers the id), as ``gymnasium.make``
+    does; ``gymnasium.spec`` alone does not, so the lookup is made with the bare id.
+    """
+    lookup = env_id
+    if ":" in env_id:
+        module, _, lookup = env_id.partition(":")
+        try:
+            importlib.import_module(module)
+        except ImportError as exc:
+            raise UnknownNameError(
+                f"Gymnasium has no environment {env_id!r}: cannot import module {module!r} "
+                f"({exc}); install the package that provides it, or write gym:Id-v0 for a "
+                "registered id"
+            ) from None
     try:
-        gymnasium.spec(env_id)
+        gymnasium.spec(lookup)
     except (gymnasium.error.Error, ModuleNotFoundError) as exc:
         known = [k for k in gymnasium.registry if "/" not in k or k.startswith("adpart/")]
         hint = difflib.get_close_matches(env_id, known, n=1)

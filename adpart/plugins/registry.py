@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import difflib
+import math
 import warnings
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -43,6 +44,11 @@ class Param:
         help: one line for ``--help``.
         choices: allowed values (strings), or None.
         min: smallest allowed value for numbers, or None.
+        check: an optional validator of the converted value (e.g. a schedule's spelling); it
+            raises an :class:`AdpartError`, which is reported naming ``--<name>``.
+
+    A float parameter must be finite: ``nan`` and ``inf`` are refused whatever ``min`` says
+    (every comparison with NaN is false, so a bound alone lets it through).
     """
 
     name: str
@@ -51,6 +57,7 @@ class Param:
     help: str
     choices: tuple[str, ...] | None = None
     min: float | None = None
+    check: Callable[[Any], Any] | None = field(default=None, compare=False, repr=False)
 
     @property
     def keyword(self) -> str:
@@ -72,12 +79,21 @@ class Param:
             raise PluginError(
                 f"{owner}: --{self.name} expects {self.type}, got {value!r}"
             ) from None
+        if self.type == "float" and not math.isfinite(out):
+            raise PluginError(
+                f"{owner}: --{self.name} must be a finite number; got {value!r}"
+            )
         if self.choices is not None and out not in self.choices:
             raise PluginError(
                 f"{owner}: --{self.name} must be one of {', '.join(self.choices)}; got {out!r}"
             )
         if self.min is not None and out < self.min:
             raise PluginError(f"{owner}: --{self.name} must be >= {self.min}; got {out!r}")
+        if self.check is not None:
+            try:
+                self.check(out)
+            except AdpartError as exc:
+                raise PluginError(f"{owner}: --{self.name} {value!r}: {exc}") from None
         return out
 
 

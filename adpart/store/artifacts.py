@@ -29,6 +29,7 @@ import hashlib
 import json
 import os
 import re
+import stat
 import uuid
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
@@ -49,6 +50,7 @@ _ROW_GROUP = 1 << 20  # row groups of 1M values let pyarrow decode in parallel o
 _SUPPORTED_KINDS = "biuf"  # bool, signed/unsigned integers, floats
 _TMP_PREFIX = ".tmp-"
 _NAME = re.compile(r"^[0-9a-f]{2}/[0-9a-f]{64}\.parquet$")
+_TMP_NAME = re.compile(r"^[0-9a-f]{2}/\.tmp-[0-9a-f]+\.parquet$")
 _THREADED_HASH_BYTES = 1 << 20  # below this a second thread costs more than it saves
 
 
@@ -220,16 +222,18 @@ class ArtifactStore:
 
     Args:
         root: a local directory or any URI ``pyarrow.fs.FileSystem.from_uri`` understands
-            (``file:///...``, ``s3://bucket/prefix``, ...). A local directory is created.
+            (``file:///...``, ``s3://bucket/prefix``, ...). A local directory is created
+            unless ``create`` is false (a read-only open).
     """
 
-    def __init__(self, root: str) -> None:
+    def __init__(self, root: str, *, create: bool = True) -> None:
         try:
             if "://" in root:
                 self.fs, base = pafs.FileSystem.from_uri(root)
             else:
                 self.fs, base = pafs.LocalFileSystem(), os.path.abspath(os.path.expanduser(root))
-            self.fs.create_dir(base, recursive=True)
+            if create:
+                self.fs.create_dir(base, recursive=True)
         except (pa.ArrowException, OSError, ValueError) as exc:
             raise StoreError(f"cannot use artifact root {root!r}: {exc}; choose a writable "
                              "directory or filesystem URI") from exc
@@ -414,31 +418,104 @@ class ArtifactStore:
         read(sha256, uri, context=context, file_sha256=file_sha256, full=True)
 
     # ------------------------------------------------------------------ listing / deletion
-    def files(self) -> list[tuple[str, int, float]]:
-        """Every file under the root as (relative path, bytes, mtime seconds)."""
-        selector = pafs.FileSelector(self.base, recursive=True, allow_not_found=True)
-        out = []
-        for info in self.fs.get_file_info(selector):
-            if info.type == pafs.FileType.File:
-                rel = info.path.removeprefix(self.base + "/")
-                mtime = info.mtime.timestamp() if info.mtime is not None else 0.0
-                out.append((rel, int(info.size or 0), mtime))
+    @property
+    def local(self) -> bool:
+        return isinstance(self.fs, pafs.LocalFileSystem)
+
+    def scan(self) -> Scan:
+        """What lies under the root, sorted into artifact files, temporaries, strays and links.
+
+        On a local root nothing is followed: the walk uses ``lstat`` semantics
+        (``os.walk(followlinks=False)``), so a symlinked directory or file inside the root is
+        reported in ``skipped`` and never listed, let alone deleted. Only ``ab/<sha>.parquet``
+        files and ``ab/.tmp-*`` temporaries inside a two-hex-digit directory are adpart's; any
+        other file is a stray, reported and left alone.
+        """
+        files: list[tuple[str, int, float]] = []
+        temporary: list[tuple[str, int, float]] = []
+        strays: list[str] = []
+        skipped: list[str] = []
+        for rel, size, mtime, is_link in self._walk():
+            if is_link:
+                skipped.append(rel)
+            elif _NAME.match(rel):
+                files.append((rel, size, mtime))
+            elif _TMP_NAME.match(rel):
+                temporary.append((rel, size, mtime))
+            else:
+                strays.append(rel)
+        return Scan(sorted(files), sorted(temporary), sorted(strays), sorted(skipped))
+
+    def _walk(self) -> list[tuple[str, int, float, bool]]:
+        """(relative path, bytes, mtime, is a symlink) of every entry that is not a directory."""
+        out: list[tuple[str, int, float, bool]] = []
+        if not self.local:  # object stores have no symlinks
+            selector = pafs.FileSelector(self.base, recursive=True, allow_not_found=True)
+            for info in self.fs.get_file_info(selector):
+                if info.type == pafs.FileType.File:
+                    mtime = info.mtime.timestamp() if info.mtime is not None else 0.0
+                    out.append((info.path.removeprefix(self.base + "/"), int(info.size or 0),
+                                mtime, False))
+            return out
+        for top, dirs, names in os.walk(self.base, followlinks=False):
+            rel_top = os.path.relpath(top, self.base)
+            prefix = "" if rel_top == "." else rel_top.replace(os.sep, "/") + "/"
+            for name in dirs + names:
+                st = os.lstat(os.path.join(top, name))
+                if stat.S_ISLNK(st.st_mode):
+                    out.append((prefix + name, 0, st.st_mtime, True))
+                elif stat.S_ISREG(st.st_mode):
+                    out.append((prefix + name, int(st.st_size), st.st_mtime, False))
         return out
+
+    def files(self) -> list[tuple[str, int, float]]:
+        """Every artifact and temporary file under the root as (relative path, bytes, mtime)."""
+        scan = self.scan()
+        return sorted(scan.files + scan.temporary)
 
     @staticmethod
     def is_temporary(rel: str) -> bool:
         return rel.rsplit("/", 1)[-1].startswith(_TMP_PREFIX)
 
     def delete(self, rel: str) -> None:
-        """Delete one file under the root (a ``.tmp-*`` leftover or an artifact)."""
-        name = rel.rsplit("/", 1)[-1]
-        if self.is_temporary(rel) and ".." not in rel.split("/") and not rel.startswith("/"):
-            path = f"{self.base}/{rel}"
-        else:
-            path = self.path(rel)
+        """Delete one adpart file (``ab/<sha>.parquet`` or ``ab/.tmp-*``) under the root.
+
+        Anything else is refused. On a local root the file and its directory are checked with
+        ``lstat`` first: a symlink (or a directory that resolves outside the root) is never
+        deleted through.
+        """
+        if not (_NAME.match(rel) or _TMP_NAME.match(rel)):
+            raise StoreError(f"refusing to delete {rel!r}: not an adpart artifact file")
+        path = f"{self.base}/{rel}"
+        if self.local:
+            directory = os.path.dirname(path)
+            try:
+                if (stat.S_ISLNK(os.lstat(directory).st_mode)
+                        or os.path.realpath(os.path.dirname(directory))
+                        != os.path.realpath(self.base)
+                        or not stat.S_ISREG(os.lstat(path).st_mode)):
+                    raise StoreError(f"refusing to delete {rel!r}: it is a symlink or lies "
+                                     "outside the artifact root")
+                os.unlink(path)
+            except FileNotFoundError:
+                return
+            except OSError as exc:
+                raise StoreError(f"cannot delete {rel} under {self.root!r}: {exc}") from exc
+            return
         try:
             self.fs.delete_file(path)
         except FileNotFoundError:
             return
         except (pa.ArrowException, OSError) as exc:
-            raise StoreError(f"cannot delete {name} under {self.root!r}: {exc}") from exc
+            raise StoreError(f"cannot delete {rel} under {self.root!r}: {exc}") from exc
+
+
+@dataclass(frozen=True)
+class Scan:
+    """The artifact root sorted by :meth:`ArtifactStore.scan` (paths relative to the root)."""
+
+    files: list[tuple[str, int, float]]  # ab/<sha>.parquet: (path, bytes, mtime)
+    temporary: list[tuple[str, int, float]]  # ab/.tmp-*: a write in progress or abandoned
+    strays: list[str]  # anything else (notes.txt, ...): reported, never deleted
+    skipped: list[str]  # symlinks: never followed, never deleted
+

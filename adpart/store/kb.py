@@ -6,6 +6,12 @@ plain values (numpy arrays, dicts, scipy.sparse matrices) and return frozen reco
 row that references them, so no row ever points at a missing file. Environments are get-or-put by
 model hash and tasks by spec hash, so pipelines rerun without duplicating them.
 
+Every write transaction holds the *store lock* from the moment it checks an artifact's row and
+file until it commits (SQLite: ``BEGIN IMMEDIATE``; PostgreSQL: a shared advisory lock), and
+garbage collection holds it exclusively, so a gc can never remove a file between a writer's
+check and its commit (docs/reliability.md). :meth:`KnowledgeBase.transaction` groups several
+puts into one transaction: a run and its policies are stored whole or not at all.
+
 This module opens the database and writes records; reads and queries are the
 :class:`~adpart.store.queries.Queries` mixin, audits and garbage collection the
 :class:`~adpart.store.maintenance.Maintenance` mixin.
@@ -15,7 +21,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Iterable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from datetime import datetime, timezone
@@ -24,7 +30,7 @@ from typing import Any, TypeVar
 import numpy as np
 import pyarrow as pa
 import scipy.sparse as sp
-from sqlalchemy import Engine, create_engine, event, select
+from sqlalchemy import Engine, create_engine, event, select, text
 from sqlalchemy.exc import IntegrityError, SQLAlchemyError
 from sqlalchemy.orm import Session, sessionmaker
 
@@ -71,10 +77,48 @@ def _json(value: Any, what: str) -> str:
                          f"no NaN): {exc}") from exc
 
 
+#: the name of the PostgreSQL advisory lock that orders writers and gc (per schema, so per KB)
+_STORE_LOCK = "adpart-store:"
+_SCHEMA_LOCK = "adpart-schema:"
+
+
+def _pg_lock(session_or_conn: Any, name: str, *, shared: bool) -> None:
+    """Take a transaction-scoped PostgreSQL advisory lock named for this KB's schema."""
+    fn = "pg_advisory_xact_lock_shared" if shared else "pg_advisory_xact_lock"
+    session_or_conn.execute(text(f"SELECT {fn}(hashtext(:name || current_schema()))"),
+                            {"name": name})
+
+
+def _read_only_sqlite(db_url: str, connect_args: dict[str, Any]) -> tuple[str, dict[str, Any]]:
+    """The URL of a SQLite file opened ``mode=ro``: no file, journal or directory is created."""
+    from sqlalchemy.engine import make_url
+
+    url = make_url(db_url)
+    path = url.database or ""
+    if path in ("", ":memory:") or not os.path.isfile(path):
+        raise StoreError(f"there is no knowledge base database {path or db_url}; check --kb / "
+                         "ADPART_KB (reading commands never create one)")
+    path = os.path.abspath(path)
+    query = "mode=ro&uri=true"
+    if not os.access(os.path.dirname(path), os.W_OK) and not os.path.exists(f"{path}-wal"):
+        # nobody can write here (no -wal can be made), so SQLite need not make its -shm either
+        query += "&immutable=1"
+    return f"sqlite:///file:{path}?{query}", connect_args
+
+
 @dataclass
 class _Pending:
+    """An artifact written for a record not yet committed, and how to write it again.
+
+    ``rewrite`` puts the same content back in place; :meth:`KnowledgeBase._ensure_rows` calls it
+    when the file is missing at commit time (removed by a gc that ran before this writer's
+    transaction began), so a writer never commits a row for a missing file and never fails
+    because of a concurrent gc.
+    """
+
     stored: StoredArtifact
     kind: str
+    rewrite: Callable[[], StoredArtifact]
 
 
 class KnowledgeBase(Queries, Maintenance):
@@ -95,11 +139,13 @@ class KnowledgeBase(Queries, Maintenance):
     """
 
     def __init__(self, db_url: str, artifact_uri: str, *, label: str | None = None,
-                 verify: bool = True) -> None:
+                 verify: bool = True, read_only: bool = False) -> None:
         self.label = label or db_url
         self.db_url = db_url
+        self.read_only = read_only
+        self._tx: Session | None = None
         try:
-            self.engine = self._make_engine(db_url)
+            self.engine = self._make_engine(db_url, read_only=read_only)
         except (SQLAlchemyError, ImportError) as exc:
             raise StoreError(f"cannot open the knowledge base database {self.label}: {exc}; "
                              "check the URL and that its driver is installed") from exc
@@ -107,7 +153,7 @@ class KnowledgeBase(Queries, Maintenance):
         self._write = sessionmaker(self.engine.execution_options(adpart_write=True),
                                    expire_on_commit=False)
         try:
-            self.artifacts = ArtifactStore(artifact_uri)
+            self.artifacts = ArtifactStore(artifact_uri, create=not read_only)
             self.artifact_uri = artifact_uri
             self.schema_version = self._init_schema(verify)
         except BaseException:
@@ -117,7 +163,8 @@ class KnowledgeBase(Queries, Maintenance):
 
     @classmethod
     def open(cls, location: str | os.PathLike[str] | KBLocation | None = None, *,
-             artifacts: str | None = None, verify: bool = True) -> KnowledgeBase:
+             artifacts: str | None = None, verify: bool = True,
+             read_only: bool = False) -> KnowledgeBase:
         """Open (creating on first use) the knowledge base at ``location``.
 
         Args:
@@ -125,17 +172,27 @@ class KnowledgeBase(Queries, Maintenance):
                 :class:`KBLocation`; ``None`` means ``$ADPART_KB`` or the per-user default.
             artifacts: artifact root URI (any pyarrow filesystem URI) for a URL location.
             verify: refuse a schema this adpart cannot read (``False`` only for ``upgrade``).
+            read_only: open an existing knowledge base for reading only: nothing is created (a
+                missing one is an error) and a read-only directory or file is fine. Writes fail.
         """
-        where = location if isinstance(location, KBLocation) else KBLocation.resolve(location,
-                                                                                    artifacts)
-        return cls(where.db_url, where.artifact_uri, label=where.label, verify=verify)
+        where = (location if isinstance(location, KBLocation)
+                 else KBLocation.resolve(location, artifacts, create=not read_only))
+        return cls(where.db_url, where.artifact_uri, label=where.label, verify=verify,
+                   read_only=read_only)
 
     # ------------------------------------------------------------------ engine and sessions
+    @property
+    def is_postgresql(self) -> bool:
+        return self.engine.dialect.name == "postgresql"
+
     @staticmethod
-    def _make_engine(db_url: str) -> Engine:
+    def _make_engine(db_url: str, *, read_only: bool = False) -> Engine:
         if not db_url.startswith("sqlite"):
             return create_engine(db_url, pool_pre_ping=True)
-        engine = create_engine(db_url, connect_args={"timeout": _BUSY_TIMEOUT_S})
+        connect_args: dict[str, Any] = {"timeout": _BUSY_TIMEOUT_S}
+        if read_only:
+            db_url, connect_args = _read_only_sqlite(db_url, connect_args)
+        engine = create_engine(db_url, connect_args=connect_args)
 
         @event.listens_for(engine, "connect")
         def _pragmas(dbapi_connection: Any, _record: Any) -> None:
@@ -143,8 +200,9 @@ class KnowledgeBase(Queries, Maintenance):
             dbapi_connection.isolation_level = None
             cursor = dbapi_connection.cursor()
             cursor.execute(f"PRAGMA busy_timeout = {int(_BUSY_TIMEOUT_S * 1000)}")
-            cursor.execute("PRAGMA journal_mode = WAL")
-            cursor.execute("PRAGMA synchronous = NORMAL")
+            if not read_only:  # a reader changes nothing, not even the journal mode
+                cursor.execute("PRAGMA journal_mode = WAL")
+                cursor.execute("PRAGMA synchronous = NORMAL")
             cursor.execute("PRAGMA foreign_keys = ON")
             cursor.close()
 
@@ -158,10 +216,26 @@ class KnowledgeBase(Queries, Maintenance):
         return engine
 
     @contextmanager
-    def _session(self, *, write: bool = False) -> Iterator[Session]:
-        """Managed session: commit (writes) or rollback; database errors become StoreError."""
+    def _session(self, *, write: bool = False, exclusive: bool = False) -> Iterator[Session]:
+        """Managed session: commit (writes) or rollback; database errors become StoreError.
+
+        Inside :meth:`transaction` every session is that transaction's, and nothing commits
+        until it ends. A write session holds the store lock for its whole transaction: shared
+        for record writers, ``exclusive`` for gc. On SQLite the lock is the database's write
+        lock (``BEGIN IMMEDIATE``: writers and gc run one at a time); on PostgreSQL it is an
+        advisory lock, shared by writers and exclusive for gc, so gc never runs while a writer
+        is between "the artifact file is there" and its commit.
+        """
+        if self._tx is not None:
+            yield self._tx
+            return
+        if write and self.read_only:
+            raise StoreError(f"the knowledge base {self.label} was opened read-only; open it "
+                             "without read_only to write")
         session = (self._write if write else self._read)()
         try:
+            if write and self.is_postgresql:
+                _pg_lock(session, _STORE_LOCK, shared=not exclusive)
             yield session
             if write:
                 session.commit()
@@ -177,9 +251,34 @@ class KnowledgeBase(Queries, Maintenance):
         finally:
             session.close()
 
+    @contextmanager
+    def transaction(self) -> Iterator[None]:
+        """Group several puts into one transaction: all of them are stored, or none.
+
+        ``with kb.transaction(): kb.put_policy(...); kb.put_run(...)`` commits once at the end;
+        an error (or a kill) anywhere inside leaves no record of the group. Artifact files are
+        written as each put runs; if the transaction is rolled back they are unreferenced files
+        that ``adpart kb gc`` removes once they are older than its grace age. Nested calls join
+        the outer transaction.
+        """
+        if self._tx is not None:
+            yield
+            return
+        with self._session(write=True) as session:
+            self._tx = session
+            try:
+                yield
+            finally:
+                self._tx = None
+
     def _init_schema(self, verify: bool) -> int:
+        if self.read_only:
+            return self._read_schema(verify)
         try:
             with self.engine.execution_options(adpart_write=True).begin() as conn:
+                if self.is_postgresql:
+                    # concurrent first opens: one creates the schema, the others wait and see it
+                    _pg_lock(conn, _SCHEMA_LOCK, shared=False)
                 found = read_version(conn, self.label)
                 if found is None:
                     upgrade_schema(conn, self.label)
@@ -192,10 +291,28 @@ class KnowledgeBase(Queries, Maintenance):
             verify_schema(found[0], found[1], self.label)
         return found[0]
 
+    def _read_schema(self, verify: bool) -> int:
+        try:
+            with self.engine.connect() as conn:
+                found = read_version(conn, self.label)
+        except SQLAlchemyError as exc:
+            orig = getattr(exc, "orig", None) or exc
+            raise StoreError(f"cannot read the knowledge base {self.label}: {orig}; check the "
+                             "location (--kb / ADPART_KB)") from exc
+        if found is None:
+            raise StoreError(f"{self.label} holds no knowledge base (an empty database); store "
+                             "something there first or point --kb / ADPART_KB elsewhere")
+        if verify:
+            verify_schema(found[0], found[1], self.label)
+        return found[0]
+
     def upgrade(self) -> tuple[int, int]:
         """Migrate the database to this adpart's schema version; returns (from, to)."""
         try:
             with self.engine.execution_options(adpart_write=True).begin() as conn:
+                if self.is_postgresql:
+                    _pg_lock(conn, _SCHEMA_LOCK, shared=False)
+                    _pg_lock(conn, _STORE_LOCK, shared=False)
                 result = upgrade_schema(conn, self.label)
         except SQLAlchemyError as exc:
             raise StoreError(f"upgrading {self.label} failed: {exc}; the database was left "
@@ -229,10 +346,14 @@ class KnowledgeBase(Queries, Maintenance):
         if shape is not None and array.shape != shape:
             raise StoreError(f"the {kind} array has shape {array.shape}, expected {shape}; "
                              "pass one value per state (and action) of the environment")
-        return _Pending(self.artifacts.put_array(array), kind)
+        return _Pending(self.artifacts.put_array(array), kind,
+                        lambda: self.artifacts.put_array(array))
 
     def _table(self, value: Any, kind: str) -> _Pending | None:
-        return None if value is None else _Pending(self.artifacts.put_table(value), kind)
+        if value is None:
+            return None
+        return _Pending(self.artifacts.put_table(value), kind,
+                        lambda: self.artifacts.put_table(value))
 
     def _ensure_rows(self, session: Session, *pending: _Pending | None) -> None:
         """Insert the artifact rows the new record will reference (deduplicated by hash)."""
@@ -242,9 +363,11 @@ class KnowledgeBase(Queries, Maintenance):
             art = item.stored
             if session.scalar(select(SqlArtifact.id).where(SqlArtifact.sha256 == art.sha256)):
                 continue
-            if not self.artifacts.exists(art.uri):  # removed by a concurrent gc: write it again
-                raise StoreError(f"artifact {art.sha256[:12]} vanished while being stored (a "
-                                 "concurrent `adpart kb gc`?); retry the write")
+            if not self.artifacts.exists(art.uri):
+                # removed by a gc that ran before this transaction took the store lock: put it
+                # back. The lock is held until commit, so no gc can remove it again before the
+                # row that keeps it is committed.
+                art = item.rewrite()
             try:
                 with session.begin_nested():
                     session.add(SqlArtifact(

@@ -48,6 +48,12 @@ def _make_dir(path: Path, what: str) -> None:
                          "--kb or ADPART_KB")
 
 
+def _must_exist(path: Path, what: str) -> None:
+    if not path.is_dir():
+        raise StoreError(f"there is no {what} {path}; check --kb / ADPART_KB (reading commands "
+                         "never create one)")
+
+
 @dataclass(frozen=True)
 class KBLocation:
     """A resolved location: the database URL, the artifact root and a label for messages."""
@@ -58,8 +64,14 @@ class KBLocation:
 
     @classmethod
     def resolve(cls, location: str | os.PathLike[str] | None = None,
-                artifacts: str | None = None) -> KBLocation:
-        """Resolve ``location`` (directory or URL) and ``artifacts`` (module docstring)."""
+                artifacts: str | None = None, *, create: bool = True) -> KBLocation:
+        """Resolve ``location`` (directory or URL) and ``artifacts`` (module docstring).
+
+        With ``create=False`` (the reading commands: ``kb info/ls/show/check/export``) nothing
+        is made and nothing needs to be writable, but a directory must already hold a
+        knowledge base.
+        """
+        make_dir = _make_dir if create else _must_exist
         where = str(location) if location is not None else default_location()
         artifacts = artifacts or os.environ.get("ADPART_KB_ARTIFACTS") or None
         if _URL.match(where) and not where.startswith("file://"):
@@ -73,14 +85,17 @@ class KBLocation:
                 on_disk = url.database not in (None, "", ":memory:")
                 if url.get_backend_name() == "sqlite" and on_disk:
                     db_file = Path(url.database).expanduser().resolve()
-                    _make_dir(db_file.parent, "knowledge base directory")
+                    make_dir(db_file.parent, "knowledge base directory")
                     artifacts = str(db_file.parent / ARTIFACT_DIR)
                 else:
                     raise StoreError(f"the database URL {label} needs an artifact root: pass "
                                      "--kb-artifacts URI or set ADPART_KB_ARTIFACTS")
             return cls(where, artifacts, label)
         directory = Path(where.removeprefix("file://")).expanduser().resolve()
-        _make_dir(directory, "knowledge base directory")
+        make_dir(directory, "knowledge base directory")
+        if not create and not (directory / DB_FILE).is_file():
+            raise StoreError(f"{directory} holds no knowledge base (no {DB_FILE}); check --kb / "
+                             "ADPART_KB, or store something there first")
         if artifacts is None:
             artifacts = str(directory / ARTIFACT_DIR)
         return cls(f"sqlite:///{directory / DB_FILE}", artifacts, str(directory))

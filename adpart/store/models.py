@@ -35,6 +35,11 @@ class Base(DeclarativeBase):
         dict[str, Any]: JSON, int: Integer, str: String(255)}
 
 
+def _row_sha() -> Mapped[Any]:
+    """The row's content hash (:mod:`adpart.store.integrity`), set in the inserting transaction."""
+    return mapped_column(_SHA, nullable=True, default=None)
+
+
 def _artifact_ref(nullable: bool = True) -> Mapped[Any]:
     return mapped_column(_SHA, ForeignKey("artifacts.sha256"), nullable=nullable, index=True)
 
@@ -48,6 +53,7 @@ class Provenance:
     parameters: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
     schema_version: Mapped[int]
+    row_sha: Mapped[str | None] = _row_sha()
 
 
 class SqlSchema(Base):
@@ -73,6 +79,7 @@ class SqlArtifact(Base):
     adpart_version: Mapped[str] = mapped_column(String(64))
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
     schema_version: Mapped[int]
+    row_sha: Mapped[str | None] = _row_sha()
 
 
 class SqlEnvironment(Provenance, Base):
@@ -126,6 +133,7 @@ class SqlSubgoal(Base):
     id: Mapped[int] = mapped_column(primary_key=True)
     subgoal_set_id: Mapped[int] = mapped_column(ForeignKey("subgoal_sets.id"), index=True)
     state: Mapped[int] = mapped_column(BigInteger)
+    row_sha: Mapped[str | None] = _row_sha()
     subgoal_set: Mapped[SqlSubgoalSet] = relationship(back_populates="subgoals")
 
 
@@ -158,6 +166,7 @@ class SqlPartitionOption(Base):
     partition_id: Mapped[int] = mapped_column(ForeignKey("partitions.id"), primary_key=True)
     option_id: Mapped[int] = mapped_column(ForeignKey("options.id"), primary_key=True, index=True)
     position: Mapped[int]
+    row_sha: Mapped[str | None] = _row_sha()
 
 
 class SqlPartition(Provenance, Base):
@@ -197,6 +206,13 @@ class SqlRun(Provenance, Base):
     curve_sha: Mapped[str | None] = _artifact_ref()
     metrics: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
 
+
+from adpart.store import integrity as _integrity  # noqa: E402  (needs Base)
+
+_integrity.install(Base)
+
+#: tables whose rows carry a content hash (every table but the schema row and the parent links)
+HASHED_TABLES = tuple(t for t in Base.metadata.sorted_tables if "row_sha" in t.c)
 
 #: record tables and the artifact columns each holds, for reference checks and garbage collection
 ARTIFACT_COLUMNS: dict[type[Base], tuple[str, ...]] = {

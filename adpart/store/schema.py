@@ -11,17 +11,45 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from sqlalchemy import Connection, inspect, select
+from sqlalchemy import Connection, inspect, select, text, update
 
 from adpart import __version__
 from adpart.store.errors import StoreError
-from adpart.store.models import Base, SqlSchema
+from adpart.store.integrity import ROW_SHA, row_digest
+from adpart.store.models import HASHED_TABLES, Base, SqlSchema, partition_parents
 
 #: the schema version this adpart reads and writes
-SCHEMA_VERSION = 1
+#: (2: every metadata row carries ``row_sha``, its content hash, checked by ``adpart kb check``)
+SCHEMA_VERSION = 2
+
+
+def stamp_all_rows(conn: Connection) -> None:
+    """(Re)compute the content hash of every row of every hashed table."""
+    links: dict[int, list[int]] = {}
+    for child, parent in conn.execute(select(partition_parents.c.child_id,
+                                             partition_parents.c.parent_id)):
+        links.setdefault(int(child), []).append(int(parent))
+    for table in HASHED_TABLES:
+        key = [c for c in table.primary_key.columns]
+        for row in conn.execute(select(table)).mappings().all():
+            parents = links.get(int(row["id"]), []) if table.name == "partitions" else None
+            where = None
+            for column in key:
+                term = column == row[column.name]
+                where = term if where is None else where & term
+            conn.execute(update(table).where(where).values(
+                {ROW_SHA: row_digest(table, row, parents)}))
+
+
+def _add_row_hashes(conn: Connection) -> None:
+    """Schema 1 -> 2: a ``row_sha`` column on every metadata table, filled for existing rows."""
+    for table in HASHED_TABLES:
+        conn.execute(text(f"ALTER TABLE {table.name} ADD COLUMN {ROW_SHA} VARCHAR(64)"))
+    stamp_all_rows(conn)
+
 
 #: MIGRATIONS[v] upgrades a version-v database to version v + 1 inside one transaction
-MIGRATIONS: dict[int, Callable[[Connection], None]] = {}
+MIGRATIONS: dict[int, Callable[[Connection], None]] = {1: _add_row_hashes}
 
 
 def read_version(conn: Connection, location: str) -> tuple[int, str] | None:

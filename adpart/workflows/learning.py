@@ -280,7 +280,16 @@ def write_learning_outputs(out: Path, outcome: LearnOutcome) -> dict[str, str]:
 
 
 def record_learning(kb: Any, outcome: LearnOutcome) -> dict[str, Any]:
-    """Record environment, task, one policy per run and the run itself; return their ids."""
+    """Record environment, task, one policy per run and the run itself; return their ids.
+
+    Everything is written in one knowledge-base transaction (``kb.transaction()``), so a kill
+    or an error part-way leaves no policy without its run: stored whole or not at all.
+    """
+    with kb.transaction():
+        return _record_learning(kb, outcome)
+
+
+def _record_learning(kb: Any, outcome: LearnOutcome) -> dict[str, Any]:
     request = outcome.request
     domain = resolve_domain(request.env)
     dyn = domain.dynamics()

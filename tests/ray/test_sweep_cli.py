@@ -87,9 +87,20 @@ def test_sweep_cli_config_error_names_the_key(tmp_path):
     assert "Did you mean `episodes`" in result.output
 
 
-def test_sweep_cli_failed_cells_exit_nonzero(tmp_path):
+def test_sweep_cli_failed_cells_exit_nonzero(tmp_path, monkeypatch):
+    import adpart.sweep as sweep_mod
+    from adpart.errors import TaskError
+
+    real = sweep_mod.run_learning
+
+    def fail_alpha_05(request, **kwargs):  # a cell failing in its worker (serial: in-process)
+        if request.params.get("alpha") == "0.5":
+            raise TaskError("simulated failure of a cell")
+        return real(request, **kwargs)
+
+    monkeypatch.setattr(sweep_mod, "run_learning", fail_alpha_05)
     path = tmp_path / "grid.toml"
-    path.write_text(GRID.replace('"0.5"', '"nonsense"'))
+    path.write_text(GRID)
     result = _run(str(path), "--kb", str(tmp_path / "kb"), "--executor", "serial")
     assert result.exit_code == 1
     assert "failed 2" in result.output

@@ -70,15 +70,24 @@ def test_sweep_interrupted_by_the_user_keeps_what_was_stored(tmp_path):
         assert len(kb.records("run")) == 4
 
 
+def _failing_worker(job: dict) -> dict:
+    """A worker in which the alpha=0.25 cell fails (a bad value that got past the config check
+    is refused there now, so the failure is made in the worker)."""
+    if job["request"]["params"]["alpha"] == "0.25":
+        params = {**job["request"]["params"], "alpha": "not-a-schedule"}
+        job = {**job, "request": {**job["request"], "params": params}}
+    return run_cell(job)
+
+
 def test_sweep_failed_cells_are_reported_and_retried_next_time(tmp_path):
-    config = {**CONFIG, "params": {"alpha": ["0.5", "not-a-schedule"]}, "seeds": [0]}
+    config = {**CONFIG, "params": {"alpha": ["0.5", "0.25"]}, "seeds": [0]}
     cells = plan_cells(parse_config(config))
     with KnowledgeBase.open(tmp_path / "kb") as kb:
-        report = run_sweep(cells, kb)
+        report = run_sweep(cells, kb, worker=_failing_worker)
         assert [r.status for r in report.results] == ["stored", "failed"]
         assert "cannot read a schedule" in report.results[1].error
         assert not report.complete
-        again = run_sweep(cells, kb)
+        again = run_sweep(cells, kb, worker=_failing_worker)
         assert [r.status for r in again.results] == ["skipped", "failed"]
 
 

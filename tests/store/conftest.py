@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import os
+import uuid
 from dataclasses import dataclass
+from urllib.parse import quote
 
 import numpy as np
 import pytest
@@ -15,12 +17,25 @@ from adpart.store import KnowledgeBase
 PG_URL = os.environ.get("ADPART_TEST_PG_URL")
 
 
-def _reset_pg(url: str) -> None:
-    """Empty the scratch database: every table (adpart's and any a test made) goes."""
+def pg_scratch_schema(url: str) -> tuple[str, str]:
+    """A fresh, uniquely named schema in the scratch database and a URL whose connections use it.
+
+    Every test gets its own schema (``search_path`` set per connection through libpq's
+    ``options``), so parallel test workers and repeated runs never see each other's tables.
+    """
+    schema = f"adpart_test_{uuid.uuid4().hex[:12]}"
     engine = create_engine(url)
     with engine.begin() as conn:
-        conn.execute(text("DROP SCHEMA public CASCADE"))
-        conn.execute(text("CREATE SCHEMA public"))
+        conn.execute(text(f'CREATE SCHEMA "{schema}"'))
+    engine.dispose()
+    sep = "&" if "?" in url else "?"
+    return schema, f"{url}{sep}options={quote(f'-csearch_path={schema}', safe='')}"
+
+
+def drop_pg_schema(url: str, schema: str) -> None:
+    engine = create_engine(url)
+    with engine.begin() as conn:
+        conn.execute(text(f'DROP SCHEMA IF EXISTS "{schema}" CASCADE'))
     engine.dispose()
 
 
@@ -47,15 +62,17 @@ class Where:
 
 
 @pytest.fixture(params=["sqlite", "postgresql"])
-def where(request, tmp_path) -> Where:
+def where(request, tmp_path):
     """An empty knowledge-base location on SQLite (a directory) and on PostgreSQL (if set)."""
     if request.param == "sqlite":
         directory = str(tmp_path / "kb")
-        return Where("sqlite", directory, "", f"sqlite:///{directory}/kb.sqlite")
+        yield Where("sqlite", directory, "", f"sqlite:///{directory}/kb.sqlite")
+        return
     if not PG_URL:
         pytest.skip("set ADPART_TEST_PG_URL to run the store tests against PostgreSQL")
-    _reset_pg(PG_URL)
-    return Where("postgresql", PG_URL, str(tmp_path / "pg-artifacts"), PG_URL)
+    schema, url = pg_scratch_schema(PG_URL)
+    yield Where("postgresql", url, str(tmp_path / "pg-artifacts"), url)
+    drop_pg_schema(PG_URL, schema)
 
 
 @pytest.fixture

@@ -10,6 +10,7 @@ import pytest
 from click.testing import CliRunner
 
 from adpart.cli.kb import kb as kb_group
+from adpart.store import SCHEMA_VERSION
 
 
 @pytest.fixture
@@ -29,10 +30,10 @@ def test_info(cli_kb):
     result = _run("info", *opts, "--json")
     assert result.exit_code == 0, result.output
     data = json.loads(result.output)
-    assert data["schema_version"] == 1
+    assert data["schema_version"] == SCHEMA_VERSION
     assert data["counts"]["partition"] == 2 and data["artifact_bytes"] == kb.artifact_bytes() > 0
     text = _run("info", *opts).output
-    assert "schema version: 1" in text
+    assert f"schema version: {SCHEMA_VERSION}" in text
     assert "policies:" in text and "partitions:" in text and "policys" not in text
 
 

@@ -168,13 +168,14 @@ def test_unknown_schema_is_refused(where):
 def test_older_schema_asks_for_upgrade_and_upgrade_migrates(where, monkeypatch):
     where.open().close()
     steps = []
-    monkeypatch.setattr(schema_mod, "SCHEMA_VERSION", 2)
-    monkeypatch.setitem(schema_mod.MIGRATIONS, 1, lambda conn: steps.append(1))
+    now = schema_mod.SCHEMA_VERSION
+    monkeypatch.setattr(schema_mod, "SCHEMA_VERSION", now + 1)
+    monkeypatch.setitem(schema_mod.MIGRATIONS, now, lambda conn: steps.append(now))
     with pytest.raises(StoreError, match="run `adpart kb upgrade`"):
         where.open()
     result = CliRunner().invoke(kb_group, ["upgrade", *where.cli])
     assert result.exit_code == 0, result.output
-    assert "1 -> 2" in result.output and steps == [1]
+    assert f"{now} -> {now + 1}" in result.output and steps == [now]
     where.open().close()
 
 
@@ -183,9 +184,12 @@ def test_unwritable_location_gives_a_clear_error(tmp_path):
     blocker.write_text("not a directory")
     with pytest.raises(StoreError, match=r"cannot create the knowledge base directory.*--kb"):
         KnowledgeBase.open(blocker / "kb")
-    result = CliRunner().invoke(kb_group, ["info", "--kb", str(blocker / "kb")])
+    result = CliRunner().invoke(kb_group, ["gc", "--kb", str(blocker / "kb")])
     assert result.exit_code == 2
     assert "cannot create" in result.output and "Traceback" not in result.output
+    result = CliRunner().invoke(kb_group, ["info", "--kb", str(blocker / "kb")])
+    assert result.exit_code == 2  # a reading command creates nothing: it says there is none
+    assert "no knowledge base directory" in result.output and "Traceback" not in result.output
     with pytest.raises(StoreError, match="artifact root"):
         KnowledgeBase.open(tmp_path / "kb2", artifacts=str(blocker / "art"))
 

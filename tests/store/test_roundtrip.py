@@ -12,7 +12,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from adpart.store import KnowledgeBase, StoreError
+from adpart.store import SCHEMA_VERSION, KnowledgeBase, StoreError
 from adpart.store.artifacts import array_sha256
 
 DTYPES = [np.bool_, np.int8, np.int16, np.int32, np.int64, np.uint8, np.uint16, np.uint32,
@@ -26,7 +26,7 @@ def test_every_record_kind_round_trips(populated):
         assert again == record, key
         assert again.provenance == record.provenance
         assert again.provenance.created_at.tzinfo is not None
-        assert again.provenance.schema_version == 1
+        assert again.provenance.schema_version == SCHEMA_VERSION
     assert rec["policy"].provenance.parameters == {"alpha": 0.1}
     assert rec["environment"].provenance.plugin == "builtin"
     np.testing.assert_array_equal(kb.load(rec["policy"], "q"),

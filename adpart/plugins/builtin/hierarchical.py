@@ -75,6 +75,9 @@ class HierarchicalLearner:
               "standard errors off a stochastic pair's lower-bound flat value", min=0.0),
         Param("flat-explore", "bool", True,
               "take the optimistic flat action where it beats the block's best"),
+        Param("reference", "str", "model",
+              "what the grounded flat value must beat by L: the block's point-model value "
+              "(model) or its learned value (learned)", choices=("model", "learned")),
         Param("min-visits", "int", 2, "visits of the flat pair and block before a test fires",
               min=0),
         Param("intra-option", "bool", False,
@@ -88,11 +91,12 @@ class HierarchicalLearner:
     def __init__(self, mode: str = "inconsistency", delta: float = 0.0,
                  partition_epsilon: float = 0.0, threshold: float = -1.0,
                  threshold_scale: float = 0.025, lcb_z: float = 2.0, flat_explore: bool = True,
+                 reference: str = "model",
                  min_visits: int = 2, intra_option: bool = False,
                  alpha: str = "1/n^0.8", epsilon: str = "0.1", max_steps: int = 1000,
                  kernel: str = "auto") -> None:
         self.intra_option = bool(intra_option)
-        self.lcb_z, self.flat_explore = lcb_z, bool(flat_explore)
+        self.lcb_z, self.flat_explore, self.reference = lcb_z, bool(flat_explore), reference
         self.mode, self.delta, self.partition_epsilon = mode, delta, partition_epsilon
         self.threshold = None if threshold < 0 else threshold
         self.threshold_scale, self.min_visits = threshold_scale, min_visits
@@ -113,7 +117,7 @@ class HierarchicalLearner:
             mdp, list(options), partition, mode=self.mode, delta=self.delta,
             epsilon=self.partition_epsilon, threshold=self.threshold,
             threshold_scale=self.threshold_scale, min_visits=self.min_visits, lcb_z=self.lcb_z,
-            flat_explore=self.flat_explore, runs=runs,
+            flat_explore=self.flat_explore, reference=self.reference, runs=runs,
             episodes=episodes, seed=seed, alpha=self.alpha, epsilon_greedy=self.epsilon,
             max_steps_per_episode=self.max_steps, eval_every=eval_every, progress=progress,
             kernel=self.kernel, intra_option=self.intra_option,

@@ -8,9 +8,22 @@ from adpart.mdp.model import FiniteMDP
 from adpart.plugins.hookspecs import hookimpl
 from adpart.plugins.registry import Param, Registrar
 
+
+def _probability_schedule(what: str) -> Callable[[str], object]:
+    """A validator: the spelling parses to a schedule that stays in [0, 1] (checked up front)."""
+    def check(value: str) -> object:
+        from adpart.learning.settings import schedule
+
+        return schedule(value, what)
+
+    return check
+
+
 #: Parameters every sample-based learner declares alike (one declaration, one --help text).
-ALPHA = Param("alpha", "str", "1/n^0.8", "step-size schedule: 0.1 | 1/n^0.8 | exp:0.5,0.99")
-EPSILON = Param("epsilon", "str", "0.1", "exploration schedule, same forms as --alpha")
+ALPHA = Param("alpha", "str", "1/n^0.8", "step-size schedule: 0.1 | 1/n^0.8 | exp:0.5,0.99",
+              check=_probability_schedule("alpha"))
+EPSILON = Param("epsilon", "str", "0.1", "exploration schedule, same forms as --alpha",
+                check=_probability_schedule("epsilon"))
 MAX_STEPS = Param("max-steps", "int", 1000, "primitive-step limit of one episode", min=1)
 
 

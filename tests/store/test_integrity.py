@@ -1,0 +1,207 @@
+"""Whole records, checks that see everything, and schema creation under concurrent opens."""
+
+from __future__ import annotations
+
+import sqlite3
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from sqlalchemy import create_engine, text
+
+from adpart.cli.kb import kb as kb_group
+from adpart.store import SCHEMA_VERSION, StoreError
+from adpart.workflows import record_learning, run_learning
+from adpart.workflows.learning import LearnRequest
+
+KILLED_RECORD = """
+    import os, signal, sys
+    from adpart.store import KnowledgeBase
+    from adpart.workflows import record_learning, run_learning
+    from adpart.workflows.learning import LearnRequest
+    kb = KnowledgeBase.open(sys.argv[1], artifacts=sys.argv[2] or None)
+    outcome = run_learning(LearnRequest(env="two-rooms", runs=2, episodes=5, eval_every=5))
+    def killed(*args, **kwargs):  # the policies are written; die before the run is
+        os.kill(os.getpid(), signal.SIGKILL)
+    KnowledgeBase.put_run = killed
+    record_learning(kb, outcome)
+"""
+
+
+def test_a_failure_between_policies_and_run_leaves_no_dangling_record(kb, monkeypatch):
+    outcome = run_learning(LearnRequest(env="two-rooms", runs=2, episodes=5, eval_every=5))
+
+    def fail(*args, **kwargs):
+        raise StoreError("simulated failure after the policies were written")
+
+    monkeypatch.setattr(kb, "put_run", fail)
+    with pytest.raises(StoreError, match="simulated"):
+        record_learning(kb, outcome)
+    assert kb.counts()["policy"] == 0 and kb.counts()["run"] == 0
+    assert kb.check().orphan_records == []
+    monkeypatch.undo()
+    ids = record_learning(kb, outcome)
+    assert len(ids["policies"]) == 2 and kb.check().ok
+
+
+@pytest.mark.slow
+def test_a_kill_between_policies_and_run_leaves_no_dangling_record(where):
+    where.open().close()
+    proc = subprocess.run([sys.executable, "-c", textwrap.dedent(KILLED_RECORD), where.location,
+                           where.artifacts], capture_output=True, text=True, timeout=300,
+                          check=False)
+    assert proc.returncode == -9, proc.stderr
+    with where.open() as kb:
+        assert kb.counts()["policy"] == 0 and kb.counts()["run"] == 0
+        report = kb.check()
+        assert report.ok, report.problems
+        assert report.orphan_records == []
+
+
+def test_orphan_policies_are_named_by_check_and_removed_by_gc(where, kb):
+    env = kb.put_environment("e", model_hash="a" * 64, n_states=2, n_actions=2)
+    task = kb.put_task(env, "t", spec={}, gamma=0.9)
+    lone = kb.put_policy(task, "q-learning", q=np.ones((2, 2)))  # as a killed old write left it
+    kept = kb.put_policy(task, "q-learning", q=np.zeros((2, 2)))
+    kb.put_run(task, "q-learning", parameters={"policies": [kept.id]})
+    assert kb.check().orphan_records == [f"policy:{lone.id}"]
+    result = CliRunner().invoke(kb_group, ["check", *where.cli])
+    assert result.exit_code == 0, result.output
+    assert f"orphan record policy:{lone.id}" in result.output
+    dry = CliRunner().invoke(kb_group, ["gc", "--yes", *where.cli])
+    assert "pass --orphans" in dry.output and kb.counts()["policy"] == 2
+    result = CliRunner().invoke(kb_group, ["gc", "--yes", "--orphans", *where.cli])
+    assert result.exit_code == 0, result.output
+    assert [p.id for p in kb.records("policy")] == [kept.id]
+    assert kb.check().ok and kb.check().orphan_records == []
+
+
+def test_transaction_stores_all_or_nothing(kb):
+    env = kb.put_environment("e", model_hash="b" * 64, n_states=2, n_actions=2)
+    task = kb.put_task(env, "t", spec={}, gamma=0.9)
+    with pytest.raises(StoreError), kb.transaction():
+        kb.put_policy(task, "q", q=np.ones((2, 2)))
+        kb.put_run(999, "q")  # no such task: the whole group goes
+    assert kb.counts()["policy"] == 0
+    with kb.transaction():
+        policy = kb.put_policy(task, "q", q=np.ones((2, 2)))
+        kb.put_run(task, "q", parameters={"policies": [policy.id]})
+    assert kb.counts()["policy"] == 1 and kb.counts()["run"] == 1
+
+
+# ---------------------------------------------------------------------- check sees everything
+def _sqlite_file(where) -> Path:
+    return Path(where.location) / "kb.sqlite"
+
+
+def test_check_names_the_record_whose_metadata_row_changed(where, populated):
+    kb, rec = populated
+    run = rec["run"]
+    # change a stored value behind adpart's back, as a flipped bit would
+    with kb.engine.begin() as conn:
+        conn.execute(text("UPDATE runs SET metrics = :m WHERE id = :i"),
+                     {"m": '{"final_gap": 0.35}', "i": run.id})
+    report = kb.check()
+    assert not report.ok
+    assert [p for p in report.problems if f"run:{run.id} is damaged" in p], report.problems
+    result = CliRunner().invoke(kb_group, ["check", *where.cli])
+    assert result.exit_code == 1 and f"run:{run.id}" in result.output
+
+
+def test_check_names_a_flipped_bit_in_the_database_file(where, tmp_path):
+    if where.backend != "sqlite":
+        pytest.skip("the flipped bit is in the SQLite file")
+    with where.open() as kb:
+        env = kb.put_environment("e", model_hash="c" * 64, n_states=2, n_actions=2)
+        task = kb.put_task(env, "t", spec={}, gamma=0.9)
+        run = kb.put_run(task, "q", metrics={"final_value_gap": {"mean": 0.248, "max": 0.3}})
+    path = _sqlite_file(where)
+    with sqlite3.connect(path) as conn:
+        conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+    data = bytearray(path.read_bytes())
+    at = data.find(b"0.248")
+    assert at >= 0 and data.count(b"0.248") == 1
+    data[at + 2] ^= 0x01  # 0.248 -> 0.348: one bit ("2" is 0x32, "3" is 0x33)
+    path.write_bytes(bytes(data))
+    with where.open() as kb:
+        assert kb.get("run", run.id).metrics["final_value_gap"]["mean"] != 0.248
+        report = kb.check()
+    assert any(f"run:{run.id} is damaged" in p for p in report.problems), report.problems
+
+
+@pytest.mark.parametrize("table", ["policies", "runs"])
+def test_check_runs_the_engines_integrity_check(where, populated, table):
+    if where.backend != "sqlite":
+        pytest.skip("zeroes a page of the SQLite file")
+    kb, _ = populated
+    kb.close()
+    path = _sqlite_file(where)
+    with sqlite3.connect(path) as conn:
+        conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+        page_size = conn.execute("PRAGMA page_size").fetchone()[0]
+        root = conn.execute("SELECT rootpage FROM sqlite_master WHERE name = ?",
+                            (table,)).fetchone()[0]
+    data = bytearray(path.read_bytes())
+    data[(root - 1) * page_size:root * page_size] = bytes(page_size)
+    path.write_bytes(bytes(data))
+    result = CliRunner().invoke(kb_group, ["check", *where.cli])
+    assert result.exit_code == 1, result.output
+    assert "integrity check" in result.output or f"table {table} cannot be read" in result.output
+
+
+def test_an_old_schema_is_upgraded_with_row_hashes(where, populated):
+    kb, rec = populated
+    kb.close()
+    engine = create_engine(where.db_url)
+    with engine.begin() as conn:  # make it a schema-1 knowledge base again
+        for table in ("artifacts", "environments", "tasks", "policies", "subgoal_sets",
+                      "subgoals", "options", "partition_options", "partitions", "runs"):
+            conn.execute(text(f"ALTER TABLE {table} DROP COLUMN row_sha"))
+        conn.execute(text("UPDATE adpart_schema SET version = 1"))
+    engine.dispose()
+    with pytest.raises(StoreError, match="run `adpart kb upgrade`"):
+        where.open()
+    result = CliRunner().invoke(kb_group, ["upgrade", *where.cli])
+    assert result.exit_code == 0, result.output
+    assert f"1 -> {SCHEMA_VERSION}" in result.output
+    with where.open() as kb:
+        report = kb.check()
+        assert report.ok, report.problems
+        assert report.rows_checked >= 10
+        assert kb.get("run", rec["run"].id) == rec["run"]
+
+
+# ---------------------------------------------------------------------- concurrent first opens
+OPENER = """
+    import sys
+    from adpart.store import KnowledgeBase
+    KnowledgeBase.open(sys.argv[1], artifacts=sys.argv[2] or None).close()
+    print("ok")
+"""
+
+
+def _first_opens(where) -> None:
+    procs = [subprocess.Popen([sys.executable, "-c", textwrap.dedent(OPENER), where.location,
+                               where.artifacts], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                              text=True) for _ in range(4)]
+    outs = [p.communicate(timeout=300) for p in procs]
+    failed = [err.strip().splitlines()[-1] for p, (_, err) in zip(procs, outs, strict=True)
+              if p.returncode != 0]
+    assert failed == []
+    with where.open() as kb:
+        assert kb.schema_version == SCHEMA_VERSION and kb.check().ok
+
+
+def test_concurrent_first_opens_create_the_schema_once(where):
+    if where.backend == "sqlite":
+        pytest.skip("SQLite creates the schema inside BEGIN IMMEDIATE; the slow test covers it")
+    _first_opens(where)
+
+
+@pytest.mark.slow
+def test_concurrent_first_opens_create_the_schema_once_on_any_backend(where):
+    _first_opens(where)
