@@ -126,8 +126,9 @@ def task_sequence(config: ExperimentConfig) -> ExperimentReport:
         env=ENV, tasks=TASKS, detector_params={"on-loop": "truncate"}, initiation="reachable",
         runs=s["runs"], episodes=s["episodes"], first_episodes=s["first_episodes"],
         seed=config.seed, eval_every=s["eval_every"],
-        flat_params={"max-steps": s["horizon"]},
-        hierarchical_params={"max-steps": s["horizon"], "min-visits": s["min_visits"]},
+        flat_params={"max-steps": s["horizon"], "alpha": "1/n^0.8"},
+        hierarchical_params={"max-steps": s["horizon"], "min-visits": s["min_visits"],
+                             "alpha": "1/n^0.8"},
         hierarchy="expected-learning-time",
     )
     tmp = None
