@@ -14,6 +14,8 @@ The solvers use these when numba imports and scipy/numpy otherwise (``kernel="nu
   rows in place from ``F`` touches a cache line of each of the ``O`` blocks per state and measured
   4x slower per product on an optimal grid policy).
 * :func:`policy_product` -- ``R_pi + F_pi V`` on that compact CSR (one Jacobi ``T_pi`` sweep).
+* :func:`greedy_rows` -- the lowest-index argmax of every row of a ``(N, A)`` table, in
+  parallel (``np.argmax(axis=1)`` walks the short axis; 5x slower on the learners' (K*S, A) Q).
 * :func:`gauss_seidel_evaluation` -- in-place Gauss-Seidel sweeps of ``T_pi`` (Puterman 6.3.3):
   each state's new value is used at once by the states after it, which halves the memory
   traffic of a Jacobi sweep (no second vector) and converges at least as fast on grid MDPs.
@@ -146,7 +148,21 @@ def _compile() -> SimpleNamespace:  # pragma: no cover - compiled code is invisi
                 break
         return sweeps
 
+    @numba.njit(cache=True, nogil=True, parallel=True)
+    def greedy_rows(Q, out):
+        """``out[i] = argmax_a Q[i, a]``, lowest index on ties (as ``np.argmax``; Q has no NaN)."""
+        n, A = Q.shape
+        for i in numba.prange(n):
+            best = Q[i, 0]
+            arg = 0
+            for a in range(1, A):
+                if Q[i, a] > best:
+                    best = Q[i, a]
+                    arg = a
+            out[i] = arg
+
     return SimpleNamespace(
+        greedy_rows=greedy_rows,
         bellman_backup=bellman_backup,
         gather_policy=gather_policy,
         policy_product=policy_product,

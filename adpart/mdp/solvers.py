@@ -537,9 +537,25 @@ def q_from_v(model: HasSMDP, V: np.ndarray) -> np.ndarray:
     return _Backup(smdp).q_t(np.asarray(V, dtype=np.float64)).T.copy()
 
 
+#: Rows from which :func:`greedy_policy` uses the compiled parallel kernel (below, numpy's
+#: argmax is as fast and needs no compiled code).
+GREEDY_COMPILED_ROWS = 200_000
+
+
 def greedy_policy(Q: np.ndarray) -> np.ndarray:
-    """``(S,)`` int64 argmax of each row of ``Q`` (ties go to the lowest action index)."""
-    return np.argmax(np.asarray(Q), axis=1).astype(np.int64)
+    """``(S,)`` int64 argmax of each row of ``Q`` (ties go to the lowest action index).
+
+    ``Q`` must not hold NaN (``-inf`` marks inadmissible pairs). Large tables (the learners'
+    ``(K*S, A)`` stacks) use the compiled kernel, with the same result as ``np.argmax``.
+    """
+    Q = np.asarray(Q)
+    if Q.ndim == 2 and Q.shape[0] >= GREEDY_COMPILED_ROWS and Q.dtype == np.float64:
+        k = _kernels.load()
+        if k is not None:
+            out = np.empty(Q.shape[0], dtype=np.int64)
+            k.greedy_rows(np.ascontiguousarray(Q), out)
+            return out
+    return np.argmax(Q, axis=1).astype(np.int64, copy=False)
 
 
 def solve(model: HasSMDP, epsilon: float = 1e-6, *, method: str = "mpi", **kwargs: object) -> (

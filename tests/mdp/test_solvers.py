@@ -176,3 +176,13 @@ def test_improper_policy_with_gamma_one_is_reported():
     mdp = FiniteMDP.from_dense(P, -np.ones((2, 1)), 1.0)
     with pytest.raises(ModelError, match=r"singular|never terminate"):
         policy_evaluation(mdp, np.zeros(2, dtype=int))
+
+
+def test_greedy_policy_compiled_path_matches_argmax():
+    from adpart.mdp.solvers import GREEDY_COMPILED_ROWS
+
+    rng = np.random.default_rng(0)
+    Q = rng.integers(0, 3, size=(GREEDY_COMPILED_ROWS, 4)).astype(np.float64)  # many ties
+    Q[rng.random(Q.shape) < 0.2] = -np.inf
+    Q[:5] = -np.inf  # all inadmissible-looking rows: argmax gives 0
+    np.testing.assert_array_equal(greedy_policy(Q), np.argmax(Q, axis=1))
