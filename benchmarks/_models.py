@@ -1,8 +1,9 @@
 """Models shared by the benchmarks: the rooms grid the issue's peers measure on.
 
-``rooms_grid_mdp(n)`` is a grid of square rooms (``room`` x ``room`` cells) separated by one-cell
-walls with one doorway in the middle of every wall segment; states are the free cells (about
-``n``). Four moves; the intended move succeeds with probability 0.8 and slips to each
+``rooms_grid_mdp(n)`` is a grid of ``k x k`` square rooms (``room`` x ``room`` cells, ``k =
+round(sqrt(n) / room)``) separated by one-cell walls with one doorway in the middle of every wall
+segment; states are the free cells (about ``n``). Four moves; the intended move succeeds with
+probability 0.8 and slips to each
 perpendicular direction with 0.1; a move into a wall or off the grid stays put. Every step costs
 -1; the south-east free cell is the single goal (terminal, absorbing); episodes start uniformly
 on the other cells. Value therefore spreads from one cell, one cell per backup -- the hard case
@@ -23,8 +24,8 @@ def rooms_grid_mdp(
     n_states: int, *, room: int = 10, slip: float = 0.2, gamma: float = 0.95
 ) -> FiniteMDP:
     """The rooms grid described in the module docstring, with about ``n_states`` free cells."""
-    free_share = (room / (room + 1)) ** 2
-    side = max(room + 2, math.isqrt(int(n_states / free_share)) + 1)
+    rooms = max(1, round(math.sqrt(n_states) / room))  # rooms per side: whole rooms only
+    side = rooms * (room + 1) - 1
     r, c = np.divmod(np.arange(side * side, dtype=np.int64), side)
     wall_r, wall_c = (r % (room + 1)) == room, (c % (room + 1)) == room
     door_r = (c % (room + 1)) == room // 2  # doorway through a horizontal wall

@@ -51,7 +51,27 @@ GAMMA = 0.95
 EPSILON = 1e-6
 
 
-def pymdptoolbox_solver(mdp: FiniteMDP, epsilon: float) -> ValueIteration:
+def pymdptoolbox_arrays(mdp: FiniteMDP) -> tuple[tuple, tuple]:
+    """``(P, R)`` per action for pymdptoolbox: the same MDP in its format.
+
+    pymdptoolbox knows neither terminal states nor admissible actions, so a terminal state becomes
+    absorbing with reward 0 (its value, 0, is then the same as adpart's) and an inadmissible
+    action gets reward ``-1e12`` and no successors (it never attains a maximum). With no terminal
+    states every row keeps discount ``gamma``, so its span rule stays valid.
+    """
+    S, A = mdp.n_states, mdp.n_actions
+    smdp = mdp.as_smdp()
+    stay = sp.diags_array(mdp.terminal.astype(np.float64), format="csr")
+    P, R = [], []
+    for a in range(A):
+        Pa = sp.csr_matrix(smdp.F[a * S:(a + 1) * S] / mdp.gamma + stay)
+        P.append(Pa)
+        R.append(np.where(mdp.admissible[:, a], smdp.R[:, a], -1e12))
+    return tuple(P), tuple(R)
+
+
+def pymdptoolbox_solver(mdp: FiniteMDP, epsilon: float, arrays: tuple | None = None
+                        ) -> ValueIteration:
     """pymdptoolbox's ValueIteration for ``mdp``, built past its dense input check.
 
     Sets exactly the attributes ``MDP.__init__`` and ``ValueIteration.__init__`` set, except that
@@ -59,13 +79,14 @@ def pymdptoolbox_solver(mdp: FiniteMDP, epsilon: float) -> ValueIteration:
     large, so the solve stops only by the epsilon-optimality rule.
     """
     S, A = mdp.n_states, mdp.n_actions
+    P, R = pymdptoolbox_arrays(mdp) if arrays is None else arrays
     vi = ValueIteration.__new__(ValueIteration)
     vi.discount = float(mdp.gamma)
     vi.epsilon = float(epsilon)
     vi.max_iter = 1_000_000
     vi.S, vi.A = S, A
-    vi.P = tuple(sp.csr_matrix(mdp.P[a * S : (a + 1) * S]) for a in range(A))
-    vi.R = tuple(np.ascontiguousarray(mdp.R[:, a]) for a in range(A))
+    vi.P = P
+    vi.R = R
     vi.verbose = False
     vi.time = None
     vi.iter = 0
