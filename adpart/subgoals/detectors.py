@@ -61,13 +61,13 @@ class CountMonteCarlo:
               min=1),
         Param("stop", "str", "passes", "stopping rule (passes: two passes over the start "
               "states agree)", choices=("passes", "either", "bernstein", "stable", "max")),
-        Param("max-samples", "int", 200_000, "most trajectories sampled", min=1),
+        Param("max-samples", "int", 50_000, "most trajectories sampled", min=1),
         _LOOP,
     )
 
     def __init__(self, p: float = 0.025, trajectories: int = 30, n: int = 0, batch: int = 50,
                  epsilon: float = 2.0, confidence: float = 0.9, stable_batches: int = 3,
-                 stop: str = "passes", max_samples: int = 200_000,
+                 stop: str = "passes", max_samples: int = 50_000,
                  on_loop: str = "error") -> None:
         self.kw = {"p": p, "trajectories": trajectories, "n": n, "batch": batch,
                    "epsilon": epsilon, "confidence": confidence, "stable_batches": stable_batches,

@@ -130,7 +130,7 @@ def discover_monte_carlo(
     confidence: float = 0.9,
     stable_batches: int = 3,
     stop: str = "passes",
-    max_samples: int = 200_000,
+    max_samples: int = 50_000,
     horizon: int | None = None,
     on_loop: str = "error",
 ) -> SubgoalResult:
@@ -146,17 +146,18 @@ def discover_monte_carlo(
     subgoal set are recomputed and recorded (the data of Figs. 5.7/5.12). Sampling stops by
     ``stop``: ``"passes"`` (default) at the end of a full pass over the start states (every
     ``|S|`` samples) once the subgoal sets of the last two passes have a Jaccard index of at
-    least :data:`PASS_AGREEMENT` (after one pass when the policy and dynamics are deterministic,
-    the counts then being exact, or when ``|S| > max_samples / 2``: then the cap decides; a
-    batch is then a pass); ``"bernstein"`` when the sample count meets eq. 4.3 with the current
-    ``max C_H`` and ``epsilon`` (the seed's rule; it stops after a few hundred samples, far
-    too early for the counts to be accurate to ``epsilon``, because eq. 4.3 bounds each
-    trajectory's count by ``max C_H`` rather than by ``|S|``); ``"stable"`` when the subgoal
-    set has not changed over ``stable_batches`` batches; ``"either"`` whichever of those two
-    comes first; ``"max"`` only at ``max_samples``. A state is a subgoal when some path reaches
-    ``mu + 2 eps_N / max(1, Delta_H(s_{t+1}))`` (theorem 4.3), with ``eps_N`` the accuracy the
-    samples drawn so far guarantee by eq. 4.3 (``bernstein_epsilon``; at most ``epsilon`` once
-    the Bernstein count is met).
+    least :data:`PASS_AGREEMENT`, or after one pass when the policy and dynamics are
+    deterministic (the counts are then exact); a batch is then a pass. When those passes do not
+    fit under ``max_samples`` (a large model, where the exhaustive count is what Monte Carlo is
+    meant to avoid) the rule is ``"either"``; ``"bernstein"`` when the sample count meets eq.
+    4.3 with the current ``max C_H`` and ``epsilon`` (the seed's rule; it stops after a few
+    hundred samples, far too early for the counts to be accurate to ``epsilon``, because eq. 4.3
+    bounds each trajectory's count by ``max C_H`` rather than by ``|S|``); ``"stable"`` when the
+    subgoal set has not changed over ``stable_batches`` batches; ``"either"`` whichever of those
+    two comes first; ``"max"`` only at ``max_samples``. A state is a subgoal when some path
+    reaches ``mu + 2 eps_N / max(1, Delta_H(s_{t+1}))`` (theorem 4.3), with ``eps_N`` the
+    accuracy the samples drawn so far guarantee by eq. 4.3 (``bernstein_epsilon``; at most
+    ``epsilon`` once the Bernstein count is met).
 
     Args:
         epsilon: the count accuracy ``eps_N`` of theorems 4.2-4.3 the ``"bernstein"`` rule aims
@@ -188,6 +189,8 @@ def discover_monte_carlo(
     # deterministic dynamics and policy: one stratified pass of expected arrivals is C* itself
     deterministic = pol.ndim == 1 and bool(
         np.all(np.diff(mdp.P.indptr)[pol * S + np.arange(S)] <= 1))
+    if stop == "passes" and (S if deterministic else 2 * S) > max_samples:
+        stop = "either"  # the passes the rule needs do not fit under the cap: a large model
     starts = StartStream(S, rng)
     # the count samples are drawn apart from the ratio paths (stratified starts, expected
     # arrivals); the first batch is as large as the ratio paths were
@@ -226,9 +229,7 @@ def discover_monte_carlo(
         )
         if stop == "passes" and n_samples % S == 0:
             pass_sets.append(subgoals)
-            # one pass: the cap would stop a second one, or the counts are already exact
-            one_pass = 2 * S > max_samples or deterministic
-            if one_pass or (len(pass_sets) >= 2
+            if deterministic or (len(pass_sets) >= 2
                             and _jaccard(pass_sets[-2], subgoals) >= PASS_AGREEMENT):
                 reason = "passes"
                 break
