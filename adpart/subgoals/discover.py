@@ -53,6 +53,20 @@ def _positive_int(value: object, what: str, low: int = 1) -> int:
     return int(value)
 
 
+def _sample_epsilon(counts: np.ndarray, rs: RatioSamples, n: int, epsilon: float,
+                    confidence: float) -> np.ndarray:
+    """Theorem 4.3's ``eps_N`` per ratio sample: the accuracy eq. 4.3 guarantees after ``n``
+    samples with ``a = max(C_H(s_t), C_H(s_{t+1}))``, the largest count the sample's two
+    states reach (the proof's ``max_t C_H(s_t)`` taken over the states the bound is used for),
+    at most ``epsilon``. A global maximum would let one looping state's huge count raise
+    every threshold."""
+    c_t = counts[rs.states]
+    a = np.maximum(c_t, c_t + rs.next_delta)
+    cl = np.maximum(a, 0.0) * np.log(2.0 / (1.0 - confidence))
+    eps = (cl + np.sqrt(cl * cl + 2.0 * n * cl)) / n
+    return np.minimum(epsilon, eps)
+
+
 def _jaccard(a: np.ndarray, b: np.ndarray) -> float:
     union = np.union1d(a, b).size
     return np.intersect1d(a, b).size / union if union else 1.0
@@ -156,8 +170,8 @@ def discover_monte_carlo(
     subgoal set has not changed over ``stable_batches`` batches; ``"either"`` whichever of those
     two comes first; ``"max"`` only at ``max_samples``. A state is a subgoal when some path
     reaches ``mu + 2 eps_N / max(1, Delta_H(s_{t+1}))`` (theorem 4.3), with ``eps_N`` the
-    accuracy the samples drawn so far guarantee by eq. 4.3 (``bernstein_epsilon``; at most
-    ``epsilon`` once the Bernstein count is met).
+    accuracy the samples drawn so far guarantee by eq. 4.3 for the sample's two states
+    (:func:`_sample_epsilon`; at most ``epsilon``).
 
     Args:
         epsilon: the count accuracy ``eps_N`` of theorems 4.2-4.3 the ``"bernstein"`` rule aims
@@ -216,7 +230,7 @@ def discover_monte_carlo(
         rs = gradient_ratios(counts, triples)
         mu, nu, sd, n_ps = _threshold(rs, S, p, n)
         max_c = float(counts.max())
-        eps_n = min(epsilon, bernstein_epsilon(n_samples, max_c, confidence))
+        eps_n = _sample_epsilon(counts, rs, n_samples, epsilon, confidence)
         passed = rs.ratios > mu + 2.0 * eps_n / np.maximum(1.0, rs.next_delta)
         subgoals = np.unique(rs.states[passed])
         needed = bernstein_samples(max_c, epsilon, confidence)
