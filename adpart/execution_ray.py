@@ -29,7 +29,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from adpart.errors import AdpartError
-from adpart.execution import Executor
+from adpart.execution import WORKER_THREAD_ENV, Executor
 from adpart.plugins.registry import Param
 
 T = TypeVar("T")
@@ -88,6 +88,11 @@ def _internalize(value: Any, get: Callable[[Any], Any]) -> Any:
     if isinstance(value, list | tuple) and not hasattr(value, "_fields"):
         return type(value)(_internalize(v, get) for v in value)
     return value
+
+
+#: Ray workers get the local pool's thread settings (:data:`adpart.execution.WORKER_THREAD_ENV`)
+#: through their runtime environment, set before the worker process imports numba.
+_RUNTIME_ENV: dict[str, Any] = {"env_vars": dict(WORKER_THREAD_ENV)}
 
 
 def _apply(fn: Callable[[Any], Any], item: Any) -> Any:
@@ -166,10 +171,12 @@ class RayExecutor(Executor):
                     num_cpus=self.num_cpus or None,
                     include_dashboard=False,
                     logging_level=logging.WARNING,
+                    runtime_env=_RUNTIME_ENV,
                 )
                 self._started = True
             else:
-                ray.init(address=self.address, logging_level=logging.WARNING)
+                ray.init(address=self.address, logging_level=logging.WARNING,
+                         runtime_env=_RUNTIME_ENV)
         except (ConnectionError, RuntimeError, TimeoutError, ValueError) as exc:
             where = (
                 "a local Ray" if self.address is None else f"the Ray cluster at {self.address!r}"
@@ -201,9 +208,13 @@ class RayExecutor(Executor):
     def _remote(self) -> Any:
         ray = import_ray()
         if self._task is None:
-            self._task = ray.remote(_apply).options(
-                max_retries=self.max_retries, retry_exceptions=self.retry_exceptions
-            )
+            options: dict[str, Any] = {
+                "max_retries": self.max_retries, "retry_exceptions": self.retry_exceptions
+            }
+            if not self._started and self.address is None:
+                # a Ray the caller initialised: its job-level environment is not ours to set
+                options["runtime_env"] = _RUNTIME_ENV
+            self._task = ray.remote(_apply).options(**options)
         return self._task
 
     def _submit(self, fn: Callable[[Any], Any], items: Iterable[Any]) -> list[Any]:

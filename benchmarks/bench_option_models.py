@@ -10,7 +10,9 @@ Workloads:
 Figures: time to build the options (pseudo-reward value iteration, not part of the comparison);
 time for the exact models of all options (``option_models``: LU of ``I - gamma P_pi C`` for R and
 F, serial, duration off, as the reference computes no duration), the same through a
-``LocalExecutor`` of 2 workers, and the reference ``option_model_by_iteration`` (``R`` and ``F``
+``LocalExecutor`` of 2 workers - cold (the first call starts the pool: forkserver, each worker's
+import of adpart and the model shipped to it) and warm (a second call on the running pool) - and
+the reference ``option_model_by_iteration`` (``R`` and ``F``
 iterated from zero until the contraction bound ``gamma/(1-gamma) * change < 1e-10``); the ratio
 reference / exact; and the largest difference between the two models.
 """
@@ -43,6 +45,7 @@ def compare(label: str, mdp: FiniteMDP, options: list[Option], build_s: float) -
     exact, t_exact = _timed(lambda: option_models(mdp, options, duration=False))
     with LocalExecutor(workers=2) as ex:
         _, t_par = _timed(lambda: option_models(mdp, options, executor=ex, duration=False))
+        _, t_warm = _timed(lambda: option_models(mdp, options, executor=ex, duration=False))
     t0 = time.perf_counter()
     iters, diff = [], 0.0
     for o, m in zip(options, exact, strict=True):
@@ -54,7 +57,8 @@ def compare(label: str, mdp: FiniteMDP, options: list[Option], build_s: float) -
     print(f"{label}: {mdp.n_states} states, {len(options)} options, |I| {min(sizes)}-{max(sizes)} "
           f"(mean {np.mean(sizes):.0f}); building the options {build_s:.2f} s")
     print(f"  exact (LU, serial)        {t_exact:8.3f} s")
-    print(f"  exact (LU, 2 workers)     {t_par:8.3f} s")
+    print(f"  exact (LU, 2 workers)     {t_par:8.3f} s cold (x{t_par / t_exact:.2f} serial: "
+          f"includes starting the pool), {t_warm:8.3f} s warm (x{t_warm / t_exact:.2f} serial)")
     print(f"  Bellman iteration         {t_iter:8.3f} s  ({int(np.mean(iters))} iterations on "
           f"average)")
     print(f"  ratio iteration / LU      {t_iter / t_exact:8.1f}x   max |difference| {diff:.1e}")

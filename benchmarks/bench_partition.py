@@ -23,7 +23,13 @@ Compared, on the same model in the same run:
 Second part: :func:`adpart.partition.refine` with ``delta = 0.3`` (eq. 4.6, reward independent)
 over 20 options - for each of the four moves, the open-loop macro "repeat the move k times",
 ``k = 1..5``, with the discounted model ``F = (gamma P_a)^k`` - on ``lumpable_grid_mdp`` grids of
-increasing size, starting from the reward-strip partition; reported with its scaling exponent.
+increasing size, starting from the reward-strip partition; reported with its scaling exponent,
+against exact lumping of the same 20-option model (the reference: the worklist's cost per split
+should stay within a small factor of it), and against the earlier round-based refiner
+(:func:`adpart.partition.refine.delta_refine_rounds`, up to ``rounds_max`` states), with block
+counts of both and the independent delta-stability checker run on the result (up to
+``check_max`` states). Last, ``refine(delta=0, epsilon=0)`` (routed to exact lumping) against
+Storm on the same grid.
 """
 
 from __future__ import annotations
@@ -38,11 +44,12 @@ import scipy.sparse as sp
 
 from adpart.mdp.generate import GRID_ACTION_NAMES, GRID_MOVES, _canonical_csr
 from adpart.mdp.model import FiniteMDP, SMDPModel
-from adpart.partition import Partition, exact_lumping, refine
+from adpart.partition import Partition, check_stability, exact_lumping, refine
 from adpart.partition.partition import canonical_labels
+from adpart.partition.refine import delta_refine_rounds
 
 SIZES = (10_000, 100_000, 1_000_000)
-DELTA_SIZES = (10_000, 30_000, 100_000)
+DELTA_SIZES = (10_000, 100_000, 1_000_000)
 
 
 def lumpable_grid_mdp(n_states: int, *, slip: float = 0.2, gamma: float = 0.95) -> FiniteMDP:
@@ -167,8 +174,20 @@ def _best(fn, repeats: int) -> tuple[float, object]:
     return best, out
 
 
+def _stacked(model: SMDPModel, start: Partition) -> tuple[np.ndarray, sp.csr_array, int]:
+    """The labels and stacked rows :func:`refine` hands its delta stage (for the old refiner)."""
+    from adpart.partition._validate import masked_rows, select_options, selected_admissible
+    from adpart.partition.partition import combine_labels, row_codes
+
+    sel = select_options(model, None)
+    adm = selected_admissible(model, sel)
+    labels = combine_labels(start.labels, row_codes(adm[:, sel]))
+    return labels, masked_rows(model, sel, adm), sel.size
+
+
 def main(sizes: tuple[int, ...] = SIZES, delta_sizes: tuple[int, ...] = DELTA_SIZES,
-         naive_max: int = 100_000, repeats: int = 2, storm: bool = True) -> dict[str, object]:
+         naive_max: int = 100_000, repeats: int = 2, storm: bool = True,
+         rounds_max: int = 100_000, check_max: int = 100_000) -> dict[str, object]:
     """Print and return the exact-lumping table and the delta = 0.3 scaling table."""
     exact_lumping(lumpable_grid_mdp(400))  # compile the numba kernels outside the timings
     try:
@@ -207,20 +226,56 @@ def main(sizes: tuple[int, ...] = SIZES, delta_sizes: tuple[int, ...] = DELTA_SI
               f"{fmt('storm_load_s', 7)} {ratio_s} {fmt('naive_s', 8)} {ratio_n} {agree}",
               flush=True)
 
-    print("\ndelta = 0.3 refinement over 20 macro options (reward independent), lumpable_grid_mdp")
-    print(f"{'states':>9} {'blocks':>7} {'seconds':>8} {'options':>7}")
+    print("\ndelta = 0.3 refinement over 20 macro options (reward independent), lumpable_grid_mdp;")
+    print("reference: exact lumping of the same 20-option model; 'rounds' = the earlier "
+          f"round-based refiner (up to {rounds_max:,} states)")
+    print(f"{'states':>9} {'blocks':>7} {'worklist s':>10} {'exact s':>8} {'wl/exact':>8} "
+          f"{'rounds s':>9} {'r blocks':>8} {'rounds/wl':>9} {'delta-stable':>12}")
     drows = []
     for n in delta_sizes:
         mdp = lumpable_grid_mdp(n)
         model = macro_options(mdp)
         start = Partition.from_labels(mdp.R[:, 0].astype(np.int64), model.admissible)
         t, part = _best(lambda model=model, start=start: refine(start, model, delta=0.3), 1)
-        drows.append({"states": mdp.n_states, "blocks": part.n_blocks, "seconds": t})
-        print(f"{mdp.n_states:>9} {part.n_blocks:>7} {t:>8.2f} {model.n_actions:>7}", flush=True)
+        t_ex, ex = _best(lambda model=model, start=start: exact_lumping(
+            model, initial=start, use_rewards=False), 1)
+        row = {"states": mdp.n_states, "blocks": part.n_blocks, "seconds": t,
+               "exact_s": t_ex, "exact_blocks": ex.n_blocks, "ratio_exact": t / t_ex}
+        if mdp.n_states <= rounds_max:
+            labels, F, k = _stacked(model, start)
+            t_r, (old, _) = _best(
+                lambda labels=labels, F=F, k=k: delta_refine_rounds(labels, F, k, 0.3, 1e-9), 1)
+            row.update(rounds_s=t_r, rounds_blocks=int(old.max()) + 1)
+        stable = "-"
+        if mdp.n_states <= check_max:
+            stable = str(bool(check_stability(part, model, delta=0.3)))
+        row["stable"] = stable
+        drows.append(row)
+        r_s = f"{row['rounds_s']:>9.2f}" if "rounds_s" in row else f"{'-':>9}"
+        r_b = f"{row['rounds_blocks']:>8}" if "rounds_blocks" in row else f"{'-':>8}"
+        r_r = f"{row['rounds_s'] / t:>9.1f}" if "rounds_s" in row else f"{'-':>9}"
+        print(f"{mdp.n_states:>9} {part.n_blocks:>7} {t:>10.2f} {t_ex:>8.2f} {t / t_ex:>8.2f} "
+              f"{r_s} {r_b} {r_r} {stable:>12}", flush=True)
+        del model
     if len(drows) >= 2:
         a, b = drows[0], drows[-1]
         expo = math.log(b["seconds"] / a["seconds"]) / math.log(b["states"] / a["states"])
-        print(f"scaling exponent (time ~ states^x): x = {expo:.2f}")
+        ex_expo = math.log(b["exact_s"] / a["exact_s"]) / math.log(b["states"] / a["states"])
+        print(f"scaling exponent (time ~ states^x) {a['states']:,} to {b['states']:,}: "
+              f"worklist x = {expo:.2f}, exact lumping x = {ex_expo:.2f}")
+        olds = [r for r in drows if "rounds_s" in r]
+        if len(olds) >= 2:
+            a, b = olds[0], olds[-1]
+            expo_r = math.log(b["rounds_s"] / a["rounds_s"]) / math.log(b["states"] / a["states"])
+            print(f"  round-based refiner {a['states']:,} to {b['states']:,}: x = {expo_r:.2f}")
+    if storm:
+        mdp = lumpable_grid_mdp(delta_sizes[0])
+        t0, part0 = _best(lambda: refine(Partition.from_labels(
+            mdp.R[:, 0].astype(np.int64), mdp.admissible), mdp, delta=0.0, epsilon=0.0), repeats)
+        st = storm_bisimulation(mdp)
+        print(f"refine(delta=0, epsilon=0) on lumpable_grid_mdp({delta_sizes[0]:_}): {t0:.3f} s, "
+              f"{part0.n_blocks} blocks; Storm {st['bisim_s']:.3f} s, {st['blocks']} blocks; "
+              f"adpart/Storm = {t0 / st['bisim_s']:.2f}")
     return {"lumping": rows, "delta": drows}
 
 

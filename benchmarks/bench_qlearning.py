@@ -10,6 +10,13 @@ streams and produce bit-identical Q tables (checked here), so the comparison is 
 * ``numba``   -- the round loop compiled with numba (the default kernel), once on one thread
   and once on all of numba's threads (one per core).
 
+End to end (issue 22): :func:`adpart.learning.q_learning` on the 10^5-state rooms grid
+(``benchmarks._models.rooms_grid_mdp``), K = 50 runs, 1 M agent-steps, one evaluation at the end.
+The call's time is split into the kernel, the exact scoring (one sparse LU per distinct greedy
+policy, the learning curve's value gap) and the rest, the learner's overhead, printed as a ratio
+of the kernel's time. The old deduplication, ``np.unique(policies, axis=0)``, is timed on the same
+policies beside :func:`adpart.learning.curves.distinct_rows`.
+
 For scale, Gymnasium's Taxi-v4 is stepped through ``gymnasium.Env.step`` with random actions.
 Figures are agent-steps per second of wall time, including the refills of the uniform buffers;
 ratios are against the Python loop measured in the same run (best of ``repeats`` timings, after
@@ -88,6 +95,71 @@ def _taxi_steps_per_second(n_steps: int = 100_000) -> float:
     return n_steps / seconds
 
 
+def end_to_end(n_states: int = 100_000, runs: int = 50, agent_steps: int = 1_000_000,
+               horizon: int = 200, repeats: int = 3) -> dict:
+    """Kernel, scoring and overhead of one ``q_learning()`` call (best of ``repeats``)."""
+    from adpart.learning import curves, qlearning
+    from adpart.mdp.solvers import greedy_policy, policy_evaluation, solve
+    from benchmarks._models import rooms_grid_mdp
+
+    mdp = rooms_grid_mdp(n_states)
+    V = policy_evaluation(mdp, solve(mdp, 1e-10).policy)
+    episodes = max(1, agent_steps // (runs * horizon))
+    timers = {"kernel": 0.0, "scoring": 0.0}
+
+    def timed(f, key):
+        def g(*args, **kwargs):
+            t = time.perf_counter()
+            out = f(*args, **kwargs)
+            timers[key] += time.perf_counter() - t
+            return out
+        return g
+
+    name = qlearning.default_kernel()
+    kernel, evaluate = _kernels.KERNELS[name], curves.policy_evaluation
+    _kernels.KERNELS[name] = timed(kernel, "kernel")
+    curves.policy_evaluation = timed(evaluate, "scoring")
+    best = None
+    try:
+        qlearning.q_learning(mdp, runs=2, episodes=1, max_steps_per_episode=5,
+                             reference_values=V, seed=0)  # warm-up (compiled code, caches)
+        for _ in range(repeats):
+            timers.update(kernel=0.0, scoring=0.0)
+            t0 = time.perf_counter()
+            result = qlearning.q_learning(mdp, runs=runs, episodes=episodes,
+                                          max_steps_per_episode=horizon, eval_every=episodes,
+                                          reference_values=V, seed=0)
+            total = time.perf_counter() - t0
+            row = {"total_s": total, **{f"{k}_s": v for k, v in timers.items()}}
+            row["overhead_s"] = total - timers["kernel"] - timers["scoring"]
+            if best is None or row["overhead_s"] < best["overhead_s"]:
+                best = row
+    finally:
+        _kernels.KERNELS[name], curves.policy_evaluation = kernel, evaluate
+    policies = greedy_policy(result.Q.reshape(-1, mdp.n_actions)).reshape(runs, -1)
+    t0 = time.perf_counter()
+    first, _ = curves.distinct_rows(policies)
+    t_hash = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    n_unique = np.unique(policies, axis=0).shape[0]
+    t_unique = time.perf_counter() - t0
+    assert n_unique == first.size
+    steps = int(result.curve["steps"].sum())
+    print(f"bench_qlearning end to end: q_learning() on rooms_grid_mdp({n_states:_}) "
+          f"({mdp.n_states:,} states), K={runs}, {steps:,} agent-steps, one evaluation")
+    print(f"  call {best['total_s']:.3f} s = kernel {best['kernel_s']:.3f} s + exact scoring of "
+          f"{first.size} distinct policies {best['scoring_s']:.3f} s + overhead "
+          f"{best['overhead_s']:.3f} s")
+    print(f"  overhead / kernel = {best['overhead_s'] / best['kernel_s']:.2f}  (target <= 0.20); "
+          f"(overhead + scoring) / kernel = "
+          f"{(best['overhead_s'] + best['scoring_s']) / best['kernel_s']:.1f}")
+    print(f"  distinct policies: hashed rows {t_hash * 1e3:.1f} ms vs np.unique(axis=0) "
+          f"{t_unique * 1e3:.1f} ms  (x{t_hash / t_unique:.3f})")
+    return {**best, "agent_steps": steps, "distinct_policies": int(first.size),
+            "overhead_per_kernel": best["overhead_s"] / best["kernel_s"],
+            "hash_vs_unique": t_hash / t_unique}
+
+
 def main(runs: int = 50, episodes: int = 100, horizon: int = 200, repeats: int = 3) -> dict:
     """Print agent-steps/s of each kernel and the ratios; return the figures."""
     mdp = random_grid_mdp(10_000, gamma=0.95, seed=0)
@@ -114,7 +186,9 @@ def main(runs: int = 50, episodes: int = 100, horizon: int = 200, repeats: int =
           f"x{taxi / rates['python']:6.2f} the Python loop")
     print(f"  kernels bit-identical: {identical}; default kernel: "
           f"{'numba' if _kernels.numba_available() else 'numpy'}")
+    e2e = end_to_end()
     return {
+        "end_to_end": e2e,
         "agent_steps": n_py,
         "steps_per_second": rates,
         "ratio_numba_1_thread_vs_python": rates["numba-1-thread"] / rates["python"],

@@ -51,7 +51,27 @@ GAMMA = 0.95
 EPSILON = 1e-6
 
 
-def pymdptoolbox_solver(mdp: FiniteMDP, epsilon: float) -> ValueIteration:
+def pymdptoolbox_arrays(mdp: FiniteMDP) -> tuple[tuple, tuple]:
+    """``(P, R)`` per action for pymdptoolbox: the same MDP in its format.
+
+    pymdptoolbox knows neither terminal states nor admissible actions, so a terminal state becomes
+    absorbing with reward 0 (its value, 0, is then the same as adpart's) and an inadmissible
+    action gets reward ``-1e12`` and no successors (it never attains a maximum). With no terminal
+    states every row keeps discount ``gamma``, so its span rule stays valid.
+    """
+    S, A = mdp.n_states, mdp.n_actions
+    smdp = mdp.as_smdp()
+    stay = sp.diags_array(mdp.terminal.astype(np.float64), format="csr")
+    P, R = [], []
+    for a in range(A):
+        Pa = sp.csr_matrix(smdp.F[a * S:(a + 1) * S] / mdp.gamma + stay)
+        P.append(Pa)
+        R.append(np.where(mdp.admissible[:, a], smdp.R[:, a], -1e12))
+    return tuple(P), tuple(R)
+
+
+def pymdptoolbox_solver(mdp: FiniteMDP, epsilon: float, arrays: tuple | None = None
+                        ) -> ValueIteration:
     """pymdptoolbox's ValueIteration for ``mdp``, built past its dense input check.
 
     Sets exactly the attributes ``MDP.__init__`` and ``ValueIteration.__init__`` set, except that
@@ -59,13 +79,14 @@ def pymdptoolbox_solver(mdp: FiniteMDP, epsilon: float) -> ValueIteration:
     large, so the solve stops only by the epsilon-optimality rule.
     """
     S, A = mdp.n_states, mdp.n_actions
+    P, R = pymdptoolbox_arrays(mdp) if arrays is None else arrays
     vi = ValueIteration.__new__(ValueIteration)
     vi.discount = float(mdp.gamma)
     vi.epsilon = float(epsilon)
     vi.max_iter = 1_000_000
     vi.S, vi.A = S, A
-    vi.P = tuple(sp.csr_matrix(mdp.P[a * S : (a + 1) * S]) for a in range(A))
-    vi.R = tuple(np.ascontiguousarray(mdp.R[:, a]) for a in range(A))
+    vi.P = P
+    vi.R = R
     vi.verbose = False
     vi.time = None
     vi.iter = 0
@@ -179,6 +200,139 @@ def _print_row(r: dict) -> None:
     )
 
 
+ROOMS_SIZES = (10_000, 100_000, 1_000_000)
+DOMAINS = ("three-floor", "urban", "taxi", "three-floor-arm")
+
+
+def _rss_mb() -> float:
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith("VmRSS"):
+                return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+def _peak_mb(fn: Callable[[], object]) -> tuple[float, object]:
+    """Peak resident memory of ``fn()`` above the resident memory before it (Linux), in MB."""
+    try:
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")  # resets the peak (VmHWM) to the current resident size
+    except OSError:
+        return float("nan"), fn()
+    before = _rss_mb()
+    out = fn()
+    with open("/proc/self/status") as f:
+        hwm = next(int(line.split()[1]) / 1024 for line in f if line.startswith("VmHWM"))
+    return hwm - before, out
+
+
+def _smdp_policy_loss(smdp, policy: np.ndarray, V_star: np.ndarray, exact: bool
+                      ) -> tuple[float, float]:
+    """``(max(V* - V^pi), error bar)``: a direct solve when ``exact``, else ``T_pi`` iterated
+    200 times from ``V*`` (error ``kappa^200 / (1 - kappa) ||T_pi V* - V*||``)."""
+    if exact:
+        return float(np.max(V_star - policy_evaluation(smdp, policy))), 0.0
+    S = smdp.n_states
+    F_pi = smdp.F[policy * S + np.arange(S)]
+    R_pi = smdp.R[np.arange(S), policy]
+    V = V_star.copy()
+    first = float(np.abs(R_pi + F_pi @ V - V).max())
+    for _ in range(200):
+        V = R_pi + F_pi @ V
+    kappa = smdp.modulus
+    return float(np.max(V_star - V)), kappa**200 / (1 - kappa) * first
+
+
+def run_goal_model(name: str, mdp: FiniteMDP, *, epsilon: float = EPSILON, repeats: int = 3,
+                   memory: bool = False) -> dict:
+    """pymdptoolbox against vi, mpi, gs and ``solve()``'s default on one goal-directed model."""
+    from adpart.mdp.solvers import choose_method, gauss_seidel_value_iteration, solve
+
+    smdp = mdp.as_smdp()
+    arrays = pymdptoolbox_arrays(mdp)
+
+    def run_tool() -> ValueIteration:
+        vi = pymdptoolbox_solver(mdp, epsilon, arrays)
+        vi.run()
+        return vi
+
+    reps = repeats if mdp.n_states < 200_000 else 1
+    t_tool, tool = _best_time(run_tool, reps)
+    t_vi, sol_vi = _best_time(lambda: value_iteration(mdp, epsilon), reps)
+    t_mpi, sol_mpi = _best_time(lambda: modified_policy_iteration(mdp, epsilon), reps)
+    t_gs, sol_gs = _best_time(lambda: gauss_seidel_value_iteration(mdp, epsilon), reps)
+    t_def, sol_def = _best_time(lambda: solve(mdp, epsilon), reps)
+    row = {"name": name, "n": mdp.n_states, "default": choose_method(mdp),
+           "tool_time": t_tool, "tool_sweeps": tool.iter, "vi_time": t_vi,
+           "vi_sweeps": sol_vi.sweeps, "mpi_time": t_mpi,
+           "mpi_sweeps": f"{sol_mpi.sweeps}+{sol_mpi.evaluation_sweeps}", "gs_time": t_gs,
+           "gs_sweeps": sol_gs.sweeps, "default_time": t_def}
+    if memory:
+        del arrays
+        row["tool_mb"], _ = _peak_mb(lambda: run_tool_fresh(mdp, epsilon))
+        row["default_mb"], _ = _peak_mb(lambda: solve(mdp, epsilon))
+    tight = gauss_seidel_value_iteration(mdp, 1e-9)
+    exact = mdp.n_states <= 20_000
+    losses = {}
+    for label, pol in (("pymdptoolbox", np.asarray(tool.policy, dtype=np.int64)),
+                       ("vi", sol_vi.policy), ("mpi", sol_mpi.policy), ("gs", sol_gs.policy),
+                       ("default", sol_def.policy)):
+        loss, err = _smdp_policy_loss(smdp, pol, tight.V, exact)
+        losses[label] = (loss, err + tight.value_error_bound)
+    row["losses"] = losses
+    return row
+
+
+def run_tool_fresh(mdp: FiniteMDP, epsilon: float) -> ValueIteration:
+    """pymdptoolbox including the conversion into its per-action format (for its memory)."""
+    vi = pymdptoolbox_solver(mdp, epsilon)
+    vi.run()
+    return vi
+
+
+def main_goal(rooms_sizes: Sequence[int] = ROOMS_SIZES, domains: Sequence[str] = DOMAINS,
+              epsilon: float = EPSILON) -> list[dict]:
+    """The goal-directed table: the peers' rooms grid and the built-in domains."""
+    from adpart.envs.registry import get_domain
+    from benchmarks._models import rooms_grid_mdp
+
+    print(f"\ngoal-directed models (single terminal goal / the domains' default tasks), "
+          f"epsilon = {epsilon:g}; times in s; ratio = adpart / pymdptoolbox (below 0.5 is the "
+          "target); 'default' is solve() with method='auto'")
+    header = (f"{'model':>22} {'states':>9} | {'pymdptb':>8} {'sw':>4} | {'vi':>7} {'sw':>4} "
+              f"{'ratio':>5} | {'mpi':>7} {'sw':>9} {'ratio':>5} | {'gs':>7} {'sw':>4} "
+              f"{'ratio':>5} | {'default':>7} {'ratio':>5} | memory MB tool/default")
+    print(header)
+    print("-" * len(header))
+    models = [(f"rooms-grid({n:_})", lambda n=n: rooms_grid_mdp(n)) for n in rooms_sizes]
+    models += [(d, lambda d=d: get_domain(d).mdp()) for d in domains]
+    rows = []
+    for name, make in models:
+        mdp = make()
+        r = run_goal_model(name, mdp, epsilon=epsilon, memory=mdp.n_states >= 500_000)
+        rows.append(r)
+        tt = r["tool_time"]
+        mem = (f"{r['tool_mb']:.0f}/{r['default_mb']:.0f} (x{r['default_mb'] / r['tool_mb']:.2f})"
+               if "tool_mb" in r else "-")
+        print(f"{name:>22} {r['n']:>9,d} | {tt:8.3f} {r['tool_sweeps']:>4d} | {r['vi_time']:7.3f} "
+              f"{r['vi_sweeps']:>4d} {r['vi_time'] / tt:5.2f} | {r['mpi_time']:7.3f} "
+              f"{r['mpi_sweeps']:>9} {r['mpi_time'] / tt:5.2f} | {r['gs_time']:7.3f} "
+              f"{r['gs_sweeps']:>4d} {r['gs_time'] / tt:5.2f} | {r['default_time']:7.3f} "
+              f"{r['default_time'] / tt:5.2f} ({r['default']}) | {mem}", flush=True)
+        del mdp
+    print("policy checks: loss = max(V* - V^pi) against a tight (epsilon = 1e-9) solve")
+    ok = True
+    for r in rows:
+        parts = []
+        for label, (loss, err) in r["losses"].items():
+            good = loss <= epsilon + err
+            ok &= good
+            parts.append(f"{label} {loss:.1e}{'' if good else ' FAIL'}")
+        print(f"{r['name']:>22}: " + "; ".join(parts))
+    print("all policies epsilon-optimal" if ok else "SOME POLICY IS NOT EPSILON-OPTIMAL")
+    return rows
+
+
 def main(sizes: Sequence[int] = SIZES, epsilon: float = EPSILON, repeats: int = 1) -> list[dict]:
     """Print the comparison table and the policy checks; return the figures."""
     print(
@@ -229,6 +383,7 @@ def main(sizes: Sequence[int] = SIZES, epsilon: float = EPSILON, repeats: int = 
             f"mpi {100 * r['agree_mpi']:.2f}%; span(V_pymdptoolbox - V_vi) {r['value_gap']:.1e}"
         )
     print("all policies epsilon-optimal" if ok else "SOME POLICY IS NOT EPSILON-OPTIMAL")
+    rows.extend(main_goal(epsilon=epsilon))
     return rows
 
 

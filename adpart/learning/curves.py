@@ -36,15 +36,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import scipy.sparse as sp
 
 from adpart.errors import ModelError, TaskError
-from adpart.mdp.model import SMDPModel
 from adpart.mdp.solvers import policy_evaluation, solve
 
 __all__ = [
     "COLUMNS",
     "LearningCurve",
+    "distinct_rows",
     "optimal_start_value",
     "plot_curves",
     "start_distribution",
@@ -326,14 +325,53 @@ def optimal_start_value(mdp, mu: np.ndarray, reference_values: np.ndarray | None
     return float(mu @ V)
 
 
-def start_values(mdp, policies: np.ndarray, mu: np.ndarray) -> np.ndarray:
-    """Exact ``sum_s mu(s) V^pi(s)`` of ``K`` deterministic policies, batched.
+def _row_hashes(a: np.ndarray) -> np.ndarray:
+    """One int64 per row of the int64 matrix ``a``: its dot product with fixed random odd
+    weights, wrapping modulo 2^64 (numpy integer matmul wraps silently)."""
+    weights = np.random.default_rng(0x5EED).integers(1, 2**62, size=a.shape[1]) | 1
+    return a @ weights
 
-    The distinct policies among the ``K`` rows are stacked into one block-diagonal one-option
-    model (state ``u*S + s`` of copy ``u`` follows policy ``u``) and evaluated with **one** call of
-    :func:`adpart.mdp.solvers.policy_evaluation`, i.e. one sparse LU of ``I - F_pi`` for all runs.
-    With ``gamma = 1`` a policy that never reaches a terminal state makes that system singular;
-    the policies are then evaluated one by one and such a policy scores NaN.
+
+def distinct_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(first, inverse)``: one row index per distinct row of ``rows`` and each row's group.
+
+    ``rows[first][inverse]`` equals ``rows``. Rows are hashed to one int64 each (a dot product
+    with fixed odd random weights, wrapping on overflow) and the ``K`` hashes deduplicated, then
+    every row is compared with its group's first row; only if two different rows shared a hash
+    (never seen; ~K^2 / 2^64) does it fall back to ``np.unique(axis=0)``. This replaces the
+    structured-dtype sort of ``np.unique(axis=0)``, which measured 2.2 s on a (50, 10^5) policy
+    matrix, with one pass over the matrix.
+
+    Args:
+        rows: ``(K, S)`` integer array.
+
+    Returns:
+        ``first`` (n_distinct,) int64 indices in order of first appearance and ``inverse``
+        (K,) int64 group of each row.
+    """
+    a = np.ascontiguousarray(rows, dtype=np.int64)
+    _, first, inverse = np.unique(_row_hashes(a), return_index=True, return_inverse=True)
+    inverse = np.asarray(inverse, dtype=np.int64).reshape(-1)
+    order = np.argsort(first, kind="stable")  # groups numbered by first appearance
+    rank = np.empty_like(order)
+    rank[order] = np.arange(order.size)
+    first, inverse = first[order].astype(np.int64), rank[inverse]
+    # K row comparisons (one per run, not per state) prove the hash grouping exact
+    if not all(np.array_equal(a[k], a[first[inverse[k]]]) for k in range(a.shape[0])):
+        _, first, inverse = np.unique(a, axis=0, return_index=True, return_inverse=True)
+        first, inverse = first.astype(np.int64), np.asarray(inverse, np.int64).reshape(-1)
+    return first, inverse
+
+
+def start_values(mdp, policies: np.ndarray, mu: np.ndarray) -> np.ndarray:
+    """Exact ``sum_s mu(s) V^pi(s)`` of ``K`` deterministic policies, once per distinct policy.
+
+    The distinct policies among the ``K`` rows (:func:`distinct_rows`) are evaluated one by one
+    with :func:`adpart.mdp.solvers.policy_evaluation`, one sparse LU of ``I - F_pi`` each (an
+    earlier version stacked them block-diagonally into one LU; its fill-reducing ordering on the
+    big matrix measured 2.5x slower than the separate LUs at 10^5 states, for the same values to
+    ~1e-13). With ``gamma = 1`` a policy that never reaches a terminal state makes its system
+    singular; that policy scores NaN.
 
     Args:
         mdp: the true model (anything with ``as_smdp()``).
@@ -346,32 +384,15 @@ def start_values(mdp, policies: np.ndarray, mu: np.ndarray) -> np.ndarray:
     smdp = mdp.as_smdp()
     S = smdp.n_states
     pols = np.asarray(policies, dtype=np.int64)
-    unique, inverse = np.unique(pols, axis=0, return_inverse=True)
-    inverse = np.asarray(inverse).reshape(-1)
-    n_unique = unique.shape[0]
-
-    def stacked(block: np.ndarray) -> tuple[SMDPModel, np.ndarray]:
-        n = block.shape[0]
-        states = np.tile(np.arange(S), n)
-        rows = block.reshape(-1) * S + states
-        F = smdp.F[rows]
-        counts = np.diff(F.indptr)
-        shift = np.repeat(np.repeat(np.arange(n, dtype=np.int64) * S, S), counts)
-        F_big = sp.csr_array((F.data, F.indices.astype(np.int64) + shift, F.indptr),
-                             shape=(n * S, n * S))
-        R_big = smdp.R[states, block.reshape(-1)][:, None]
-        model = SMDPModel(R=R_big, F=F_big, admissible=np.ones((n * S, 1), dtype=bool))
-        return model, np.zeros(n * S, dtype=np.int64)
-
+    first, inverse = distinct_rows(pols)
+    unique = pols[first]
     if not np.all(smdp.admissible[np.arange(S), unique]):
         raise ModelError("a policy to score chooses an inadmissible action")
-    try:
-        values = policy_evaluation(*stacked(unique)).reshape(n_unique, S) @ mu
-    except ModelError:
-        values = np.empty(n_unique)
-        for u in range(n_unique):
-            try:
-                values[u] = policy_evaluation(*stacked(unique[u:u + 1])) @ mu
-            except ModelError:
-                values[u] = np.nan
+    values = np.empty(first.size)
+    for u in range(first.size):  # one sparse solve per distinct policy (not per state)
+        try:
+            # einsum, not BLAS ddot: a threaded ddot spin-waits on a loaded machine (solvers._dot)
+            values[u] = np.einsum("i,i->", policy_evaluation(smdp, unique[u]), mu)
+        except ModelError:
+            values[u] = np.nan
     return values[inverse]

@@ -102,7 +102,13 @@ def _initial_state(
     adm_ptr = np.zeros(S + 1, dtype=np.int64)
     np.cumsum(np.bincount(rows, minlength=S), out=adm_ptr[1:])
     start_cdf = np.cumsum(mu)
-    Q = np.where(adm, float(q_init), -np.inf)
+    # One (K, S, A) allocation, written only where it is not 0: np.zeros maps untouched pages
+    # lazily, so with q_init = 0 the kernel pays only for the rows it visits.
+    Q = np.zeros((runs, S, A))
+    if q_init != 0.0:
+        Q.fill(float(q_init))
+    if not adm.all():
+        Q[:, ~adm] = -np.inf
     st = _kernels.LockStepState(
         keys=keys,
         indptr=indptr,
@@ -117,7 +123,7 @@ def _initial_state(
         horizon=horizon,
         alpha=alpha.params(),
         eps=epsilon.params(),
-        Q=np.broadcast_to(Q, (runs, S, A)).copy(),
+        Q=Q,
         n_sa=np.zeros((runs, S, A), dtype=np.int64),
         n_s=np.zeros((runs, S), dtype=np.int64),
         state=np.zeros(runs, dtype=np.int64),
@@ -137,6 +143,20 @@ def _initial_state(
     )
     st.episode_factors(np.arange(runs))
     return st
+
+
+def _greedy_policies(st: _kernels.LockStepState, unvisited: np.ndarray) -> np.ndarray:
+    """``(K, S)`` greedy policies (lowest index on ties), reading only the visited rows of Q.
+
+    ``Q[k, s]`` changes only when run ``k`` updates from ``s``, which counts ``n_s[k, s]``; an
+    unvisited row still holds its initial values, whose greedy action is ``unvisited[s]``.
+    The result equals ``greedy_policy`` of all of Q, without a pass over the (K, S, A) table.
+    """
+    K, S = st.n_s.shape
+    policies = np.broadcast_to(unvisited, (K, S)).copy()
+    runs, states = np.nonzero(st.n_s)
+    policies[runs, states] = greedy_policy(st.Q[runs, states])
+    return policies
 
 
 def q_learning(
@@ -195,6 +215,7 @@ def q_learning(
     mu = start_distribution(mdp)
     v_star = optimal_start_value(mdp, mu, reference_values)
     st = _initial_state(mdp, K, N, H, alpha_s, eps_s, q_init, mu)
+    unvisited_policy = greedy_policy(np.where(mdp.admissible, float(q_init), -np.inf))
     rngs = np.random.default_rng(root_seed).spawn(K)
     st.state[:] = [st.start_state(rng.random()) for rng in rngs]
 
@@ -206,7 +227,7 @@ def q_learning(
             for k in np.flatnonzero((st.cursor == BLOCK_ROWS) & (st.episode < st.target)):
                 rngs[k].random(out=st.U[k])
                 st.cursor[k] = 0
-        policies = greedy_policy(st.Q.reshape(-1, mdp.n_actions)).reshape(K, -1)
+        policies = _greedy_policies(st, unvisited_policy)
         eval_value[:, boundary - 1] = start_values(mdp, policies, mu)
         if progress is not None:
             progress(boundary, N)

@@ -3,6 +3,7 @@
 from adpart.mdp.model import FiniteMDP, SMDPModel
 from adpart.mdp.solvers import (
     Solution,
+    gauss_seidel_value_iteration,
     greedy_policy,
     modified_policy_iteration,
     policy_evaluation,
@@ -15,6 +16,7 @@ __all__ = [
     "FiniteMDP",
     "SMDPModel",
     "Solution",
+    "gauss_seidel_value_iteration",
     "greedy_policy",
     "modified_policy_iteration",
     "policy_evaluation",

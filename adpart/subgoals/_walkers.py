@@ -8,6 +8,8 @@ gives the same draws as numpy would):
   vectorised numpy walker did (time step by time step; per step first one action uniform per
   running walker for a stochastic policy, then one successor uniform per running walker, walkers
   in index order), so the ratio paths of a seed are the same as before the walker was compiled.
+* :func:`expected_arrivals` adds up each trajectory's expected arrivals given its path (the
+  Monte Carlo count's default estimator, lower variance than counting the arrivals drawn);
 * :func:`count_arrivals` only adds up arrivals, one trajectory after another, and stops a
   trajectory at its first self-loop step: later arrivals do not count (eq. 4.1 sums over paths
   without self-loops), so walking on would spend random numbers and time on nothing.
@@ -117,6 +119,65 @@ def count_arrivals(keys, indptr, indices, terminal, actions, cdf, stochastic, st
             if terminal[s2]:
                 break
             s = s2
+            t += 1
+    return cut
+
+
+@numba.njit(cache=True, nogil=True)
+def expected_arrivals(data, indptr, indices, terminal, actions, cdf, stochastic, start, horizon,
+                      gen, arrivals):  # pragma: no cover - compiled
+    """Add each trajectory's *accumulated likelihoods* of arrival (definition 4.4) to ``arrivals``.
+
+    At each step in ``s`` (action ``a``) the expected arrivals ``w * P(s' | s, a)`` go to every
+    successor ``s' != s`` at once, instead of 1 to the one successor drawn; the walk then moves
+    to a successor drawn from ``P(. | s, a)`` without the self-loop, and the weight ``w`` (the
+    probability that the walker has not self-looped yet, started at 1) is multiplied by
+    ``1 - P(s | s, a)``. Each step's contribution is the conditional expectation of the plain
+    count's given the path so far, so the estimator is unbiased for ``C*`` of eq. 4.1 (self-loop
+    steps end a walker's count there) with a smaller variance: on deterministic dynamics it is
+    the plain count; with slip only the branching of the sampled path is left to chance.
+
+    Returns the number of trajectories the horizon cut while they were still counting.
+    """
+    S = terminal.shape[0]
+    cut = 0
+    for i in range(start.shape[0]):
+        s = start[i]
+        if terminal[s]:
+            continue
+        w = 1.0
+        t = 0
+        while True:
+            if t == horizon:
+                cut += 1
+                break
+            a = _action(s, gen.random() if stochastic else 0.0, actions, cdf, stochastic)
+            row = a * S + s
+            p_self = 0.0
+            for k in range(indptr[row], indptr[row + 1]):
+                s2 = indices[k]
+                if s2 == s:
+                    p_self += data[k]
+                else:
+                    arrivals[s2] += w * data[k]
+            move = 1.0 - p_self
+            if move <= 1e-15:
+                break
+            x = gen.random() * move
+            nxt = -1
+            acc = 0.0
+            for k in range(indptr[row], indptr[row + 1]):
+                s2 = indices[k]
+                if s2 == s:
+                    continue
+                nxt = s2
+                acc += data[k]
+                if x < acc:
+                    break
+            w *= move
+            if nxt < 0 or terminal[nxt]:
+                break
+            s = nxt
             t += 1
     return cut
 

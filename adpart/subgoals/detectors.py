@@ -59,15 +59,16 @@ class CountMonteCarlo:
         Param("confidence", "float", 0.9, "probability p of eq. 4.3, in (0, 1)", min=0.0),
         Param("stable-batches", "int", 3, "stop when the subgoals are unchanged this many batches",
               min=1),
-        Param("stop", "str", "either", "stopping rule",
-              choices=("either", "bernstein", "stable", "max")),
-        Param("max-samples", "int", 20000, "most trajectories sampled", min=1),
+        Param("stop", "str", "passes", "stopping rule (passes: two passes over the start "
+              "states agree)", choices=("passes", "either", "bernstein", "stable", "max")),
+        Param("max-samples", "int", 50_000, "most trajectories sampled", min=1),
         _LOOP,
     )
 
     def __init__(self, p: float = 0.025, trajectories: int = 30, n: int = 0, batch: int = 50,
                  epsilon: float = 2.0, confidence: float = 0.9, stable_batches: int = 3,
-                 stop: str = "either", max_samples: int = 20000, on_loop: str = "truncate") -> None:
+                 stop: str = "passes", max_samples: int = 50_000,
+                 on_loop: str = "truncate") -> None:
         self.kw = {"p": p, "trajectories": trajectories, "n": n, "batch": batch,
                    "epsilon": epsilon, "confidence": confidence, "stable_batches": stable_batches,
                    "stop": stop, "max_samples": max_samples, "on_loop": on_loop}

@@ -17,7 +17,7 @@ import numpy as np
 
 from adpart.errors import TaskError
 from adpart.mdp.model import FiniteMDP
-from adpart.subgoals._walkers import count_arrivals, walk_paths
+from adpart.subgoals._walkers import count_arrivals, expected_arrivals, walk_paths
 from adpart.subgoals.policy import check_mdp, check_policy
 
 
@@ -74,6 +74,8 @@ def sample_arrivals(
     horizon: int | None = None,
     *,
     checked: bool = False,
+    starts: np.ndarray | None = None,
+    expected: bool = False,
 ) -> tuple[np.ndarray, int]:
     """Arrival counts of ``n`` fresh trajectories, without keeping the trajectories.
 
@@ -82,16 +84,26 @@ def sample_arrivals(
     the same estimator as :func:`arrival_counts` of :func:`sample_trajectories`), and the number
     of trajectories the horizon cut while they were still counting. A trajectory is not walked
     past its first self-loop step, whose later arrivals would not count.
+
+    ``starts`` (``(n,)`` state ids) replaces the uniform draw of the start states, e.g. by the
+    stratified stream of :class:`StartStream`. ``expected=True`` adds each trajectory's
+    accumulated likelihoods of arrival instead of the arrivals drawn
+    (:func:`adpart.subgoals._walkers.expected_arrivals`: same mean, smaller variance).
     """
-    args, start, H = _walk_setup(mdp, policy, n, rng, horizon, checked)
+    args, start, H = _walk_setup(mdp, policy, n, rng, horizon, checked, starts)
     arrivals = np.zeros(mdp.n_states)
-    cut = count_arrivals(*args, start, H, rng, arrivals)
+    if expected:
+        _keys, indptr, indices = mdp.sampler_arrays
+        cut = expected_arrivals(np.ascontiguousarray(mdp.P.data, dtype=np.float64), indptr,
+                                indices, *args[3:], start, H, rng, arrivals)
+    else:
+        cut = count_arrivals(*args, start, H, rng, arrivals)
     return arrivals, int(cut)
 
 
 def _walk_setup(
     mdp: FiniteMDP, policy: np.ndarray, n: int, rng: np.random.Generator, horizon: int | None,
-    checked: bool,
+    checked: bool, starts: np.ndarray | None = None,
 ) -> tuple[tuple, np.ndarray, int]:
     """Validate, then ``(walker arguments, start states, horizon)``; draws the starts first."""
     mdp = check_mdp(mdp)
@@ -101,11 +113,46 @@ def _walk_setup(
     H = mdp.n_states if horizon is None else int(horizon)
     if H < 1:
         raise TaskError(f"horizon = {horizon!r} must be >= 1")
-    start = rng.integers(0, mdp.n_states, size=int(n))
+    if starts is None:
+        start = rng.integers(0, mdp.n_states, size=int(n))
+    else:
+        start = np.ascontiguousarray(starts, dtype=np.int64)
+        if start.shape != (int(n),) or start.min() < 0 or start.max() >= mdp.n_states:
+            raise TaskError(f"starts must be {n} state ids in 0..{mdp.n_states - 1}")
     stochastic = pol.ndim == 2
     actions = np.zeros(1, dtype=np.int64) if stochastic else pol
     cdf = np.cumsum(pol, axis=1) if stochastic else np.zeros((1, 1))
     return (*mdp.sampler_arrays, mdp.terminal, actions, cdf, stochastic), start, H
+
+
+class StartStream:
+    """Start states drawn uniformly *without replacement*: a random permutation of the states,
+    taken in order, and a fresh permutation when it is used up.
+
+    Every state is still equally likely at every draw, so ``C_H`` stays unbiased, but after
+    ``k |S|`` draws every state has started exactly ``k`` trajectories: the start-state part of
+    the sampling error (the only part on deterministic dynamics, where ``C_H`` is then exactly
+    ``C*``) shrinks by the finite-population factor ``1 - N/|S|`` and vanishes at multiples of
+    ``|S|``.
+    """
+
+    def __init__(self, n_states: int, rng: np.random.Generator) -> None:
+        self.n_states = int(n_states)
+        self.rng = rng
+        self._perm = np.zeros(0, dtype=np.int64)
+        self._pos = 0
+
+    def take(self, n: int) -> np.ndarray:
+        parts, need = [], int(n)
+        while need > 0:
+            if self._pos == self._perm.size:
+                self._perm = self.rng.permutation(self.n_states).astype(np.int64)
+                self._pos = 0
+            k = min(need, self._perm.size - self._pos)
+            parts.append(self._perm[self._pos:self._pos + k])
+            self._pos += k
+            need -= k
+        return np.concatenate(parts) if parts else np.zeros(0, dtype=np.int64)
 
 
 def arrival_counts(traj: Trajectories, n_states: int) -> np.ndarray:

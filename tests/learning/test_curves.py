@@ -2,10 +2,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from adpart.errors import TaskError
 from adpart.learning import LearningCurve, plot_curves, q_learning
-from adpart.learning.curves import COLUMNS, start_values
+from adpart.learning.curves import COLUMNS, distinct_rows, start_values
 from adpart.mdp.model import FiniteMDP
 from adpart.mdp.solvers import policy_evaluation
 
@@ -87,3 +89,23 @@ def test_non_terminating_policy_scores_nan_with_gamma_one():
                                initial=np.array([1.0, 0.0]))
     values = start_values(mdp, np.array([[0, 0], [1, 0]]), np.array([1.0, 0.0]))
     assert np.isnan(values[0]) and values[1] == -1.0
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(1, 8), st.integers(1, 30), st.integers(1, 4), st.integers(0, 2**32 - 1))
+def test_distinct_rows_groups_like_np_unique(k, s, values, seed):
+    rows = np.random.default_rng(seed).integers(0, values, size=(k, s))
+    first, inverse = distinct_rows(rows)
+    np.testing.assert_array_equal(rows[first][inverse], rows)
+    assert len(np.unique(rows, axis=0)) == first.size  # one group per distinct row
+    assert np.all(np.diff(first) > 0)  # numbered by first appearance
+
+
+def test_distinct_rows_survives_hash_collisions(monkeypatch):
+    from adpart.learning import curves
+
+    monkeypatch.setattr(curves, "_row_hashes", lambda a: np.zeros(a.shape[0], dtype=np.int64))
+    rows = np.array([[0, 1], [1, 0], [0, 1]])
+    first, inverse = distinct_rows(rows)
+    np.testing.assert_array_equal(rows[first][inverse], rows)
+    assert first.size == 2

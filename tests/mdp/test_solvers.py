@@ -12,7 +12,6 @@ from adpart.errors import ModelError
 from adpart.mdp.model import FiniteMDP, SMDPModel
 from adpart.mdp.solvers import (
     greedy_policy,
-    modified_policy_iteration,
     policy_evaluation,
     q_from_v,
     solve,
@@ -57,7 +56,7 @@ mdp_params = st.tuples(
 )
 
 
-@given(mdp_params, st.sampled_from(["vi", "mpi"]))
+@given(mdp_params, st.sampled_from(["vi", "mpi", "gs", "auto"]))
 def test_solution_is_epsilon_optimal_against_dense_oracle(params, method):
     seed, S, A, density, gamma = params
     P, R = random_dense(seed, S, A, density)
@@ -82,11 +81,13 @@ def test_terminal_states_and_admissible_masks(params):
     admissible[np.arange(S), rng.integers(0, A, S)] = True
     mdp = FiniteMDP.from_dense(P, R, gamma, terminal=terminal, admissible=admissible)
     V_star = dense_optimal_values(P, R, gamma, terminal, admissible)
-    sol = modified_policy_iteration(mdp, 1e-7)
-    assert sol.rule == "sup" or not terminal.any()
-    assert np.all(admissible[np.arange(S), sol.policy])
-    np.testing.assert_allclose(policy_evaluation(mdp, sol.policy), V_star, atol=2e-7)
-    assert np.all(sol.V[terminal] == 0.0)
+    for method in ("mpi", "gs"):
+        sol = solve(mdp, 1e-7, method=method)
+        assert sol.rule == "sup" or not terminal.any()
+        assert np.all(admissible[np.arange(S), sol.policy])
+        np.testing.assert_allclose(policy_evaluation(mdp, sol.policy), V_star, atol=2e-7)
+        assert np.max(V_star - policy_evaluation(mdp, sol.policy)) <= 1e-7 + 1e-9
+        assert np.all(sol.V[terminal] == 0.0)
 
 
 @given(st.integers(0, 10_000), st.integers(2, 20), st.integers(1, 4))
@@ -116,7 +117,7 @@ def test_smdp_option_models_solve_like_their_semi_markov_oracle(seed, S, n_optio
     V = np.zeros(S)
     for _ in range(3000):
         V = (R + np.einsum("ost,t->so", F, V)).max(axis=1)
-    for method in ("vi", "mpi"):
+    for method in ("vi", "mpi", "gs"):
         sol = solve(model, 1e-8, method=method)
         assert sol.rule == "sup"
         np.testing.assert_allclose(sol.V, V, atol=1e-7)
@@ -176,3 +177,44 @@ def test_improper_policy_with_gamma_one_is_reported():
     mdp = FiniteMDP.from_dense(P, -np.ones((2, 1)), 1.0)
     with pytest.raises(ModelError, match=r"singular|never terminate"):
         policy_evaluation(mdp, np.zeros(2, dtype=int))
+
+
+def test_greedy_policy_compiled_path_matches_argmax():
+    from adpart.mdp.solvers import GREEDY_COMPILED_ROWS
+
+    rng = np.random.default_rng(0)
+    Q = rng.integers(0, 3, size=(GREEDY_COMPILED_ROWS, 4)).astype(np.float64)  # many ties
+    Q[rng.random(Q.shape) < 0.2] = -np.inf
+    Q[:5] = -np.inf  # all inadmissible-looking rows: argmax gives 0
+    np.testing.assert_array_equal(greedy_policy(Q), np.argmax(Q, axis=1))
+
+
+@given(mdp_params)
+def test_gauss_seidel_index_orders_keep_the_guarantee(params):
+    # force the large-model path (index order or its reverse when it agrees with the search)
+    from adpart.mdp import solvers
+
+    seed, S, A, density, gamma = params
+    P, R = random_dense(seed, S, A, density)
+    terminal = np.random.default_rng(seed).random(S) < 0.3
+    mdp = FiniteMDP.from_dense(P, R, gamma, terminal=terminal)
+    V_star = dense_optimal_values(P, R, gamma, terminal)
+    saved = solvers.LOCALITY_NNZ, solvers.INDEX_ORDER_AGREEMENT
+    try:
+        solvers.LOCALITY_NNZ, solvers.INDEX_ORDER_AGREEMENT = 0, 0.0
+        sol = solvers.gauss_seidel_value_iteration(mdp, 1e-6)
+    finally:
+        solvers.LOCALITY_NNZ, solvers.INDEX_ORDER_AGREEMENT = saved
+    assert sol.converged
+    assert np.max(V_star - policy_evaluation(mdp, sol.policy)) <= 1e-6 + 1e-9
+
+
+def test_auto_picks_gauss_seidel_with_sinks_and_mpi_without():
+    from adpart.mdp.solvers import choose_method, sweep_order
+
+    P, R = random_dense(0, 6, 2, 0.5)
+    plain = FiniteMDP.from_dense(P, R, 0.9)
+    goal = FiniteMDP.from_dense(P, R, 0.9, terminal=np.arange(6) == 5)
+    assert choose_method(plain) == "mpi" and sweep_order(plain.as_smdp()) is None
+    assert choose_method(goal) == "gs"
+    assert sweep_order(goal.as_smdp())[0] == 5  # swept from the sink outwards

@@ -62,3 +62,19 @@ def test_ray_unreachable_address_names_address_and_fix():
 def test_ray_malformed_address_is_explained():
     with pytest.raises(ClusterError, match="not host:port"):
         RayExecutor(address="no-port-here").connect()
+
+
+def _thread_settings(_: int) -> tuple[str | None, int]:
+    import os
+
+    import numba
+
+    return os.environ.get("NUMBA_NUM_THREADS"), numba.config.NUMBA_NUM_THREADS
+
+
+def test_ray_workers_get_the_local_pools_thread_settings(ray_cluster):
+    from adpart.execution import WORKER_THREAD_ENV
+
+    with RayExecutor() as ex:
+        results = ex.map(_thread_settings, [0, 1])
+    assert results == [(WORKER_THREAD_ENV["NUMBA_NUM_THREADS"], 1)] * 2

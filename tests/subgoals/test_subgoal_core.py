@@ -19,6 +19,7 @@ from adpart.subgoals import (
     betweenness,
     count_metric,
     discover_exhaustive,
+    discover_monte_carlo,
     sample_trajectories,
     t_test_threshold,
     transition_graph,
@@ -232,3 +233,56 @@ def test_subgoal_bernstein_seed_example():
 def test_subgoal_transition_graph_no_self_loops():
     g = transition_graph(get_domain("four-rooms").mdp("G1"))
     assert g.diagonal().sum() == 0
+
+
+def test_expected_arrivals_are_unbiased_and_tighter_than_drawn_arrivals():
+    from adpart.subgoals.montecarlo import sample_arrivals
+
+    mdp = _tiny_mdp(3, 5)
+    policy = np.array([0, 1, 0, 1, 0])
+    exact = count_metric(mdp, policy).counts
+    S, n = mdp.n_states, 20_000
+    expected, _ = sample_arrivals(mdp, policy, n, np.random.default_rng(7), expected=True)
+    assert np.max(np.abs(S * expected / n - exact)) <= 0.05
+    # smaller variance: mean squared error over 40 independent estimates of 200 samples each
+    mse = {}
+    for flag in (False, True):
+        errs = [S * sample_arrivals(mdp, policy, 200, np.random.default_rng(k), expected=flag)[0]
+                / 200 - exact for k in range(40)]
+        mse[flag] = float(np.mean(np.square(errs)))
+    assert mse[True] < mse[False]
+
+
+@settings(max_examples=20, deadline=None)
+@given(S=st.integers(1, 40), n=st.integers(1, 200), seed=st.integers(0, 1000))
+def test_start_stream_draws_every_state_once_per_pass(S, n, seed):
+    from adpart.subgoals.montecarlo import StartStream
+
+    stream = StartStream(S, np.random.default_rng(seed))
+    drawn = np.concatenate([stream.take(k) for k in (n // 3, n - n // 3)])
+    counts = np.bincount(drawn, minlength=S)
+    assert drawn.size == n
+    assert counts.max() - counts.min() <= 1  # without replacement within each pass
+
+
+@pytest.mark.parametrize("name", ["two-rooms", "three-floor"])
+def test_monte_carlo_agrees_with_exhaustive_by_default(name):
+    """Issue 22: with the default stopping rule the two subgoal sets have Jaccard >= 0.9."""
+    mdp = get_domain(name).mdp()
+    policy = solve(mdp).policy
+    ex = discover_exhaustive(mdp, policy, np.random.default_rng(0))
+    mc = discover_monte_carlo(mdp, policy, np.random.default_rng(0))
+    union = np.union1d(ex.subgoals, mc.subgoals).size
+    jaccard = np.intersect1d(ex.subgoals, mc.subgoals).size / union if union else 1.0
+    assert ex.subgoals.size > 0
+    assert jaccard >= 0.9
+    assert mc.stats["stop_reason"] == "passes"
+
+
+def test_monte_carlo_agrees_with_exhaustive_on_slippery_three_floor_arm():
+    mdp = get_domain("three-floor-arm").mdp("deliver")
+    policy = solve(mdp).policy
+    ex = discover_exhaustive(mdp, policy, np.random.default_rng(0))
+    mc = discover_monte_carlo(mdp, policy, np.random.default_rng(0))
+    both = np.intersect1d(ex.subgoals, mc.subgoals).size
+    assert both / np.union1d(ex.subgoals, mc.subgoals).size >= 0.9
