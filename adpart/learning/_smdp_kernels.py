@@ -85,7 +85,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from adpart.mdp._sampling import first_above, successor
+from adpart.mdp._sampling import compiled, first_above, successor
 
 #: Uniforms per agent-step in the main stream (explore?, which option, successor, next start).
 UNIFORMS_PER_STEP = 4
@@ -226,6 +226,17 @@ class SMDPLockStepState:
         )
 
 
+@compiled
+def watkins_target(table, k, s2, r, gamma, done):  # pragma: no cover - compiled
+    """``r`` if ``done`` else ``r + gamma max_b table[k, s2, b]`` (Watkins' Q-learning target)."""
+    if done:
+        return r
+    best = table[k, s2, 0]
+    for b in range(1, table.shape[2]):
+        best = max(best, table[k, s2, b])
+    return r + gamma * best
+
+
 def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, horizon,
              a_scale, a_rate, a_omega, a_floor, e_scale, e_rate, e_omega, e_floor,
              pol_act, pol_cdf, beta, labels, adm, Q, n_o, n_d, n_blocks, track_flat, Qf, nf,
@@ -361,23 +372,11 @@ def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, h
                 if a_omega != 0.0:
                     alpha = alpha * math.pow(float(nf[k, s, a]), -a_omega)
                 alpha = max(a_floor, alpha)
-                if done:
-                    tdf = r
-                else:
-                    bn = Qf[k, s2, 0]
-                    for b in range(1, A):
-                        bn = max(bn, Qf[k, s2, b])
-                    tdf = r + gamma * bn
+                tdf = watkins_target(Qf, k, s2, r, gamma, done)
                 old = Qf[k, s, a]
                 Qf[k, s, a] = old + alpha * (tdf - old)
                 if check_on:
-                    if done:
-                        tdl = r
-                    else:
-                        bl = Ql[k, s2, 0]
-                        for b in range(1, A):
-                            bl = max(bl, Ql[k, s2, b])
-                        tdl = r + gamma * bl
+                    tdl = watkins_target(Ql, k, s2, r, gamma, done)
                     old = Ql[k, s, a]
                     Ql[k, s, a] = old + alpha * (tdl - old)
                     tsum[k, s, a] += tdl

@@ -18,14 +18,15 @@ try:
     import numba
 except ImportError:  # pragma: no cover - numba is a dependency; kept for a bare interpreter
 
-    def _compiled(fn: Callable) -> Callable:
+    def compiled(fn: Callable) -> Callable:
         return fn
 
 else:
-    _compiled = numba.njit(cache=True, nogil=True)
+    #: ``numba.njit`` for helpers the compiled kernels call (plain functions without numba).
+    compiled = numba.njit(cache=True, nogil=True)
 
 
-@_compiled
+@compiled
 def first_above(values, x, lo, hi):  # pragma: no cover - compiled
     left = lo
     right = hi
@@ -38,7 +39,7 @@ def first_above(values, x, lo, hi):  # pragma: no cover - compiled
     return left
 
 
-@_compiled
+@compiled
 def successor(row, u, keys, indptr, indices):  # pragma: no cover - compiled
     hi = indptr[row + 1]
     return indices[min(first_above(keys, row + u, indptr[row], hi), hi - 1)]
