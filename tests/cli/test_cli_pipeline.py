@@ -17,6 +17,7 @@ from adpart.store import KnowledgeBase
 PIPELINE = [
     "pipeline",
     "two-rooms",
+    "--no-fallback",
     "--tasks",
     "reach-goal,goal:x=9,y=5",
     "--runs",
