@@ -13,7 +13,9 @@
 Two outcomes end the abstraction and are reported, not raised: the detector finds **no
 subgoals** (stage ``no-subgoals``), and the knowledge base **predicts that abstraction will not
 pay** - the ``expected-learning-time`` estimate (section 4.4) of the best layer it can build from
-the tasks learned so far is not below that of the flat MDP (stage ``fallback``). The later tasks
+the tasks learned so far (to the bound, in some flat run) is not below that of the flat MDP, or no
+earlier task was learned at all (stage ``fallback``; otherwise stage ``predict`` records the
+comparison). The later tasks
 are then learned with the flat learner, and the row of the method says why (``fallback``).
 
 Every step first looks in the knowledge base for a result of exactly the same request and reuses
@@ -450,22 +452,31 @@ def run_pipeline(
 
     learned = [parse_ref(first_ids["task"], "task")]
     learned_flat = list(learned)  # tasks with a flat (primitive-action) policy for the estimator
+    # tasks learned to the bound in some flat run: the estimator's evidence (section 4.4 builds
+    # on learned tasks T_i = (pi_i, P_i, Q_i); an unlearned task's Q predicts nothing)
+    evidence = list(learned) if report.rows[0]["runs_within_bound"] > 0 else []
     option_ids = [r.id for r in stored.records]
     for task in later:
-        verdict: dict[str, Any] = {}
         if config.fallback:
             start = time.perf_counter()
             params = dict(config.hierarchy_params) if config.hierarchy == (
                 "expected-learning-time") else {}
-            verdict = predict_fallback(kb, config.env, list(learned_flat), params)
+            if evidence:
+                verdict = predict_fallback(kb, config.env, list(evidence), params)
+                reason = (f"the knowledge base predicts abstraction will "
+                          f"{'not pay' if verdict['fallback'] else 'pay'} for {task}: E[t_learn] "
+                          f"{verdict['estimate']:.4g} of the best layer ({verdict['blocks']} "
+                          f"blocks) {'>=' if verdict['fallback'] else '<'} "
+                          f"{verdict['flat_estimate']:.4g} flat")
+            else:
+                verdict = {"fallback": True}
+                reason = (f"no earlier task was learned to the bound in any run, so the knowledge "
+                          f"base holds no values to predict a layer from: {task} is learned flat")
+            report.stages.append(Stage("fallback" if verdict["fallback"] else "predict", task,
+                                       "flat" if verdict["fallback"] else "layer", False,
+                                       time.perf_counter() - start, {**verdict, "reason": reason}))
             if verdict["fallback"]:
-                reason = (f"the knowledge base predicts abstraction will not pay for {task}: "
-                          f"E[t_learn] {verdict['estimate']:.4g} of the best layer "
-                          f"({verdict['blocks']} blocks) >= {verdict['flat_estimate']:.4g} flat")
                 say(reason)
-                report.stages.append(Stage("fallback", task, "flat", False,
-                                           time.perf_counter() - start,
-                                           {**verdict, "reason": reason}))
                 ids, curve = learn_flat(task, config.episodes)
                 report.curves[task] = {"flat (fallback)": curve}
                 report.rows.append(task_row(task, "flat-fallback", curve, config.gap_fraction,
@@ -477,6 +488,8 @@ def run_pipeline(
                 for seen in (learned_flat, learned):
                     if tid not in seen:
                         seen.append(tid)
+                if report.rows[-1]["runs_within_bound"] > 0 and tid not in evidence:
+                    evidence.append(tid)
                 continue
         if config.hierarchy is None:
             say(f"partitioning for {task} (delta {config.delta}, epsilon {config.epsilon})")
@@ -523,6 +536,8 @@ def run_pipeline(
             report.rows.append(task_row(task, "flat", base_curve, config.gap_fraction, {}))
             if task_id not in learned_flat:
                 learned_flat.append(task_id)
+            if report.rows[-1]["runs_within_bound"] > 0 and task_id not in evidence:
+                evidence.append(task_id)
         if task_id not in learned:
             learned.append(task_id)
     _figures(report, config, out)
