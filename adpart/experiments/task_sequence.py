@@ -128,7 +128,7 @@ def task_sequence(config: ExperimentConfig) -> ExperimentReport:
         seed=config.seed, eval_every=s["eval_every"],
         flat_params={"max-steps": s["horizon"]},
         hierarchical_params={"max-steps": s["horizon"], "min-visits": s["min_visits"]},
-        hierarchy="expected-learning-time",
+        hierarchy="expected-learning-time", fallback=False,  # the layers are what is compared
     )
     tmp = None
     location = config.kb

@@ -172,3 +172,32 @@ def test_q_from_stored_policy_is_used(four_rooms_kb):
     live = ~mdp.terminal
     np.testing.assert_allclose(inputs.tasks[0].Q[live, :4], np.where(
         mdp.admissible, Q, -np.inf)[live])
+
+
+def test_blocks_the_estimate_calls_consistent_lose_nothing(four_rooms_kb, estimator_registry):
+    """Oracle: the exact SMDP of the built layer, with the blocks the estimate says will be
+    refined opened to the task's resolution (per state, primitives added) and the other blocks
+    held to one column each. The committed policy (the estimator's column per block, the greedy
+    primitive per refined state), evaluated exactly, is within L of V* at the start."""
+    from adpart.hierarchy.estimator import expected_time as estimate
+    from adpart.learning.curves import start_distribution
+    from adpart.learning.smdp_q import option_set
+    from adpart.mdp.solvers import policy_evaluation
+
+    kb, data = four_rooms_kb
+    res = build_hierarchy(kb, "four-rooms", store=False)
+    inputs = load_inputs(kb, "four-rooms")
+    layer = _full(res, inputs)
+    A = inputs.mdp.n_actions
+    for task in inputs.tasks:
+        mdp = data["domain"].mdp(task.name)
+        est = estimate([task], layer, n_primitives=A)
+        _, smdp = option_set(mdp, inputs.options, include_primitives=True)
+        V = solve(mdp, 1e-10).V
+        Q = smdp.R + (smdp.F @ V).reshape(smdp.n_actions, -1).T
+        refined = est.p_refine[0][layer.labels] > 0
+        col = est.committed[0][layer.labels]
+        prim = np.argmax(np.where(mdp.admissible, Q[:, :A], -np.inf), axis=1)
+        pol = np.where(refined | (col < 0), prim, col)
+        v = start_distribution(mdp) @ policy_evaluation(smdp, pol)
+        assert v >= start_distribution(mdp) @ V - max(task.threshold, 1e-9) - 1e-9
