@@ -161,9 +161,11 @@ class _Greedy:
         n_j = float(M.size)
         self.n[j] = n_j
         occ_j = self.occ[:, M].sum(axis=1)  # (T,)
+        T = self.w.size
+        sel = np.ix_(np.arange(T), M, own)
         w_j = self._refine_weight(
-            self.qw[:, M][:, :, own].sum(axis=1), self.blocked[:, M][:, :, own].sum(axis=1),
-            self.bad[:, M][:, :, own].sum(axis=1), np.ones(own.size, dtype=bool), occ_j)
+            self.qw[sel].sum(axis=1), self.blocked[sel].sum(axis=1),
+            self.bad[sel].sum(axis=1), np.ones(own.size, dtype=bool), occ_j)
         k_j = float(own.size)
         self.term[j] = n_j**2 * (k_j + A) * w_j
         self.dP[j], self.dD[j], self.dR[j] = 0.0, 0.0, np.inf
@@ -180,9 +182,9 @@ class _Greedy:
 
         ones = np.ones((M.size, C))
         n_g = sums(ones)
-        a_g = sums(self.adm[M][:, cols].astype(np.float64))
+        a_g = sums(self.adm[np.ix_(M, cols)].astype(np.float64))
         gets = (n_g > 0) & (a_g == n_g)
-        T = self.w.size
+        cells = np.ix_(M, cols)
         # per task: (C, G, |own| + 1) sums of the offered columns and of the candidate
         vals = np.zeros((T, C, G, own.size + 1))
         blocked = np.zeros_like(vals)
@@ -195,7 +197,7 @@ class _Greedy:
                     arr[i, :, :, slot] = sums(np.broadcast_to(
                         src[i, M, k][:, None].astype(np.float64), (M.size, C)))
             for arr, src in ((vals, self.qw), (blocked, self.blocked), (bad, self.bad)):
-                arr[i, :, :, -1] = sums(src[i][M][:, cols].astype(np.float64))
+                arr[i, :, :, -1] = sums(src[i][cells].astype(np.float64))
         offered = np.concatenate(
             [np.ones((C, G, own.size), dtype=bool), gets[:, :, None]], axis=2)
         w_g = self._refine_weight(vals, blocked, bad, offered, occupied)  # (C, G)

@@ -451,7 +451,6 @@ def run_pipeline(
     )
 
     learned = [parse_ref(first_ids["task"], "task")]
-    learned_flat = list(learned)  # tasks with a flat (primitive-action) policy for the estimator
     # tasks learned to the bound in some flat run: the estimator's evidence (section 4.4 builds
     # on learned tasks T_i = (pi_i, P_i, Q_i); an unlearned task's Q predicts nothing)
     evidence = list(learned) if report.rows[0]["runs_within_bound"] > 0 else []
@@ -485,9 +484,8 @@ def run_pipeline(
                     report.curves[task]["flat (no transfer)"] = curve
                     report.rows.append(task_row(task, "flat", curve, config.gap_fraction, {}))
                 tid = parse_ref(ids["task"], "task")
-                for seen in (learned_flat, learned):
-                    if tid not in seen:
-                        seen.append(tid)
+                if tid not in learned:
+                    learned.append(tid)
                 if report.rows[-1]["runs_within_bound"] > 0 and tid not in evidence:
                     evidence.append(tid)
                 continue
@@ -534,8 +532,6 @@ def run_pipeline(
             _, base_curve = learn_flat(task, config.episodes)
             report.curves[task]["flat (no transfer)"] = base_curve
             report.rows.append(task_row(task, "flat", base_curve, config.gap_fraction, {}))
-            if task_id not in learned_flat:
-                learned_flat.append(task_id)
             if report.rows[-1]["runs_within_bound"] > 0 and task_id not in evidence:
                 evidence.append(task_id)
         if task_id not in learned:
