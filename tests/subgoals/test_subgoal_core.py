@@ -209,7 +209,8 @@ def test_subgoal_inadmissible_action():
 
 
 def test_subgoal_looping_policy():
-    """A deterministic 2-cycle never terminates: error by default, truncation on request."""
+    """A deterministic 2-cycle never terminates: ``count_metric`` errs by default (the detector
+    plugins truncate by default since the pipeline change, so the error is asked for there)."""
     P = np.zeros((3, 1, 3))
     P[0, 0, 1] = P[1, 0, 0] = P[2, 0, 2] = 1.0
     mdp = FiniteMDP.from_dense(P, np.zeros((3, 1)), 0.9, terminal=np.array([False, False, True]))
@@ -217,7 +218,7 @@ def test_subgoal_looping_policy():
     with pytest.raises(TaskError, match="never terminates"):
         count_metric(mdp, pol)
     with pytest.raises(TaskError, match="never terminates"):
-        CountMonteCarlo().detect(mdp, pol, np.random.default_rng(0))
+        CountMonteCarlo(on_loop="error").detect(mdp, pol, np.random.default_rng(0))
     cm = count_metric(mdp, pol, on_loop="truncate")
     assert cm.iterations == 3 and cm.trapped.tolist() == [0, 1]
 
