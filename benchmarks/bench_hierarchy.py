@@ -98,10 +98,10 @@ def main(task_counts: tuple[int, ...] = (1, 5, 10, 20),
             adm, term = adm_all[:, :K], term_all[:, :K]
             inputs_s = float(sum(occ_s[:T]) + sum(opt_s[i][:n_opt].sum() for i in range(T)))
             t = time.perf_counter()
-            res = greedy_hierarchy(tasks, adm, splits=column_splits(adm, term))
+            res = greedy_hierarchy(tasks, adm, splits=column_splits(adm, term), n_primitives=A)
             greedy_s = time.perf_counter() - t
             t = time.perf_counter()
-            expected_time(tasks, res.partition)
+            expected_time(tasks, res.partition, n_primitives=A)
             one = time.perf_counter() - t
             naive = one * res.candidates_evaluated
             row = {"tasks": T, "options": n_opt, "inputs_s": inputs_s, "greedy_s": greedy_s,

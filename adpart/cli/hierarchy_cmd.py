@@ -160,6 +160,10 @@ def _print(summary: dict[str, Any]) -> None:
         " -> ".join(f"{v:.4g}" for v in trace[:6]) + " -> ... -> "
         + " -> ".join(f"{v:.4g}" for v in trace[-3:]))
     click.echo(f"  E[t_learn]    {shown}  ({summary['steps']} refinements)")
+    if summary.get("flat_estimate") is not None:
+        verdict = ("fall back to flat learning" if summary.get("fallback")
+                   else "the layer is predicted to pay")
+        click.echo(f"  flat MDP      {summary['flat_estimate']:.4g}  ({verdict})")
     secs = summary["seconds"]
     click.echo("  seconds       " + ", ".join(f"{k} {v:.2f}" for k, v in secs.items()))
     for b, (n, cols) in enumerate(zip(summary["block_states"], summary["block_columns"],

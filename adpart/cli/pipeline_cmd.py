@@ -144,10 +144,23 @@ def _say(quiet: bool):  # type: ignore[no-untyped-def]
     help="Episodes of the first (flat) task.",
 )
 @click.option(
+    "--flat-learner",
+    default="q-learning",
+    show_default=True,
+    metavar="NAME",
+    help="Learner plugin of the first task, the flat baseline and the flat fallback.",
+)
+@click.option(
     "--flat-opt",
     multiple=True,
     metavar="KEY=VALUE",
-    help="A q-learning parameter for the flat learners, e.g. --flat-opt alpha=1.",
+    help="A parameter of the flat learner, e.g. --flat-opt alpha=1.",
+)
+@click.option(
+    "--no-fallback",
+    is_flag=True,
+    help="Always learn on the layer, even when the knowledge base predicts that flat "
+    "learning is faster (section 4.4's estimate).",
 )
 @click.option(
     "--hier-opt",
@@ -190,7 +203,9 @@ def pipeline_cmd(
     first_episodes: int,
     seed: int,
     eval_every: int,
+    flat_learner: str,
     flat_opt: tuple[str, ...],
+    no_fallback: bool,
     hier_opt: tuple[str, ...],
     no_baseline: bool,
     hierarchy: str | None,
@@ -207,7 +222,11 @@ def pipeline_cmd(
     With --hierarchy NAME each later task starts from the layer that estimator builds from the
     tasks learned before it in the sequence (section 4.4) instead of the multi-phase partition.
     Every step is stored in the knowledge base and reused when the same step is asked again,
-    so a second run (or one resumed after a crash) recomputes nothing it already has. Ends with
+    so a second run (or one resumed after a crash) recomputes nothing it already has. When the
+    detector finds no subgoals, or the knowledge base predicts that abstraction will not pay
+    for a task (its expected learning time on the best layer is not below flat's), that task is
+    learned with the flat learner and the stage says why (--no-fallback: always use the layer).
+    Ends with
     a table (runs within the bound, median episodes to reach it, final value gap) and one figure
     per task comparing the decision layer with flat learning.
     """
@@ -233,6 +252,8 @@ def pipeline_cmd(
         baseline=not no_baseline,
         hierarchy=hierarchy,
         hierarchy_params=_key_values(hierarchy_opt, "--hierarchy-opt"),
+        flat_learner=flat_learner,
+        fallback=not no_fallback,
     )
     check_pipeline_options(config)
     out = out or Path("adpart-pipeline") / env.replace(":", "_")
@@ -252,6 +273,8 @@ def pipeline_cmd(
             f"{stage.stage:<20} {stage.task or '':<20} {stage.result:<28} "
             f"{'reused' if stage.reused else f'{stage.seconds:.2f} s'}"
         )
+        if stage.detail.get("reason"):
+            click.echo(f"  {stage.detail['reason']}")
     click.echo("")
     for line in _table(report.rows):
         click.echo(line)

@@ -35,12 +35,59 @@ def domain_names() -> list[str]:
     return list(BUILTIN_DOMAINS)
 
 
+def _gym_value(text: str) -> object:
+    """A keyword value from a name: ``true``/``false`` (any case), an int, a float, or text."""
+    low = text.strip().lower()
+    if low in ("true", "false"):
+        return low == "true"
+    if low in ("none", "null"):
+        return None
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text.strip()
+
+
+def parse_gym_name(name: str) -> tuple[str, dict[str, object]]:
+    """``gym:ID[key=value,...]`` -> ``(ID, {key: value})`` (the form the domain's name takes).
+
+    Raises:
+        UnknownNameError: a malformed bracket (the message shows the expected form).
+    """
+    body = name.removeprefix(GYM_PREFIX)
+    if "[" not in body:
+        return body, {}
+    env_id, _, rest = body.partition("[")
+    if not rest.endswith("]") or not env_id:
+        raise UnknownNameError(
+            f"cannot read {name!r}: write Gymnasium keyword arguments as "
+            "gym:ID[key=value,...], e.g. gym:FrozenLake-v1[map_name=8x8,is_slippery=true]"
+        )
+    kwargs: dict[str, object] = {}
+    for item in filter(None, (x.strip() for x in rest[:-1].split(","))):
+        key, eq, value = item.partition("=")
+        if not eq or not key.strip():
+            raise UnknownNameError(
+                f"cannot read {item!r} in {name!r}: each keyword argument is key=value, e.g. "
+                "gym:FrozenLake-v1[map_name=8x8,is_slippery=true]"
+            )
+        kwargs[key.strip()] = _gym_value(value)
+    return env_id, kwargs
+
+
 def get_domain(name: str) -> Domain:
-    """The environment called ``name``: a built-in domain, or ``gym:<id>`` for Gymnasium."""
+    """The environment called ``name``: a built-in domain, or ``gym:<id>`` for Gymnasium.
+
+    ``gym:ID[key=value,...]`` passes the keyword arguments to ``gymnasium.make`` (values
+    ``true``/``false``, numbers or text), e.g. ``gym:FrozenLake-v1[map_name=8x8,is_slippery=true]``.
+    """
     if name.startswith(GYM_PREFIX):
         from adpart.envs.gym_adapter import GymDomain
 
-        return GymDomain(name.removeprefix(GYM_PREFIX))
+        env_id, kwargs = parse_gym_name(name)
+        return GymDomain(env_id, **kwargs)
     if name not in BUILTIN_DOMAINS:
         hint = difflib.get_close_matches(name, list(BUILTIN_DOMAINS), n=1)
         raise UnknownNameError(

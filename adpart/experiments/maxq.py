@@ -198,7 +198,8 @@ def _taxi_pipeline(config: ExperimentConfig, s: dict[str, Any]) -> tuple[Any, di
                         detector_params={"on_loop": "truncate"}, runs=s["runs"],
                         episodes=s["pipe"], first_episodes=s["pipe_first"], seed=config.seed,
                         eval_every=s["eval_every"], baseline=False,
-                        flat_params={"alpha": ALPHA, "epsilon": EPSILON})
+                        flat_params={"alpha": ALPHA, "epsilon": EPSILON},
+                        fallback=False)  # the decision layer is what is compared
     tmp = None
     location = config.kb
     if location is None:

@@ -140,7 +140,7 @@ def _transfer(config: ExperimentConfig, setup: _Setup, report: ExperimentReport
         eval_every=s.eval_every, flat_params=learner,
         hierarchical_params={**learner, "mode": "inconsistency", "delta": DELTA,
                              "partition-epsilon": EPSILON},
-        gap_fraction=GAP_FRACTION,
+        gap_fraction=GAP_FRACTION, fallback=False,  # the experiment compares the layer with flat
     )
     kb = _open_kb(config)
     try:

@@ -7,7 +7,13 @@
 * :mod:`adpart.hierarchy.kb` - the same over the tasks and options of a knowledge base.
 """
 
-from adpart.hierarchy.estimator import Estimate, expected_time, good_columns, t_conv
+from adpart.hierarchy.estimator import (
+    Estimate,
+    expected_time,
+    flat_time,
+    good_columns,
+    t_conv,
+)
 from adpart.hierarchy.greedy import GreedyResult, Step, column_splits, greedy_hierarchy
 from adpart.hierarchy.kb import HierarchyResult, build_hierarchy, load_inputs
 from adpart.hierarchy.tasks import (
@@ -27,6 +33,7 @@ __all__ = [
     "column_splits",
     "discounted_occupancy",
     "expected_time",
+    "flat_time",
     "good_columns",
     "greedy_hierarchy",
     "load_inputs",

@@ -1,35 +1,36 @@
 """Algorithm 3: greedy autonomous hierarchy construction (section 4.4).
 
-From ``P_0`` = one block offering no option, every step considers every pair (block ``B_j``,
-column ``o`` not yet offered in ``B_j``), forms ``P_{n+1,(o,j)}`` = ``P_n`` with ``B_j`` *refined
-with* ``o``, and keeps the pair with the smallest ``E[t_learn | P_{n+1}]``; it stops as soon as the
+From ``P_0`` = one block offering no option (``O_0 = {}``), every step considers every pair
+(block ``B_j``, *option* ``o`` not yet offered in ``B_j``), forms ``P_{n+1,(o,j)}`` = ``P_n`` with
+``B_j`` *refined with* ``o``, and keeps the pair with the smallest ``E[t_learn | P_{n+1}]``
+(:func:`adpart.hierarchy.estimator.expected_time`: a block commits to one column, and must be
+refined when that column is not within ``L`` in some occupied state); it stops as soon as the
 best candidate does not lower ``E[t_learn]`` and returns the last layer that did (``P_{n-1}`` of
 the algorithm), so the result never costs more than the start.
+
+Only options are candidate columns, as the algorithm is written (``o_i in O - O_{n,B_j}`` with
+``O`` the option set): primitive actions join a layer only through the hierarchical learner's
+refinement, which the refinement term of the estimate prices.
 
 "``B_j`` refined with ``o``" is, in adpart (docs/hierarchy.md):
 
 1. ``B_j`` is split by the column's *split labels* (default: phase 1's initial blocks of section
    4.2.1.2 - the option's termination states, the rest of its initiation set, the states outside
-   it; for a primitive action: where it is admissible or not). Only ``B_j`` changes, the "splitting
-   the blocks separately" variant the dissertation calls the more nuanced one.
+   it). Only ``B_j`` changes, the "splitting the blocks separately" variant the dissertation
+   calls the more nuanced one.
 2. ``o`` joins the option set of every sub-block in which every state may start it (the
    algorithm's ``O_{n+1,B} = O_{n,B} u {o}`` restricted to initiation-consistent blocks, as the
    decision layer requires); the other sub-blocks keep ``O_{n,B_j}``.
 
 Candidates must add ``o`` to at least one sub-block. Each accepted step adds at least one
-(state, column) pair, so the loop ends after at most ``S K`` steps (``max_steps`` caps it).
+(state, option) pair, so the loop ends after at most ``S O`` steps (``max_steps`` caps it).
 
-**Vectorised evaluation.** At the per-state resolution of the stored tasks, ``E[t_learn]``
-decomposes over blocks: with ``U_0(s) = sum_i w_i d_i(s) uncov_i(s)`` (the weighted occupancy of
-``s`` where the block's options are all worse than the best by more than ``L``) and
-``U(s, o) = sum_i w_i d_i(s) uncov_i(s) [o not good in s for T_i]``,
-
-    E = c (|P| D + sum_B n_B^2 (|O_B| + 1) sum_{s in B} U_0(s)),  D = sum_B max(1, |O_B|).
-
-A candidate changes only its block's term and the scalars ``|P|`` and ``D``, so the table of all
-candidates is three ``(B, K)`` arrays (``d|P|``, ``dD``, ``dR``) built by ``bincount`` over
-(block, column, split group) keys - no Python loop over states. After a step only the refined
-block's rows of ``U`` and of the candidate table are recomputed.
+**Evaluation.** ``E = c (|P| D + R)`` with ``D = sum_B max(1, |O_B|)`` and ``R = sum_B n_B^2
+(|O_B| + A) sum_i w_i P_refine(B | T_i)``. A candidate changes only its block's term of ``R`` and
+the scalars ``|P|`` and ``D``, so the run keeps, per block, the change ``(d|P|, dD, dR)`` of every
+candidate option; after a step only the refined block's sub-blocks are scored again. Scoring a
+block is a handful of ``bincount`` calls over (candidate, split group) keys per task and offered
+column - no Python loop over states or candidates.
 """
 
 from __future__ import annotations
@@ -40,7 +41,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from adpart.errors import TaskError
-from adpart.hierarchy.estimator import check_tasks, good_columns
+from adpart.hierarchy.estimator import check_tasks, committed_columns, good_columns
 from adpart.hierarchy.tasks import LearnedTask
 from adpart.partition.multiphase import initial_termination_labels
 from adpart.partition.partition import Partition, canonical_labels
@@ -98,99 +99,128 @@ class _Greedy:
     """The mutable state of one run (working block ids never renumber during the run)."""
 
     def __init__(self, tasks: Sequence[LearnedTask], admissible: np.ndarray, splits: np.ndarray,
-                 c: float) -> None:
+                 candidates: np.ndarray, n_primitives: int, c: float) -> None:
         S, K = admissible.shape
-        self.S, self.K, self.c = S, K, c
-        w = check_tasks(tasks, S, K)
+        self.S, self.K, self.c, self.A = S, K, c, n_primitives
+        self.w = check_tasks(tasks, S, K)
         self.adm = admissible
+        self.cand = candidates
         self.splits = splits.astype(np.int64)
         self.G = int(self.splits.max()) + 1 if self.splits.size else 1
-        self.good = np.stack([good_columns(t) for t in tasks])  # (T, S, K)
-        self.m = np.stack([wi * t.occupancy for wi, t in zip(w, tasks, strict=True)])  # (T, S)
-        self.uncov = np.ones((len(tasks), S), dtype=bool)
-        self.U0 = np.zeros(S)
-        self.U = np.zeros((S, K))
+        occ = np.stack([t.occupancy > 0 for t in tasks])  # (T, S)
+        self.occ = occ
+        Q = np.stack([t.Q for t in tasks])  # (T, S, K)
+        fin = np.isfinite(Q)
+        self.qw = np.where(occ[:, :, None] & fin,
+                           np.stack([t.occupancy for t in tasks])[:, :, None] * np.where(fin, Q, 0),
+                           0.0)
+        self.blocked = occ[:, :, None] & ~fin
+        self.bad = occ[:, :, None] & ~np.stack([good_columns(t) for t in tasks])
         self.labels = np.zeros(S, dtype=np.int64)
         cap = 64
         self.offered = np.zeros((cap, K), dtype=bool)
         self.n = np.zeros(cap)
-        self.mass = np.zeros(cap)
+        self.term = np.zeros(cap)
         self.dP = np.zeros((cap, K))
         self.dD = np.zeros((cap, K))
         self.dR = np.full((cap, K), np.inf)
         self.n_blocks = 1
         self.evaluated = 0
-        self._refresh_states(np.arange(S))
-        self._refresh_blocks(np.array([0]))
+        self._score_blocks([0])
 
-    # ------------------------------------------------------------------ bookkeeping
     def _grow(self, need: int) -> None:
         cap = self.offered.shape[0]
         if need <= cap:
             return
         new = max(need, 2 * cap)
-        for name, fill in (("offered", False), ("n", 0.0), ("mass", 0.0), ("dP", 0.0),
+        for name, fill in (("offered", False), ("n", 0.0), ("term", 0.0), ("dP", 0.0),
                            ("dD", 0.0), ("dR", np.inf)):
             old = getattr(self, name)
             arr = np.full((new, *old.shape[1:]), fill, dtype=old.dtype)
             arr[:cap] = old
             setattr(self, name, arr)
 
-    def _refresh_states(self, states: np.ndarray) -> None:
-        """Recompute ``U_0`` and ``U`` on ``states`` (a loop over tasks, vectorised inside)."""
-        mu = self.m[:, states] * self.uncov[:, states]  # (T, n)
-        self.U0[states] = mu.sum(axis=0)
-        acc = np.zeros((states.size, self.K))
-        for i in range(mu.shape[0]):
-            acc += mu[i][:, None] * ~self.good[i][states]
-        self.U[states] = acc
+    def _refine_weight(self, vals: np.ndarray, blocked: np.ndarray, bad: np.ndarray,
+                       offered: np.ndarray, occupied: np.ndarray) -> np.ndarray:
+        """``sum_i w_i P_refine`` per (sub-)block from per-task column sums ``(T, ..., K')``."""
+        v = np.where(blocked > 0, -np.inf, vals)
+        tie = committed_columns(v, offered[None])
+        consistent = (tie & (bad == 0)).any(axis=-1)
+        need = (occupied > 0) & ~consistent
+        return np.tensordot(self.w, need.astype(np.float64), axes=1)
 
-    def _refresh_blocks(self, blocks: np.ndarray) -> None:
-        """Block totals and candidate rows of ``blocks`` (all their states at once)."""
-        K, G = self.K, self.G
-        pos = np.full(self.n_blocks, -1, dtype=np.int64)
-        pos[blocks] = np.arange(blocks.size)
-        states = np.flatnonzero(pos[self.labels] >= 0)
-        bp = pos[self.labels[states]]
-        nb = blocks.size
-        self.n[blocks] = np.bincount(bp, minlength=nb)
-        self.mass[blocks] = np.bincount(bp, weights=self.U0[states], minlength=nb)
-        key = ((bp[:, None] * K + np.arange(K)[None, :]) * G + self.splits[:, states].T).ravel()
-        size = nb * K * G
-        n_g = np.bincount(key, minlength=size).reshape(nb, K, G)
-        a_g = np.bincount(key, weights=self.adm[states].ravel().astype(np.float64),
-                          minlength=size).reshape(nb, K, G)
-        with_o = np.bincount(key, weights=self.U[states].ravel(), minlength=size).reshape(nb, K, G)
-        u0 = np.broadcast_to(self.U0[states][:, None], (states.size, K)).ravel()
-        without = np.bincount(key, weights=u0, minlength=size).reshape(nb, K, G)
+    def _score_blocks(self, blocks: Sequence[int]) -> None:
+        """The block terms and candidate rows of ``blocks``."""
+        for j in blocks:  # a handful of blocks per step; each vectorised over its states
+            members = np.flatnonzero(self.labels == j)
+            self._score_block(int(j), members)
+
+    def _score_block(self, j: int, M: np.ndarray) -> None:
+        A, G = self.A, self.G
+        own = np.flatnonzero(self.offered[j])
+        n_j = float(M.size)
+        self.n[j] = n_j
+        occ_j = self.occ[:, M].sum(axis=1)  # (T,)
+        T = self.w.size
+        sel = np.ix_(np.arange(T), M, own)
+        w_j = self._refine_weight(
+            self.qw[sel].sum(axis=1), self.blocked[sel].sum(axis=1),
+            self.bad[sel].sum(axis=1), np.ones(own.size, dtype=bool), occ_j)
+        k_j = float(own.size)
+        self.term[j] = n_j**2 * (k_j + A) * w_j
+        self.dP[j], self.dD[j], self.dR[j] = 0.0, 0.0, np.inf
+        cols = np.flatnonzero(self.cand & ~self.offered[j] & self.adm[M].any(axis=0))
+        if cols.size == 0:
+            return
+        C = cols.size
+        grp = self.splits[cols][:, M].T  # (n, C)
+        key = (np.arange(C)[None, :] * G + grp).ravel()
+        size = C * G
+
+        def sums(weights: np.ndarray) -> np.ndarray:  # (n, C) -> (C, G)
+            return np.bincount(key, weights=weights.ravel(), minlength=size).reshape(C, G)
+
+        ones = np.ones((M.size, C))
+        n_g = sums(ones)
+        a_g = sums(self.adm[np.ix_(M, cols)].astype(np.float64))
+        gets = (n_g > 0) & (a_g == n_g)
+        cells = np.ix_(M, cols)
+        # per task: (C, G, |own| + 1) sums of the offered columns and of the candidate
+        vals = np.zeros((T, C, G, own.size + 1))
+        blocked = np.zeros_like(vals)
+        bad = np.zeros_like(vals)
+        occupied = np.zeros((T, C, G))
+        for i in range(T):  # loop over tasks and offered columns; bincount over states
+            occupied[i] = sums(np.broadcast_to(self.occ[i, M][:, None], (M.size, C)))
+            for slot, k in enumerate(own):
+                for arr, src in ((vals, self.qw), (blocked, self.blocked), (bad, self.bad)):
+                    arr[i, :, :, slot] = sums(np.broadcast_to(
+                        src[i, M, k][:, None].astype(np.float64), (M.size, C)))
+            for arr, src in ((vals, self.qw), (blocked, self.blocked), (bad, self.bad)):
+                arr[i, :, :, -1] = sums(src[i][cells].astype(np.float64))
+        offered = np.concatenate(
+            [np.ones((C, G, own.size), dtype=bool), gets[:, :, None]], axis=2)
+        w_g = self._refine_weight(vals, blocked, bad, offered, occupied)  # (C, G)
+        k_g = k_j + gets
         nonempty = n_g > 0
-        gets = nonempty & (a_g == n_g)
-        k_opts = self.offered[blocks].sum(axis=1).astype(np.float64)[:, None, None]
-        mass_g = np.where(gets, with_o, without)
-        new_opts = k_opts + gets
-        n_j = self.n[blocks][:, None]
-        kj = k_opts[:, :, 0]
-        self.dP[blocks] = nonempty.sum(axis=2) - 1.0
-        self.dD[blocks] = (np.where(nonempty, np.maximum(new_opts, 1.0), 0.0).sum(axis=2)
-                           - np.maximum(kj, 1.0))
-        r_new = (n_g.astype(np.float64) ** 2 * (new_opts + 1.0) * mass_g).sum(axis=2)
-        r_old = n_j**2 * (kj + 1.0) * self.mass[blocks][:, None]
-        valid = gets.any(axis=2) & ~self.offered[blocks]
-        self.dR[blocks] = np.where(valid, r_new - r_old, np.inf)
+        r_new = (n_g**2 * (k_g + A) * w_g).sum(axis=1)
+        valid = gets.any(axis=1)
+        self.dP[j, cols] = nonempty.sum(axis=1) - 1.0
+        self.dD[j, cols] = (np.where(nonempty, np.maximum(k_g, 1.0), 0.0).sum(axis=1)
+                            - max(k_j, 1.0))
+        self.dR[j, cols] = np.where(valid, r_new - self.term[j], np.inf)
         self.evaluated += int(valid.sum())
 
     def totals(self) -> tuple[float, float, float]:
         live = slice(0, self.n_blocks)
         k = self.offered[live].sum(axis=1).astype(np.float64)
         D = float(np.maximum(k, 1.0).sum())
-        R = float((self.n[live] ** 2 * (k + 1.0) * self.mass[live]).sum())
-        return float(self.n_blocks), D, R
+        return float(self.n_blocks), D, float(self.term[live].sum())
 
     def estimate(self) -> float:
         P, D, R = self.totals()
         return self.c * (P * D + R)
 
-    # ------------------------------------------------------------------ one step
     def best(self) -> tuple[int, int, float]:
         P, D, R = self.totals()
         live = slice(0, self.n_blocks)
@@ -212,17 +242,10 @@ class _Greedy:
         self.offered[touched] = self.offered[j]
         self.n_blocks += present.size - 1
         self.labels[members] = new_ids[groups]
-        gets = []
         for g in present:  # at most G (3) split groups
-            sub = members[groups == g]
-            if self.adm[sub, o].all():
+            if self.adm[members[groups == g], o].all():
                 self.offered[new_ids[g], o] = True
-                gets.append(sub)
-        if gets:
-            states = np.concatenate(gets)
-            self.uncov[:, states] &= ~self.good[:, states, o]
-            self._refresh_states(states)
-        self._refresh_blocks(touched)
+        self._score_blocks(touched)
 
     def partition(self) -> Partition:
         canon = canonical_labels(self.labels)
@@ -235,6 +258,7 @@ def greedy_hierarchy(
     tasks: Sequence[LearnedTask],
     admissible: np.ndarray,
     *,
+    n_primitives: int,
     splits: np.ndarray | None = None,
     c: float = 1.0,
     max_steps: int | None = None,
@@ -243,8 +267,11 @@ def greedy_hierarchy(
     """Run Algorithm 3 over ``tasks`` (module docstring).
 
     Args:
-        tasks: the learned tasks, all over the same ``K`` columns (primitive actions, options).
+        tasks: the learned tasks, all over the same ``K`` columns (the ``n_primitives``
+            primitive actions first, then the options).
         admissible: ``(S, K)`` bool, where each column may be started.
+        n_primitives: ``A``; columns ``A..K-1`` are the candidate options, and the estimate's
+            refinement term counts the ``A`` primitive actions a refinement may add.
         splits: ``(K, S)`` small non-negative ints, how "refined with column k" splits a block
             (default :func:`column_splits` of ``admissible``: by admissibility alone).
         c: the constant of ``T_conv`` (it scales ``E`` and does not change the choices).
@@ -257,6 +284,8 @@ def greedy_hierarchy(
     adm = np.asarray(admissible)
     if adm.ndim != 2 or adm.dtype != bool:
         raise TaskError(f"admissible must be a boolean (S, K) array; got {adm.dtype} {adm.shape}")
+    if not (isinstance(n_primitives, int | np.integer) and 0 <= n_primitives <= adm.shape[1]):
+        raise TaskError(f"n_primitives = {n_primitives!r} must be an int in 0..{adm.shape[1]}")
     if any(t.labels is not None for t in tasks):
         raise TaskError(
             "greedy construction works at the per-state resolution of the stored tasks; build "
@@ -272,7 +301,8 @@ def greedy_hierarchy(
             f"splits must be non-negative integers of shape {adm.T.shape} (columns, states)"
         )
     spl = np.stack([canonical_labels(row) for row in spl]) if spl.size else spl
-    run = _Greedy(tasks, adm, spl, float(c))
+    cand = np.arange(adm.shape[1]) >= n_primitives
+    run = _Greedy(tasks, adm, spl, cand, int(n_primitives), float(c))
     trace = [run.estimate()]
     steps: list[Step] = []
     stopped = "no-improvement"

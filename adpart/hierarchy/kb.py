@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from adpart.errors import AdpartError, TaskError
-from adpart.hierarchy.estimator import expected_time
+from adpart.hierarchy.estimator import expected_time, flat_time
 from adpart.hierarchy.greedy import Step, column_splits, greedy_hierarchy
 from adpart.hierarchy.tasks import LearnedTask, task_from_model
 from adpart.mdp.model import FiniteMDP
@@ -82,6 +82,10 @@ class HierarchyResult:
         partition_id: the stored ``hierarchy`` partition, or None when not stored.
         seconds: ``{"inputs": ..., "construction": ...}``.
         parameters: the estimator's parameters (stored as provenance).
+        flat_estimate: ``E[t_learn | flat]`` (the "no abstraction" candidate), None when not
+            compared.
+        fallback: True when the flat MDP is predicted to learn faster than the layer: the next
+            task should be learned flat (the layer is still stored, for the record).
     """
 
     estimator: str
@@ -95,6 +99,8 @@ class HierarchyResult:
     partition_id: int | None
     seconds: dict[str, float] = field(default_factory=dict)
     parameters: dict[str, Any] = field(default_factory=dict)
+    flat_estimate: float | None = None
+    fallback: bool = False
 
     @property
     def n_blocks(self) -> int:
@@ -114,6 +120,8 @@ class HierarchyResult:
             "options": [f"option:{i}" for i in self.option_ids],
             "tasks": [f"task:{i}" for i in self.task_ids],
             "estimate": self.estimate,
+            "flat_estimate": self.flat_estimate,
+            "fallback": self.fallback,
             "trace": list(self.trace),
             "steps": len(self.steps),
             "seconds": dict(self.seconds),
@@ -280,13 +288,19 @@ def expected_time_layer(
     inputs: HierarchyInputs, *, c: float = 1.0, max_steps: int | None = None
 ) -> tuple[Partition, list[float], list[Step], float]:
     """Algorithm 3 over ``inputs``; returns ``(filled layer, trace, steps, its estimate)``."""
+    A = inputs.mdp.n_actions
     result = greedy_hierarchy(
-        inputs.tasks, inputs.admissible,
+        inputs.tasks, inputs.admissible, n_primitives=A,
         splits=column_splits(inputs.admissible, inputs.termination), c=c, max_steps=max_steps,
     )
-    A = inputs.mdp.n_actions
     filled = fill_empty_blocks(result.partition, inputs.admissible, A)
-    return filled, result.trace, result.steps, expected_time(inputs.tasks, filled, c=c).total
+    est = expected_time(inputs.tasks, filled, n_primitives=A, c=c).total
+    return filled, result.trace, result.steps, est
+
+
+def flat_estimate(inputs: HierarchyInputs, *, c: float = 1.0) -> float:
+    """``E[t_learn | flat]`` over the inputs' primitive actions (the "no abstraction" layer)."""
+    return flat_time(inputs.admissible[:, :inputs.mdp.n_actions], c)
 
 
 def all_subgoals_layer(
@@ -319,7 +333,7 @@ def all_subgoals_layer(
         layer.labels, layer.n_blocks, inputs.admissible))
     A = inputs.mdp.n_actions
     filled = fill_empty_blocks(layer, inputs.admissible, A)
-    return filled, expected_time(inputs.tasks, filled, c=c).total
+    return filled, expected_time(inputs.tasks, filled, n_primitives=A, c=c).total
 
 
 def store_layer(
@@ -367,13 +381,19 @@ def build_hierarchy(
 def finish(
     kb: Any, inputs: HierarchyInputs, layer: Partition, *, estimator: str, trace: list[float],
     steps: list[Step], estimate: float, parameters: Mapping[str, Any], store: bool,
-    seconds: dict[str, float],
+    seconds: dict[str, float], flat: float | None = None,
 ) -> HierarchyResult:
-    """Prune, optionally store, and wrap a built layer (shared by the estimator plugins)."""
+    """Prune, optionally store, and wrap a built layer (shared by the estimator plugins).
+
+    With ``flat`` (``E[t_learn | flat]``) the result says whether to fall back to flat learning
+    (``flat <= estimate``); the decision is stored with the layer's parameters.
+    """
     t0 = time.perf_counter()
     task_ids = [t.id for t in inputs.task_records]
+    fallback = flat is not None and flat <= estimate
     params = {**parameters, "tasks": task_ids, "policies": [p.id for p in inputs.policy_records],
-              "estimate": estimate, "steps": len(steps)}
+              "estimate": estimate, "steps": len(steps), "flat_estimate": flat,
+              "fallback": fallback}
     if store:
         pruned, option_ids, pid = store_layer(kb, inputs, layer, estimator=estimator,
                                               parameters=params)
@@ -386,4 +406,4 @@ def finish(
         for i in option_ids]
     seconds = {**seconds, "store": time.perf_counter() - t0}
     return HierarchyResult(estimator, pruned, option_ids, names, list(trace), estimate,
-                           list(steps), task_ids, pid, seconds, dict(parameters))
+                           list(steps), task_ids, pid, seconds, dict(parameters), flat, fallback)

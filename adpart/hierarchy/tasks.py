@@ -11,9 +11,13 @@ the task's blocks. adpart stores per-state Q over the primitive actions (``Polic
   hands over to the task's own values where it stops. That is one sparse solve per option,
   ``(I - gamma P_pi C) x = r_pi + gamma P_pi (I - C) V_i``, on the states the option can act in
   (the option-model system of eq. 3.1 with the continuation value added to the right-hand side).
-* **Occupancies** are the discounted state occupancy of the task's start distribution under its
-  greedy policy, ``d = mu + gamma P_pi^T d`` over the non-terminal states (no decision is taken in
-  a terminal state), normalised to sum to one; ``P(B | T_i) = sum_{s in B} d(s)``.
+* **Occupancies** are the discounted state occupancy under the task's greedy policy,
+  ``d = mu + gamma P_pi^T d`` over the non-terminal states (no decision is taken in a terminal
+  state), normalised to sum to one, started from *every* state reachable from the task's start
+  distribution (``starts="reachable"``, the default: ``mu`` uniform over them) - learning explores,
+  so every such state is met and acted in, while the greedy policy from the start alone puts
+  weight on a corridor (320 of urban's 20,004 states). ``starts="start"`` is the greedy policy's
+  occupancy from the start distribution itself. ``P(B | T_i) = sum_{s in B} d(s)``.
 
 The per-state resolution is the task's own partition ``P_i`` (``B_{i,k} = {s}``) unless a task
 partition is given (then block Q values are occupancy-weighted means, see
@@ -92,8 +96,36 @@ class LearnedTask:
         return self.Q.shape[1]
 
 
-def discounted_occupancy(mdp: FiniteMDP, policy: np.ndarray) -> np.ndarray:
-    """``(S,)`` discounted occupancy of ``mdp``'s start distribution under ``policy``, sum 1.
+STARTS = ("reachable", "start")
+
+
+def reachable_states(mdp: FiniteMDP, sources: np.ndarray) -> np.ndarray:
+    """``(S,)`` bool: states some sequence of admissible actions reaches from ``sources``.
+
+    Terminal states are reached but not left (the episode ends there). Breadth first over the
+    union of the action graphs (``scipy.sparse.csgraph``).
+    """
+    from scipy.sparse.csgraph import breadth_first_order
+
+    S, A = mdp.n_states, mdp.n_actions
+    P = sp.csr_array(mdp.P)
+    rows = np.repeat(np.arange(A * S), np.diff(P.indptr))
+    a, s = rows // S, rows % S
+    keep = mdp.admissible[s, a] & ~mdp.terminal[s] & (P.data > 0)
+    src = np.flatnonzero(sources)
+    # a virtual node S points at every source
+    graph = sp.csr_array((np.ones(int(keep.sum()) + src.size),
+                          (np.r_[s[keep], np.full(src.size, S)], np.r_[P.indices[keep], src])),
+                         shape=(S + 1, S + 1))
+    order = breadth_first_order(graph, S, directed=True, return_predecessors=False)
+    out = np.zeros(S + 1, dtype=bool)
+    out[order] = True
+    return out[:S]
+
+
+def discounted_occupancy(mdp: FiniteMDP, policy: np.ndarray, starts: str = "reachable"
+                         ) -> np.ndarray:
+    """``(S,)`` discounted occupancy under ``policy`` from ``starts`` (module docstring), sum 1.
 
     Solves ``(I - gamma P_pi^T) d = mu`` on the non-terminal states (sparse LU); terminal states
     get 0 (the episode is over on arrival). With ``gamma = 1`` the policy must reach a terminal
@@ -103,9 +135,14 @@ def discounted_occupancy(mdp: FiniteMDP, policy: np.ndarray) -> np.ndarray:
     pol = np.asarray(policy, dtype=np.int64)
     if pol.shape != (S,) or pol.min() < 0 or pol.max() >= mdp.n_actions:
         raise TaskError(f"policy must be {S} actions in 0..{mdp.n_actions - 1}")
+    if starts not in STARTS:
+        raise TaskError(f"starts = {starts!r}: use one of {', '.join(STARTS)}")
     live = np.flatnonzero(~mdp.terminal)
     P_pi = mdp.P[pol[live] * S + live][:, live]
-    mu = start_distribution(mdp)[live]
+    mu = start_distribution(mdp)
+    if starts == "reachable":
+        mu = (reachable_states(mdp, mu > 0) & ~mdp.terminal).astype(np.float64)
+    mu = mu[live] / mu[live].sum()
     system = sp.csc_array(sp.eye_array(live.size) - mdp.gamma * sp.csr_array(P_pi).T)
     try:
         d_live = spla.splu(system).solve(mu)
@@ -170,12 +207,13 @@ def task_from_model(
     name: str | None = None,
     weight: float = 1.0,
     labels: np.ndarray | None = None,
+    starts: str = "reachable",
 ) -> LearnedTask:
     """Build a :class:`LearnedTask` from a task's model and its learned primitive ``Q`` (S, A).
 
     Columns: the ``A`` primitive actions (the stored Q, ``-inf`` where inadmissible) then one per
     option (:func:`option_values`); occupancy from the greedy policy of ``Q``
-    (:func:`discounted_occupancy`).
+    (:func:`discounted_occupancy` from ``starts``).
     """
     S, A = mdp.n_states, mdp.n_actions
     Qp = np.asarray(Q, dtype=np.float64)
@@ -193,7 +231,7 @@ def task_from_model(
     return LearnedTask(
         name=name or mdp.name,
         Q=np.concatenate([Qp, Qo], axis=1),
-        occupancy=discounted_occupancy(mdp, policy),
+        occupancy=discounted_occupancy(mdp, policy, starts),
         threshold=float(threshold),
         weight=float(weight),
         labels=labels,

@@ -300,7 +300,9 @@ def _record_learning(kb: Any, outcome: LearnOutcome) -> dict[str, Any]:
         model_hash=dyn.content_hash,
         n_states=dyn.n_states,
         n_actions=dyn.n_actions,
-        spec={"name": request.env, "source": domain.source, "actions": list(dyn.action_names)},
+        spec={"name": request.env, "source": domain.source, "actions": list(dyn.action_names),
+              **({"make_kwargs": dict(domain.make_kwargs)}
+                 if getattr(domain, "make_kwargs", None) else {})},
     )
     task_rec = kb.put_task(
         environment,

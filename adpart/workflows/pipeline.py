@@ -10,6 +10,14 @@
 5. learn every later task on that decision layer with the hierarchical learner (refinement
    where flat and abstract values disagree), and flat without transfer for comparison.
 
+Two outcomes end the abstraction and are reported, not raised: the detector finds **no
+subgoals** (stage ``no-subgoals``), and the knowledge base **predicts that abstraction will not
+pay** - the ``expected-learning-time`` estimate (section 4.4) of the best layer it can build from
+the tasks learned so far (to the bound, in some flat run) is not below that of the flat MDP, or no
+earlier task was learned at all (stage ``fallback``; otherwise stage ``predict`` records the
+comparison). The later tasks
+are then learned with the flat learner, and the row of the method says why (``fallback``).
+
 Every step first looks in the knowledge base for a result of exactly the same request and reuses
 it, so a pipeline run again - or resumed after being killed - recomputes nothing it already has.
 """
@@ -63,6 +71,9 @@ class PipelineConfig:
             ``all-subgoals``); when set, each later task starts from the layer that estimator
             builds from the earlier tasks of the sequence instead of the multi-phase partition.
         hierarchy_params: that estimator's parameters.
+        flat_learner: the learner plugin of the first task, the baseline and the fallback.
+        fallback: ask the knowledge base before each later task whether abstraction pays
+            (module docstring); False always learns on the layer.
     """
 
     env: str
@@ -84,6 +95,8 @@ class PipelineConfig:
     gap_fraction: float = 0.05
     hierarchy: str | None = None
     hierarchy_params: dict[str, Any] = field(default_factory=dict)
+    flat_learner: str = "q-learning"
+    fallback: bool = True
 
     def __post_init__(self) -> None:
         if len(self.tasks) < 2:
@@ -322,6 +335,39 @@ def episode_defaults(env: str) -> dict[str, Any]:
             "max-steps": max(1000, 2 * dyn.n_states)}
 
 
+def learner_defaults(learner: str, defaults: dict[str, Any]) -> dict[str, Any]:
+    """The entries of ``defaults`` that the learner plugin ``learner`` declares.
+
+    Raises:
+        UnknownNameError: no learner plugin of that name (the message names ``--flat-learner``).
+    """
+    from adpart.errors import UnknownNameError
+    from adpart.plugins import get_registry
+
+    try:
+        spec = get_registry().get("learner", learner)
+    except UnknownNameError as exc:
+        raise UnknownNameError(f"--flat-learner: {exc}") from None
+    declared = {p.name for p in spec.params}
+    return {k: v for k, v in defaults.items() if k in declared}
+
+
+def predict_fallback(kb: Any, env: str, task_ids: list[int], params: dict[str, Any]
+                     ) -> dict[str, Any]:
+    """Whether the knowledge base predicts that abstraction will not pay for the next task.
+
+    Builds (without storing) the ``expected-learning-time`` layer from ``task_ids`` and compares
+    its ``E[t_learn]`` with the flat MDP's (:mod:`adpart.hierarchy.estimator`). Returns
+    ``{"fallback": bool, "estimate": ..., "flat_estimate": ..., "blocks": ...}``.
+    """
+    from adpart.hierarchy import build_hierarchy
+
+    res = build_hierarchy(kb, env, estimator="expected-learning-time", tasks=task_ids,
+                          params=params, store=False)
+    return {"fallback": bool(res.fallback), "estimate": res.estimate,
+            "flat_estimate": res.flat_estimate, "blocks": res.n_blocks}
+
+
 def run_pipeline(
     kb: Any,
     config: PipelineConfig,
@@ -334,14 +380,20 @@ def run_pipeline(
     report = PipelineReport(config)
     first, *later = config.tasks
     defaults = episode_defaults(config.env)
-    flat = {**defaults, **config.flat_params}
+    flat = {**learner_defaults(config.flat_learner, defaults), **config.flat_params}
     hierarchical = {**defaults, **config.hierarchical_params}
+
+    def learn_flat(task: str, episodes: int, stage: str = "learn-flat") -> tuple[dict, Any]:
+        req = LearnRequest(env=config.env, task=task, learner=config.flat_learner,
+                           params=dict(flat), runs=config.runs, episodes=episodes,
+                           seed=config.seed, eval_every=config.eval_every)
+        return _learn(kb, req, report, stage)
 
     say(f"learning {first} flat ({config.runs} runs x {config.first_episodes} episodes)")
     first_req = LearnRequest(
         env=config.env,
         task=first,
-        learner="q-learning",
+        learner=config.flat_learner,
         params=flat,
         runs=config.runs,
         episodes=config.first_episodes,
@@ -369,10 +421,20 @@ def run_pipeline(
         )
     )
     if found.result.subgoals.size == 0:
-        raise TaskError(
-            f"{config.detector} found no subgoals in {policy.ref}; try another detector or "
-            "learn the first task longer"
-        )
+        reason = (f"{config.detector} found no subgoals in {policy.ref}: no options to build a "
+                  "layer from, so the later tasks are learned flat")
+        say(reason)
+        report.stages.append(Stage("no-subgoals", first, found.record.ref, found.reused, 0.0,
+                                   {"reason": reason}))
+        for task in later:
+            _, curve = learn_flat(task, config.episodes)
+            report.curves[task] = {"flat (no subgoals)": curve}
+            report.rows.append(task_row(task, "flat-fallback", curve, config.gap_fraction,
+                                        {"fallback": reason}))
+            if config.baseline:
+                report.rows.append(task_row(task, "flat", curve, config.gap_fraction, {}))
+        _figures(report, config, out)
+        return report
 
     say(f"learning options to {found.result.subgoals.size} subgoals")
     start = time.perf_counter()
@@ -389,8 +451,44 @@ def run_pipeline(
     )
 
     learned = [parse_ref(first_ids["task"], "task")]
+    # tasks learned to the bound in some flat run: the estimator's evidence (section 4.4 builds
+    # on learned tasks T_i = (pi_i, P_i, Q_i); an unlearned task's Q predicts nothing)
+    evidence = list(learned) if report.rows[0]["runs_within_bound"] > 0 else []
     option_ids = [r.id for r in stored.records]
     for task in later:
+        if config.fallback:
+            start = time.perf_counter()
+            params = dict(config.hierarchy_params) if config.hierarchy == (
+                "expected-learning-time") else {}
+            if evidence:
+                verdict = predict_fallback(kb, config.env, list(evidence), params)
+                reason = (f"the knowledge base predicts abstraction will "
+                          f"{'not pay' if verdict['fallback'] else 'pay'} for {task}: E[t_learn] "
+                          f"{verdict['estimate']:.4g} of the best layer ({verdict['blocks']} "
+                          f"blocks) {'>=' if verdict['fallback'] else '<'} "
+                          f"{verdict['flat_estimate']:.4g} flat")
+            else:
+                verdict = {"fallback": True}
+                reason = (f"no earlier task was learned to the bound in any run, so the knowledge "
+                          f"base holds no values to predict a layer from: {task} is learned flat")
+            report.stages.append(Stage("fallback" if verdict["fallback"] else "predict", task,
+                                       "flat" if verdict["fallback"] else "layer", False,
+                                       time.perf_counter() - start, {**verdict, "reason": reason}))
+            if verdict["fallback"]:
+                say(reason)
+                ids, curve = learn_flat(task, config.episodes)
+                report.curves[task] = {"flat (fallback)": curve}
+                report.rows.append(task_row(task, "flat-fallback", curve, config.gap_fraction,
+                                            {"fallback": reason}))
+                if config.baseline:
+                    report.curves[task]["flat (no transfer)"] = curve
+                    report.rows.append(task_row(task, "flat", curve, config.gap_fraction, {}))
+                tid = parse_ref(ids["task"], "task")
+                if tid not in learned:
+                    learned.append(tid)
+                if report.rows[-1]["runs_within_bound"] > 0 and tid not in evidence:
+                    evidence.append(tid)
+                continue
         if config.hierarchy is None:
             say(f"partitioning for {task} (delta {config.delta}, epsilon {config.epsilon})")
             layer = _partition_layer(kb, config, found.record.ref, task, report)
@@ -431,22 +529,18 @@ def run_pipeline(
         task_id = parse_ref(hier_ids["task"], "task")
         if config.baseline:
             say(f"learning {task} flat for comparison")
-            base_req = LearnRequest(
-                env=config.env,
-                task=task,
-                learner="q-learning",
-                params=flat,
-                runs=config.runs,
-                episodes=config.episodes,
-                seed=config.seed,
-                eval_every=config.eval_every,
-            )
-            _, base_curve = _learn(kb, base_req, report, "learn-flat")
+            _, base_curve = learn_flat(task, config.episodes)
             report.curves[task]["flat (no transfer)"] = base_curve
             report.rows.append(task_row(task, "flat", base_curve, config.gap_fraction, {}))
+            if report.rows[-1]["runs_within_bound"] > 0 and task_id not in evidence:
+                evidence.append(task_id)
         if task_id not in learned:
             learned.append(task_id)
+    _figures(report, config, out)
+    return report
 
+
+def _figures(report: PipelineReport, config: PipelineConfig, out: Path | None) -> None:
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
         for task, curves in report.curves.items():
@@ -458,4 +552,3 @@ def run_pipeline(
                 title=f"{config.env}/{task}: value gap of the greedy policy",
             )
             report.figures.append(str(path))
-    return report

@@ -18,7 +18,7 @@ PIPELINE = [
     "--runs", "2", "--episodes", "100", "--first-episodes", "500", "--epsilon", "1",
     "--flat-opt", "alpha=1", "--flat-opt", "epsilon=0.5",
     "--hier-opt", "alpha=1", "--hier-opt", "epsilon=0.3",
-    "--hierarchy", "expected-learning-time",
+    "--hierarchy", "expected-learning-time", "--no-fallback",
 ]
 
 
@@ -89,7 +89,9 @@ def test_hierarchy_command_stores_the_layer_it_prints(pipeline_kb, tmp_path):
     out = json.loads(res.output)
     assert out["task_names"] == ["reach-goal", "goal:x=9,y=5"]
     assert all(b <= a for a, b in zip(out["trace"], out["trace"][1:], strict=False))
-    assert out["estimate"] <= out["trace"][0]
+    # the stored layer (empty blocks given the primitive actions) is compared with flat
+    assert out["flat_estimate"] == 55 * 55 * 8
+    assert out["fallback"] == (out["flat_estimate"] <= out["estimate"])
     kb = KnowledgeBase.open(str(kb_dir))
     try:
         part = kb.get("partition", int(out["partition"].split(":")[1]))
@@ -126,3 +128,23 @@ def test_bad_input_is_one_line_and_exit_2(pipeline_kb, args, needle):
     assert res.exit_code == 2, res.output
     assert needle in res.output and "Traceback" not in res.output
     assert len(res.output.strip().splitlines()) == 1
+
+
+def test_pipeline_falls_back_to_flat_where_the_abstraction_cannot_pay(tmp_path):
+    """two-rooms' one doorway option fits none of the goals, so every layer Algorithm 3 can
+    build costs more than learning the 55 states flat: the method learns flat, saying so."""
+    args = [a for a in PIPELINE if a != "--no-fallback"]
+    args[args.index("--tasks") + 1] = "reach-goal,goal:x=9,y=5"
+    res = CliRunner().invoke(cli, [*args, "--kb", str(tmp_path / "kb"), "--out",
+                                   str(tmp_path / "o"), "--json"])
+    assert res.exit_code == 0, res.output
+    summary = json.loads(res.output)
+    stages = [s["stage"] for s in summary["stages"]]
+    assert "fallback" in stages and "learn-hierarchical" not in stages
+    fb = next(s for s in summary["stages"] if s["stage"] == "fallback")
+    assert fb["detail"]["flat_estimate"] == pytest.approx(55 * 55 * 8)
+    assert fb["detail"]["estimate"] >= fb["detail"]["flat_estimate"]
+    assert "will not pay" in fb["detail"]["reason"]
+    rows = {r["learner"]: r for r in summary["tasks"] if r["task"] == "goal:x=9,y=5"}
+    assert rows["flat-fallback"]["episodes_to_bound_median"] == (
+        rows["flat"]["episodes_to_bound_median"])

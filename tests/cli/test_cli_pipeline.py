@@ -9,6 +9,7 @@ import subprocess
 import sys
 import time
 
+import pytest
 from click.testing import CliRunner
 
 from adpart.cli import cli
@@ -17,6 +18,7 @@ from adpart.store import KnowledgeBase
 PIPELINE = [
     "pipeline",
     "two-rooms",
+    "--no-fallback",
     "--tasks",
     "reach-goal,goal:x=9,y=5",
     "--runs",
@@ -158,3 +160,26 @@ def test_transfer_runs_the_last_step_alone(tmp_path):
         ],
     )
     assert bad.exit_code == 2 and "partition:999" in bad.output
+
+
+@pytest.mark.slow
+def test_no_subgoals_is_a_reported_outcome_and_the_flat_learner_is_a_choice(tmp_path):
+    """Taxi's learned policy has no subgoal for count-exhaustive: the pipeline learns the later
+    task flat and says why, instead of failing; the Gymnasium keyword arguments are stored."""
+    args = ["pipeline", "gym:Taxi-v4[is_rainy=false]", "--tasks", "reward,reward", "--runs",
+            "10", "--episodes", "20", "--first-episodes", "500", "--kb", str(tmp_path / "kb"),
+            "--out", str(tmp_path / "o")]
+    res = CliRunner().invoke(cli, [*args, "--json"])
+    assert res.exit_code == 0, res.output
+    summary = json.loads(res.output)
+    stage = next(s for s in summary["stages"] if s["stage"] == "no-subgoals")
+    assert "found no subgoals" in stage["detail"]["reason"]
+    assert [r["learner"] for r in summary["tasks"]] == ["flat", "flat-fallback", "flat"]
+    kb = KnowledgeBase.open(str(tmp_path / "kb"))
+    try:
+        env = kb.find_environment("gym:Taxi-v4[is_rainy=false]")
+        assert env.spec["make_kwargs"] == {"is_rainy": False}
+    finally:
+        kb.close()
+    bad = CliRunner().invoke(cli, [*args, "--flat-learner", "nope"])
+    assert bad.exit_code == 2 and "--flat-learner" in bad.output

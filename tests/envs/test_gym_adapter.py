@@ -323,3 +323,21 @@ def test_bad_arguments_raise_clear_errors():
         GymDomain("Taxi-v4", gamma=1.5)
     with pytest.raises(UnknownNameError, match="has no task"):
         GymDomain("Taxi-v4").task("deliver")
+
+
+def test_gym_names_carry_keyword_arguments_and_round_trip():
+    from adpart.envs.registry import get_domain, parse_gym_name
+    from adpart.errors import UnknownNameError
+
+    env_id, kw = parse_gym_name("gym:FrozenLake-v1[map_name=8x8,is_slippery=true]")
+    assert env_id == "FrozenLake-v1" and kw == {"map_name": "8x8", "is_slippery": True}
+    assert parse_gym_name("gym:Taxi-v4") == ("Taxi-v4", {})
+    dom = get_domain("gym:FrozenLake-v1[map_name=8x8,is_slippery=False]")
+    assert dom.dynamics().n_states == 64 and dom.make_kwargs["is_slippery"] is False
+    # the domain's own name reads back to the same environment
+    again = get_domain(dom.name)
+    assert again.dynamics().content_hash == dom.dynamics().content_hash
+    with pytest.raises(UnknownNameError, match="key=value"):
+        parse_gym_name("gym:FrozenLake-v1[map_name]")
+    with pytest.raises(UnknownNameError, match=r"gym:ID\[key=value"):
+        parse_gym_name("gym:FrozenLake-v1[map_name=8x8")

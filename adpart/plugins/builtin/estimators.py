@@ -20,6 +20,7 @@ from adpart.hierarchy.kb import (
     all_subgoals_layer,
     expected_time_layer,
     finish,
+    flat_estimate,
     load_inputs,
 )
 from adpart.plugins.hookspecs import hookimpl
@@ -35,17 +36,20 @@ _COMMON = (
 
 
 class ExpectedLearningTime:
-    """Algorithm 3: greedy (block, option) refinements minimising E[t_learn | P]."""
+    """Algorithm 3: greedy (block, option) refinements minimising E[t_learn | P], or flat."""
 
     name = "expected-learning-time"
     description = "greedy layer minimising the expected learning time over learned tasks (4.4)"
     params = (*_COMMON,
-              Param("max-steps", "int", 0, "cap on accepted refinements (0 = no cap)", min=0))
+              Param("max-steps", "int", 0, "cap on accepted refinements (0 = no cap)", min=0),
+              Param("flat", "bool", True,
+                    "compare with the flat MDP ('no abstraction'); fall back when it is cheaper"))
 
     def __init__(self, c: float = 1.0, threshold: float = -1.0,
-                 threshold_scale: float = DEFAULT_THRESHOLD_SCALE, max_steps: int = 0) -> None:
+                 threshold_scale: float = DEFAULT_THRESHOLD_SCALE, max_steps: int = 0,
+                 flat: bool = True) -> None:
         self.c, self.threshold, self.threshold_scale = c, threshold, threshold_scale
-        self.max_steps = max_steps
+        self.max_steps, self.flat = max_steps, flat
 
     def build(self, knowledge_base: Any, environment: str, *,
               tasks: Sequence[str | int] | None = None, store: bool = True) -> HierarchyResult:
@@ -58,10 +62,12 @@ class ExpectedLearningTime:
             inputs, c=self.c, max_steps=self.max_steps or None)
         t2 = time.perf_counter()
         params = {"c": self.c, "threshold": self.threshold,
-                  "threshold_scale": self.threshold_scale, "max_steps": self.max_steps}
+                  "threshold_scale": self.threshold_scale, "max_steps": self.max_steps,
+                  "flat": self.flat}
         return finish(knowledge_base, inputs, layer, estimator=self.name, trace=trace,
                       steps=steps, estimate=estimate, parameters=params, store=store,
-                      seconds={"inputs": t1 - t0, "construction": t2 - t1})
+                      seconds={"inputs": t1 - t0, "construction": t2 - t1},
+                      flat=flat_estimate(inputs, c=self.c) if self.flat else None)
 
 
 class AllSubgoals:
