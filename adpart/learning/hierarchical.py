@@ -387,7 +387,7 @@ def hierarchical_learning(
     min_visits: int = MIN_VISITS,
     lcb_z: float = LCB_Z,
     flat_explore: bool = True,
-    reference: str = "model",
+    reference: str = "learned",
     models: Sequence[OptionModel] | None = None,
     runs: int = 10,
     episodes: int = 500,
@@ -416,9 +416,11 @@ def hierarchical_learning(
         threshold_scale: the ``|V*(start)|`` fraction of the default threshold.
         min_visits: visits of the flat pair and of the block before the test may fire.
         lcb_z: standard errors subtracted from a stochastic pair's lower-bound flat value.
-        reference: what the grounded flat value is compared with: ``"model"``, the block's
-            value ``V*_P(b)`` in the layer's point model (recomputed after every refinement), or
-            ``"learned"``, its learned ``max_o Q_P(b, o)``.
+        reference: what the grounded flat value is compared with: ``"learned"`` (default), the
+            block's learned ``max_o Q_P(b, o)``, or ``"model"``, its value ``V*_P(b)`` in the
+            layer's point model, recomputed after every refinement: then every firing is a real
+            inconsistency by the definition ``Q*(s, a*) - V*_P(B) > L``, at a measured cost
+            (docs/hierarchical-learning.md).
         flat_explore: at a greedy decision take the optimistic flat action where it beats
             the block's best value (exploration for goals that are no subgoal; ``inconsistency``
             mode only - the other modes make the goal reachable on the layer).

@@ -75,7 +75,7 @@ class HierarchicalLearner:
               "standard errors off a stochastic pair's lower-bound flat value", min=0.0),
         Param("flat-explore", "bool", True,
               "take the optimistic flat action where it beats the block's best"),
-        Param("reference", "str", "model",
+        Param("reference", "str", "learned",
               "what the grounded flat value must beat by L: the block's point-model value "
               "(model) or its learned value (learned)", choices=("model", "learned")),
         Param("min-visits", "int", 2, "visits of the flat pair and block before a test fires",
@@ -91,7 +91,7 @@ class HierarchicalLearner:
     def __init__(self, mode: str = "inconsistency", delta: float = 0.0,
                  partition_epsilon: float = 0.0, threshold: float = -1.0,
                  threshold_scale: float = 0.025, lcb_z: float = 2.0, flat_explore: bool = True,
-                 reference: str = "model",
+                 reference: str = "learned",
                  min_visits: int = 2, intra_option: bool = False,
                  alpha: str = "1/n^0.8", epsilon: str = "0.1", max_steps: int = 1000,
                  kernel: str = "auto") -> None:
