@@ -58,6 +58,22 @@ def import_ray() -> Any:
     return ray
 
 
+def _start_reaper() -> None:
+    """Start :mod:`adpart.ray_reaper` for this process (where ``/proc`` exists), in its own
+    session so that a signal to the driver's process group does not reach it."""
+    import os
+    import subprocess
+    import sys
+
+    if not os.path.isdir("/proc"):
+        return
+    subprocess.Popen(
+        [sys.executable, "-m", "adpart.ray_reaper", str(os.getpid())],
+        stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+        start_new_session=True, close_fds=True,
+    )
+
+
 @dataclass(frozen=True)
 class _Shared:
     """Placeholder for an array in the object store; replaced by the array inside the worker."""
@@ -174,6 +190,7 @@ class RayExecutor(Executor):
                     runtime_env=_RUNTIME_ENV,
                 )
                 self._started = True
+                _start_reaper()
             else:
                 ray.init(address=self.address, logging_level=logging.WARNING,
                          runtime_env=_RUNTIME_ENV)
