@@ -16,7 +16,7 @@ the discounted probability that it terminates in ``s'``. Primitives: ``R_a = R(.
     R_i = r + M R_i,    F_i = B + M F_i     (M = F_c restricted to running -> running states,
                                              r = R_c, B = F_c running -> termination states),
 
-solved by a sparse LU (the models are kept dense). The subtask's own SMDP is solved by
+solved by a sparse LU (sparse models; the exits are few). The subtask's own SMDP is solved by
 value iteration,
 
     V~_i(s) = max_k  R_{c_k(s)}(s) + sum_{s'} F_{c_k(s)}(s, s') W(s'),
@@ -29,8 +29,8 @@ slot names it and it is not already terminated there; a primitive only where adm
 
 Call-time parameters (Parr's graph) are handled as executed: a slot invokes, in the state it is
 called from, the node the compiled graph binds there, which then runs its own policy to its own
-termination. Dense ``(S, S)`` models are kept per node: meant for Taxi-sized graphs (hundreds of
-states, tens of nodes), not for the Parr maze's hundreds of instances.
+termination. Models are sparse, so Parr's mini maze (1,988 states, 605 subtask instances) is
+solved as well as Taxi.
 """
 
 from __future__ import annotations
@@ -74,11 +74,11 @@ def recursively_optimal(mdp: FiniteMDP, g: CompiledGraph, *, tol: float = 1e-10,
     n_nodes = A + g.n_composite
     gamma = mdp.gamma
     Rm: list[np.ndarray] = []
-    Fm: list[np.ndarray] = []
+    Fm: list[sp.csr_array] = []
     for a in range(A):
         Rm.append(np.asarray(mdp.R[:, a], dtype=np.float64))
         rows_a = a * S + np.arange(S)  # P stacks the actions: row a*S + s
-        Fm.append(gamma * np.asarray(mdp.P[rows_a].toarray()))
+        Fm.append(sp.csr_array(gamma * mdp.P[rows_a]))
     V = np.zeros((n_nodes, S))
     for a in range(A):
         V[a] = Rm[a]
@@ -94,61 +94,82 @@ def recursively_optimal(mdp: FiniteMDP, g: CompiledGraph, *, tol: float = 1e-10,
         n, K = rows.size, sn.shape[0]
         in_rows = np.zeros(S, dtype=bool)
         in_rows[rows] = True
-        # per slot and row: the child's reward and discounted exit distribution
         ok = np.zeros((K, n), dtype=bool)
         rew = np.full((K, n), -np.inf)
-        F = np.zeros((K, n, S))
+        F: list[sp.csr_array] = []  # per slot, (n, S): the child's exit distribution per row
         for k in range(K):
+            parts, where = [], []
             for child in np.unique(sn[k][sn[k] >= 0]):
                 sel = np.flatnonzero(sn[k] == child)
                 sel = sel[running[int(child), rows[sel]]]
                 ok[k, sel] = True
                 rew[k, sel] = Rm[int(child)][rows[sel]]
-                F[k, sel] = Fm[int(child)][rows[sel]]
-        pseudo = g.pseudo[j]
-        term_part = np.where(ok, np.einsum("kns,s->kn", F[:, :, ~in_rows], pseudo[~in_rows]),
-                             0.0)
-        Frun = F[:, :, rows]  # (K, n, n)
+                parts.append(Fm[int(child)][rows[sel]])
+                where.append(sel)
+            F.append(_place(parts, where, n, S))
+        pseudo = np.where(in_rows, 0.0, g.pseudo[j])
+        term = [Fk @ pseudo for Fk in F]
+        Frun = [sp.csr_array(Fk[:, rows]) for Fk in F]
+
+        def q_of(vt: np.ndarray, rew=rew, ok=ok, term=term, Frun=Frun) -> np.ndarray:
+            q = np.stack([rew[k] + term[k] + Frun[k] @ vt for k in range(len(Frun))]) \
+                if Frun else np.zeros((0, vt.size))
+            return np.where(ok, q, -np.inf)
+
         vt = np.zeros(n)
         sweep = 0
         for sweep in range(1, max_sweeps + 1):  # noqa: B007 (reported)
-            q = np.where(ok, rew + term_part + Frun @ vt, -np.inf)
+            q = q_of(vt)
             new = q.max(axis=0) if K else np.full(n, -np.inf)
-            new = np.where(np.isfinite(new), new, -1e300)
+            new = np.where(np.isfinite(new), new, _FLOOR)
             if np.max(np.abs(new - vt), initial=0.0) <= tol:
                 vt = new
                 break
             vt = new
-        q = np.where(ok, rew + term_part + Frun @ vt, -np.inf)
+        q = q_of(vt)
         best = q.max(axis=0) if K else np.full(n, -np.inf)
-        scale = np.maximum(1.0, np.abs(best))
-        choice = np.argmax(q >= best - 1e-9 * scale, axis=0) if K else np.zeros(n, np.int64)
-        none = ~ok.any(axis=0)
-        cols = np.arange(n)
+        none = ~(best > _FLOOR / 2)
+        scale = np.maximum(1.0, np.abs(np.where(none, 0.0, best)))
+        choice = (np.argmax(q >= (best - 1e-9 * scale)[None], axis=0) if K
+                  else np.zeros(n, dtype=np.int64))
         # the model of i under its policy: R_i = r + M R_i, F_i = B + M F_i
-        Fc = F[choice, cols] if K else np.zeros((n, S))
-        rc = np.where(none, 0.0, rew[choice, cols] if K else 0.0)
-        Fc[none] = 0.0
-        exits = np.flatnonzero(~in_rows & (Fc != 0).any(axis=0))  # only reachable exits
-        rhs = np.column_stack([rc, Fc[:, exits]])
+        pick = [sp.diags_array(((choice == k) & ~none).astype(np.float64)) for k in range(K)]
+        Fc = sp.csr_array(sum((pick[k] @ F[k] for k in range(K)), sp.csr_array((n, S))))
+        rc = np.where(none, 0.0, np.take_along_axis(rew, choice[None], 0)[0] if K else 0.0)
+        exits = np.flatnonzero(~in_rows & (np.asarray(abs(Fc).sum(axis=0)).ravel() > 0))
+        Fi = sp.csr_array((S, S))
+        Ri = rc
         if n:
-            lhs = sp.eye_array(n, format="csc") - sp.csc_array(Fc[:, rows])
+            lhs = sp.csc_array(sp.eye_array(n) - Fc[:, rows])
+            rhs = np.column_stack([rc, Fc[:, exits].toarray()])
             sol = spla.splu(lhs).solve(rhs)
-        else:
-            sol = rhs
-        Ri = sol[:, 0]
-        Fi = np.zeros((S, S))
-        Fi[np.ix_(rows, exits)] = sol[:, 1:]
+            Ri = sol[:, 0]
+            X = sp.coo_array(sol[:, 1:])
+            Fi = sp.csr_array((X.data, (rows[X.row], exits[X.col])), shape=(S, S))
         Rfull = np.zeros(S)
         Rfull[rows] = np.where(none, -np.inf, Ri)
         Rm.append(Rfull)
         Fm.append(Fi)
         V[node] = Rfull
-        C = np.where(ok, Frun @ np.where(none, 0.0, Ri), -np.inf)
-        C_out.append(C)
+        Vrun = np.where(none, 0.0, Ri)
+        C_out.append(np.where(ok, np.stack([Fr @ Vrun for Fr in Frun]) if K
+                              else np.zeros((0, n)), -np.inf))
         pol_out.append(choice.astype(np.int64))
         sweeps_out.append(sweep)
     return RecursiveSolution(V=V, C=C_out, policy=pol_out, sweeps=sweeps_out)
+
+
+#: Stand-in for "no child available" inside value iteration (keeps the arithmetic finite).
+_FLOOR = -1e300
+
+
+def _place(parts: list[sp.csr_array], where: list[np.ndarray], n: int, S: int) -> sp.csr_array:
+    """Stack row blocks ``parts[i]`` at row positions ``where[i]`` of an ``(n, S)`` matrix."""
+    if not parts:
+        return sp.csr_array((n, S))
+    M = sp.coo_array(sp.vstack(parts, format="coo"))
+    order = np.concatenate(where)
+    return sp.csr_array((M.data, (order[M.row], M.col)), shape=(n, S))
 
 
 def reachable_states(mdp: FiniteMDP) -> np.ndarray:
