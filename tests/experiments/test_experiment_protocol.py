@@ -1,0 +1,61 @@
+"""The evaluation protocol of chapter 6: ceilings, the scoring of unreachable loops, rows."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from adpart.envs.domains.taxi import Taxi
+from adpart.experiments.protocol import absorb_unreachable, layer_ceiling, score
+from adpart.learning.curves import start_distribution, start_values
+from adpart.learning.maxq import polled_policy, recursively_optimal, taxi_graph
+from adpart.mdp.solvers import value_iteration
+from adpart.partition import Partition
+from tests.learning.conftest import slippery_grid
+
+
+def test_absorbing_unreachable_configurations_keeps_values_and_fixes_loop_scores() -> None:
+    raw = Taxi(fickle=True, gamma=1.0).mdp()
+    mdp = absorb_unreachable(raw)
+    assert int(mdp.terminal.sum() - raw.terminal.sum()) == 100
+    live = ~mdp.terminal
+    np.testing.assert_allclose(value_iteration(mdp, epsilon=1e-10).V[live],
+                               value_iteration(raw, epsilon=1e-10).V[live], atol=1e-8)
+    # a good policy that loops forever in one configuration no episode can enter
+    g = taxi_graph().compile(raw)
+    pol = polled_policy(g, recursively_optimal(raw, g), raw.admissible)
+    S = raw.n_states
+    absorbed = np.flatnonzero(mdp.terminal & ~raw.terminal)
+    stay = [(s, a) for s in absorbed for a in range(raw.n_actions)
+            if raw.P[[a * S + s]].toarray()[0, s] == 1.0]  # an illegal Putdown stays put
+    s, a = stay[0]
+    pol[s] = a
+    mu = start_distribution(raw)
+    assert np.isnan(start_values(raw, pol[None], mu)[0])  # the old score: undefined
+    assert np.isfinite(start_values(mdp, pol[None], mu)[0])
+    assert absorb_unreachable(mdp) is mdp
+
+
+def test_layer_ceiling_of_the_finest_layer_is_v_star_and_coarse_is_below() -> None:
+    mdp = slippery_grid(4)
+    smdp = mdp.as_smdp()
+    mu = start_distribution(mdp)
+    v_star = float(mu @ value_iteration(mdp, epsilon=1e-12).V)
+    finest = Partition(np.arange(mdp.n_states), np.ones((mdp.n_states, 4), dtype=bool))
+    assert layer_ceiling(finest, smdp, mu) == pytest.approx(v_star, abs=1e-8)
+    # two blocks (top half / bottom half): one action per block, so no better than V*
+    coarse = Partition(np.repeat([0, 1], 8), np.ones((2, 4), dtype=bool))
+    assert layer_ceiling(coarse, smdp, mu) < v_star - 1e-6
+
+
+def test_score_own_ceiling_and_cannot_reach() -> None:
+    gaps = np.full((3, 6), np.nan)
+    ev = np.array([2, 4, 6])
+    gaps[:, ev - 1] = [[9.0, 6.4, 6.2], [8.0, 7.0, 6.1], [6.3, 6.2, 6.1]]
+    steps = np.full((3, 6), 10)
+    row = score("layer", gaps, steps, ev, tol=0.5, ceiling_gap=6.0, cap=50.0,
+                ceiling_name="point model", step_size="alpha", seed=0)
+    assert not row["can_reach_v_star"] and row["v_star"]["reached"] == 0
+    assert row["own"]["episodes"] == [4.0, 6.0, 2.0]
+    assert row["own"]["steps"] == [40.0, 60.0, 20.0]
+    assert row["auc"]["per_run"][2] == pytest.approx(np.trapezoid([6.3, 6.2, 6.1], ev) / 4)
