@@ -57,9 +57,13 @@ def test_quick_experiment_writes_report(name: str, tmp_path) -> None:
     rows = summary["data"]["rows"]
     assert len(rows) == (4 if name == "maxq-taxi" else 3)
     for row in rows:
-        assert row["runs"] == 2 and 0 <= row["reached"] <= 2
-        assert row["total_steps_mean"] > 0
-    assert summary["data"]["comparisons"]
+        assert row["runs"] == 2
+        assert 0 <= row["v_star"]["reached"] <= row["own"]["reached"] <= 2
+        assert row["total_steps_mean"] > 0 and 0 <= row["auc"]["mean"] <= row["auc"]["cap"]
+        assert row["ceiling_gap_median"] >= -1e-6
+        assert row["can_reach_v_star"] == (row["ceiling_gap_median"] <= row["tolerance"])
+    comps = summary["data"]["comparisons"]
+    assert comps and all(c["sequential"]["runs_used"] <= 2 for c in comps)
     for fig in report.figures:
         assert (tmp_path / fig.split("/")[-1]).stat().st_size > 0
     assert "What we measured" in (tmp_path / "summary.md").read_text()
@@ -67,3 +71,8 @@ def test_quick_experiment_writes_report(name: str, tmp_path) -> None:
         first = summary["data"]["first_task"]
         assert first["samples"] > 0 and first["mu"] is not None
         assert any("seed's claims" in f for f in summary["findings"])
+        settings = summary["data"]["settings"]
+        assert settings["maxq_ceiling"] < settings["v_star_start"]  # graph ceiling below V*
+    else:
+        assert any("Dietterich's ~40,000" in f for f in summary["findings"])
+        assert summary["data"]["settings"]["absorbed_unreachable"] == 100
