@@ -47,6 +47,7 @@ from adpart.experiments.base import ExperimentConfig, ExperimentReport, experime
 from adpart.experiments.protocol import (
     absorb_unreachable,
     layer_ceiling,
+    options_only_optimum,
     score,
     sentence,
     steps_to,
@@ -490,6 +491,7 @@ def maxq_parr(config: ExperimentConfig) -> ExperimentReport:
     maxq_ceiling = float(mu @ recursively_optimal(mdp, g).V[g.root])
     layer_ceilings = np.array([layer_ceiling(p, layer_smdp, mu) for p in hier.partitions])
     initial_layer = layer_ceiling(layer, layer_smdp, mu)
+    options_opt = options_only_optimum(layer_smdp, mdp.n_actions, mu)
     ceilings = {
         "(a) MAXQ-Q": (v_star - maxq_ceiling,
                        ("the recursively optimal value of the parr-maze graph, executed with its "
@@ -527,6 +529,7 @@ def maxq_parr(config: ExperimentConfig) -> ExperimentReport:
                                "blocks_final_mean": float(hier.blocks[:, -1].mean()),
                                "maxq_ceiling": maxq_ceiling,
                                "layer_ceiling_initial": initial_layer,
+                               "options_only_optimum": options_opt,
                                "layer_ceilings_final": layer_ceilings.tolist(),
                                "gap_cap": PARR_CAP,
                                "maxq_rollouts_finished_final": float(

@@ -137,3 +137,19 @@ def sentence(row: dict[str, Any]) -> str:
                f"{au['ci'][1]:.3g}]; final gap median {row['final_gap_median']:.3g} "
                f"({row['final_gap_undefined']} undefined)")
     return "; ".join(out)
+
+
+def options_only_optimum(smdp: Any, n_primitives: int, mu: np.ndarray) -> float:
+    """``sum_s mu(s) V*_O(s)``: the optimum over the stacked model's *options* alone (columns
+    from ``n_primitives`` on) on the flat states - the best any layer over them could do
+    without adding primitives. Set beside :func:`layer_ceiling` it says whether a layer loses
+    value through its options or through its partition."""
+    from adpart.mdp.model import SMDPModel
+    from adpart.mdp.solvers import solve
+
+    adm = np.asarray(smdp.admissible, dtype=bool).copy()
+    adm[:, :n_primitives] = False
+    live = adm.any(axis=1)
+    adm[~live, 0] = True  # states no option starts from (terminal ones): any column, value 0
+    model = SMDPModel(R=np.where(adm, smdp.R, 0.0), F=smdp.F, admissible=adm)
+    return float(mu @ solve(model, 1e-10).V)

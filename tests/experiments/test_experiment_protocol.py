@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 from adpart.envs.domains.taxi import Taxi
 from adpart.experiments.protocol import absorb_unreachable, layer_ceiling, score
@@ -59,3 +60,18 @@ def test_score_own_ceiling_and_cannot_reach() -> None:
     assert row["own"]["episodes"] == [4.0, 6.0, 2.0]
     assert row["own"]["steps"] == [40.0, 60.0, 20.0]
     assert row["auc"]["per_run"][2] == pytest.approx(np.trapezoid([6.3, 6.2, 6.1], ev) / 4)
+
+
+def test_options_only_optimum_with_primitives_as_options_is_v_star() -> None:
+    from adpart.experiments.protocol import options_only_optimum
+    from adpart.mdp.model import SMDPModel
+
+    mdp = slippery_grid(4)
+    one = mdp.as_smdp()
+    # the primitives stacked twice: columns 4-7 are "options" identical to the actions
+    F = sp.vstack([one.F, one.F], format="csr")
+    two = SMDPModel(R=np.hstack([one.R, one.R]), F=F,
+                    admissible=np.hstack([one.admissible, one.admissible]))
+    mu = start_distribution(mdp)
+    v_star = float(mu @ value_iteration(mdp, epsilon=1e-12).V)
+    assert options_only_optimum(two, 4, mu) == pytest.approx(v_star, abs=1e-8)
