@@ -177,13 +177,16 @@ def gap_auc(gaps: np.ndarray, x: np.ndarray, cap: float) -> np.ndarray:
 
 
 def gap_auc_steps(gaps: np.ndarray, cum_steps: np.ndarray, horizon: float,
-                  cap: float) -> np.ndarray:
-    """Per run, the mean gap over the first ``horizon`` primitive steps of training.
+                  cap: float, start: float = 0.0) -> np.ndarray:
+    """Per run, the mean gap over primitive steps ``[start, horizon]`` of training.
 
     The gap at step ``t`` is that of the latest evaluation at or before ``t`` (the greedy
     policy the learner would hand over then), ``cap`` before the first one; NaN counts as
     ``cap``, negative gaps as 0. A run whose training ended before ``horizon`` keeps its last
-    gap (choose ``horizon`` <= every run's total to avoid relying on that).
+    gap (choose ``horizon`` <= every run's total to avoid relying on that). Comparing learners
+    whose first evaluations fall at different step counts, let ``start`` be the latest first
+    evaluation of all their runs, so that none is charged ``cap`` for *when* it is first
+    scored.
 
     Args:
         gaps: ``(K, m)`` gaps at the evaluation points.
@@ -196,11 +199,13 @@ def gap_auc_steps(gaps: np.ndarray, cum_steps: np.ndarray, horizon: float,
     """
     g = np.clip(np.where(np.isnan(gaps), cap, gaps), 0.0, cap)
     K = g.shape[0]
-    t = np.minimum(np.asarray(cum_steps, dtype=np.float64), horizon)
-    starts = np.concatenate([np.zeros((K, 1)), t], axis=1)        # segment starts
+    if not 0.0 <= start < horizon:
+        raise ValueError(f"need 0 <= start < horizon, got start={start}, horizon={horizon}")
+    t = np.clip(np.asarray(cum_steps, dtype=np.float64), start, horizon)
+    starts = np.concatenate([np.full((K, 1), float(start)), t], axis=1)  # segment starts
     ends = np.concatenate([t, np.full((K, 1), float(horizon))], axis=1)
     values = np.concatenate([np.full((K, 1), cap), g], axis=1)    # gap held on each segment
-    return (values * (ends - starts)).sum(axis=1) / horizon
+    return (values * (ends - starts)).sum(axis=1) / (horizon - start)
 
 
 def ratio_of_medians_ci(a: np.ndarray, b: np.ndarray, *, level: float = 0.95,

@@ -85,3 +85,15 @@ def test_gap_auc_steps_against_a_step_function_loop():
             g = 6.0 if seen.size == 0 else gaps[k, seen[-1]]
             total += 6.0 if np.isnan(g) else min(g, 6.0)
         assert out[k] == pytest.approx(total / 50.0)
+
+
+def test_gap_auc_steps_window_start():
+    from adpart.experiments.stats import gap_auc_steps
+
+    gaps = np.array([[5.0, 1.0, 0.0]])
+    cum = np.array([[10.0, 30.0, 60.0]])
+    # over steps 15-50: gap 5 on 15-30, 1 on 30-50
+    assert gap_auc_steps(gaps, cum, 50.0, 6.0, start=15.0)[0] == pytest.approx(
+        (5 * 15 + 1 * 20) / 35)
+    with pytest.raises(ValueError, match="start"):
+        gap_auc_steps(gaps, cum, 50.0, 6.0, start=50.0)
