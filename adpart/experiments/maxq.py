@@ -26,13 +26,20 @@ parameters make its policy non-Markov in the state, so it is scored by executing
 hierarchical greedy policy (:func:`adpart.learning.maxq.hierarchical_rollouts`); (b) and (c)
 exactly.
 
-**Statistics.** Per run: primitive steps (and episodes) until the greedy policy's value gap
-stays within a tolerance, ``inf`` when it never does (censored); medians with bootstrap CIs of
-the median (``inverted_cdf`` percentiles, so ``inf`` is a legal value). Pairwise claims use
-:func:`adpart.experiments.stats.compare` on per-run numbers that are always finite: total
-primitive steps over the training (the area under the steps-per-episode curve that Figs.
-6.2/6.3 plot) and steps-to-tolerance with censored runs set to the learner's whole step budget
-(a lower bound, said in the sentence).
+**Protocol and statistics** (:mod:`adpart.experiments.protocol`, docs/maxq.md): every learner
+is scored against ``V*`` and against its own ceiling (MAXQ-Q: the recursively optimal value of
+its graph, :func:`adpart.learning.maxq.recursively_optimal`; a layer: its point model's
+executed optimum); per run the primitive steps and episodes until the gap stays within the
+tolerance (``inf`` = censored; medians with bootstrap CIs) and the mean gap over each pair's
+common window of primitive steps (:func:`adpart.experiments.stats.gap_auc_steps`). Pairs get
+:func:`adpart.experiments.stats.compare` (Welch and bootstrap ratio CIs; censored runs set to
+the budget, a lower bound) and the group-sequential permutation test of
+:mod:`adpart.experiments.sequential`, which reports how many runs it needed. On Taxi the
+configurations no episode can enter are made absorbing
+(:func:`adpart.experiments.protocol.absorb_unreachable`), without which a flat greedy policy
+looping in one of them scores NaN under ``gamma = 1``. On Parr's maze MAXQ-Q's rollouts are
+scored by their discounted return cut at the horizon (a never-arriving policy is worth -100,
+as in the exact scores).
 """
 
 from __future__ import annotations
