@@ -54,6 +54,7 @@ from adpart.experiments.base import ExperimentConfig, ExperimentReport, experime
 from adpart.experiments.protocol import (
     absorb_unreachable,
     layer_ceiling,
+    option_chain_reach,
     options_only_optimum,
     score,
     sentence,
@@ -424,7 +425,7 @@ def maxq_parr(config: ExperimentConfig) -> ExperimentReport:
     from adpart.learning.hierarchical import decision_layer, hierarchical_learning
     from adpart.learning.maxq import get_graph, recursively_optimal
     from adpart.learning.qlearning import q_learning
-    from adpart.learning.smdp_q import smdp_q_learning
+    from adpart.learning.smdp_q import option_set, smdp_q_learning
     from adpart.options.models import option_models
     from adpart.options.subgoal_options import subgoal_options
     from adpart.subgoals import discover_monte_carlo
@@ -461,11 +462,23 @@ def maxq_parr(config: ExperimentConfig) -> ExperimentReport:
     states = np.unique(np.r_[sub, goal_cells[:1]])
     config.progress(f"{sub.size} subgoals; options and models")
     # SMDP Q (primitives everywhere) gets the options near their subgoals only; the decision
-    # layer needs every state covered, so far states also get their nearest subgoal's option
+    # layer needs every state covered, so far states also get their nearest subgoal's option -
+    # unless chaining those options cannot reach the goal from the start (measured on this
+    # maze: local radius-30 options reach 26 of 30 subgoals and never the goal room), in which
+    # case a layer over them could only ever learn never to arrive; it then gets the basins
     options = subgoal_options(mdp, states, initiation="local")
     models = option_models(mdp, options, duration=False)
-    layer_options = subgoal_options(mdp, states, initiation="local", cover=True)
-    layer_models = option_models(mdp, layer_options, duration=False)
+    mu = start_distribution(mdp)
+    chain = {}
+    for init in ("local", "reachable"):
+        layer_options = subgoal_options(mdp, states, initiation=init, cover=init == "local")
+        layer_models = option_models(mdp, layer_options, duration=False)
+        full_smdp = option_set(mdp, layer_options, include_primitives=True,
+                               models=layer_models)[1]
+        chain[init] = option_chain_reach(full_smdp, mdp.n_actions, mu, mdp.terminal)
+        if chain[init][1]:
+            break
+    layer_initiation = init
     st = found.stats
     report.data["first_task"] = {
         "goal": goal, "episodes": s["first"],
@@ -496,7 +509,6 @@ def maxq_parr(config: ExperimentConfig) -> ExperimentReport:
     config.progress("maze task: MAXQ-Q (hierarchical greedy rollouts)")
     m_steps, m_gaps, m_ev, m_done = _maxq_parr(mdp, s, config.seed, v_star)
     config.progress("ceilings: the parr graph's recursively optimal value, the layers' optima")
-    mu = start_distribution(mdp)
     g = get_graph("parr-maze").compile(mdp)
     maxq_ceiling = float(mu @ recursively_optimal(mdp, g).V[g.root])
     layer_ceilings = np.array([layer_ceiling(p, layer_smdp, mu) for p in hier.partitions])
@@ -540,6 +552,9 @@ def maxq_parr(config: ExperimentConfig) -> ExperimentReport:
                                "maxq_ceiling": maxq_ceiling,
                                "layer_ceiling_initial": initial_layer,
                                "options_only_optimum": options_opt,
+                               "layer_initiation": layer_initiation,
+                               "option_chains": {k: {"states_reached": v[0], "goal": v[1]}
+                                                 for k, v in chain.items()},
                                "layer_ceilings_final": layer_ceilings.tolist(),
                                "gap_cap": PARR_CAP,
                                "maxq_rollouts_finished_final": float(
@@ -555,6 +570,12 @@ def maxq_parr(config: ExperimentConfig) -> ExperimentReport:
         f"{100 * float(np.mean(m_done[:, m_ev[-1] - 1])):.0f}% of its rollouts reached the goal;"
         f" the others exact); partition: {int(hier.blocks[0, 0])} initial "
         f"blocks, {float(hier.blocks[:, -1].mean()):.0f} after refinement (mean).")
+    report.findings.append(
+        "decision layer options: " + "; ".join(
+            f"{k} initiation - option chains from the start reach {v[0]} states, "
+            f"{'including' if v[1] else 'NOT'} the goal room" for k, v in chain.items())
+        + f" -> the layer uses {layer_initiation} initiation (SMDP Q keeps the local options "
+        "plus the primitives).")
     report.findings += [sentence(r) for r in rows]
     claims = [("(a) MAXQ-Q", "(b) SMDP Q (options)"), ("(c) partition space", "(a) MAXQ-Q"),
               ("(c) partition space", "(b) SMDP Q (options)")]

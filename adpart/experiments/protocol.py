@@ -153,3 +153,27 @@ def options_only_optimum(smdp: Any, n_primitives: int, mu: np.ndarray) -> float:
     adm[~live, 0] = True  # states no option starts from (terminal ones): any column, value 0
     model = SMDPModel(R=np.where(adm, smdp.R, 0.0), F=smdp.F, admissible=adm)
     return float(mu @ solve(model, 1e-10).V)
+
+
+def option_chain_reach(smdp: Any, n_primitives: int, mu: np.ndarray,
+                       terminal: np.ndarray) -> tuple[int, bool]:
+    """Chaining options alone from the start states: ``(states reached, goal reached)``.
+
+    A state is reached when some option admissible in a reached state can end there
+    (``F_o(s, s') > 0``); the goal is reached when a terminal state is. A layer whose options
+    cannot chain to the goal has a ceiling of never arriving, whatever its partition.
+    """
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import breadth_first_order
+
+    S = smdp.admissible.shape[0]
+    adj = sp.csr_array((S, S))
+    for o in range(n_primitives, smdp.admissible.shape[1]):
+        Fo = sp.csr_array(smdp.F[o * S:(o + 1) * S])
+        adj = adj + sp.diags_array(smdp.admissible[:, o].astype(np.float64)) @ Fo
+    adj = sp.csr_array(adj > 0, dtype=np.float64)
+    seen = np.zeros(S, dtype=bool)
+    for s0 in np.flatnonzero(mu > 0):
+        if not seen[s0]:
+            seen[breadth_first_order(adj, int(s0), return_predecessors=False)] = True
+    return int(seen.sum()), bool((seen & np.asarray(terminal, dtype=bool)).any())

@@ -75,3 +75,26 @@ def test_options_only_optimum_with_primitives_as_options_is_v_star() -> None:
     mu = start_distribution(mdp)
     v_star = float(mu @ value_iteration(mdp, epsilon=1e-12).V)
     assert options_only_optimum(two, 4, mu) == pytest.approx(v_star, abs=1e-8)
+
+
+def test_option_chain_reach_on_a_corridor() -> None:
+    """Options 0->2 and 2->4 chain to the goal; without the second the goal is never reached."""
+    from adpart.experiments.protocol import option_chain_reach
+    from adpart.mdp.model import SMDPModel
+
+    S = 6  # corridor 0..5, 5 terminal; primitives: one "stay" action
+    prim = sp.csr_array(np.eye(S) * 0.9)
+    hop1 = sp.csr_array(([0.8, 0.8], ([0, 1], [2, 2])), shape=(S, S))
+    hop2 = sp.csr_array(([0.8, 0.8, 0.8], ([2, 3, 4], [5, 5, 5])), shape=(S, S))
+    adm = np.zeros((S, 3), dtype=bool)
+    adm[:5, 0] = True
+    adm[[0, 1], 1] = True
+    adm[[2, 3, 4], 2] = True
+    model = SMDPModel(R=-np.ones((S, 3)), F=sp.vstack([prim, hop1, hop2], format="csr"),
+                      admissible=adm)
+    mu = np.r_[1.0, np.zeros(S - 1)]
+    terminal = np.r_[np.zeros(S - 1, dtype=bool), True]
+    assert option_chain_reach(model, 1, mu, terminal) == (3, True)
+    adm[:, 2] = False
+    cut = SMDPModel(R=-np.ones((S, 3)), F=model.F, admissible=adm)
+    assert option_chain_reach(cut, 1, mu, terminal) == (2, False)
