@@ -363,7 +363,7 @@ def _parr_settings(config: ExperimentConfig) -> dict[str, Any]:
     if config.quick:
         return {"runs": min(config.runs, 2), "first": 150, "episodes": 6, "eval_every": 3,
                 "rollouts": 2, "horizon": 3000, "max_samples": 300}
-    return {"runs": config.runs, "first": 3000, "episodes": 150, "eval_every": 15,
+    return {"runs": config.runs, "first": 3000, "episodes": 500, "eval_every": 25,
             "rollouts": 10, "horizon": 5000, "max_samples": 5000}
 
 
