@@ -200,7 +200,10 @@ def _claim(report: ExperimentReport, what: str, a: np.ndarray, b: np.ndarray, la
     """Welch/bootstrap comparison plus the group-sequential test on finite per-run values."""
     comp = compare(a, b, la, lb, seed=seed)
     n, k = _design(min(a.size, b.size))
-    seq = sequential_test(a, b, n_per_interim=n, interims=k, seed=seed, label_a=la, label_b=lb)
+    # differences below 1e-4 of the scores' scale are ties (practically nil, see sequential)
+    scale = float(max(np.abs(a).max(), np.abs(b).max(), 1e-12))
+    seq = sequential_test(a, b, n_per_interim=n, interims=k, seed=seed, label_a=la, label_b=lb,
+                          resolution=1e-4 * scale)
     report.findings.append(comp.sentence(what))
     report.findings.append(seq.sentence(what))
     return {"what": what, **comp.to_dict(), "sequential": seq.to_dict()}

@@ -142,12 +142,15 @@ def boundaries_from(stats_abs: np.ndarray, spent: np.ndarray) -> tuple[np.ndarra
 def sequential_test(a: np.ndarray, b: np.ndarray, *, n_per_interim: int, interims: int,
                     alpha: float = 0.05, n_permutations: int = 2000,
                     spending: str = "linear", seed: int = 0, label_a: str = "a",
-                    label_b: str = "b") -> SequentialDecision:
+                    label_b: str = "b", resolution: float = 0.0) -> SequentialDecision:
     """Run the group-sequential permutation test on runs given in the order they were made.
 
     ``a`` and ``b`` hold at least ``n_per_interim * interims`` finite per-run scores each (runs
     are independent, so using the first ``n k`` runs is exactly what a test that launched them
     interim by interim would have seen). The test stops at the first rejection.
+    ``resolution > 0`` rounds every score to a multiple of it first: differences below it are
+    ties (a permutation test otherwise "detects" a consistent 1e-7 between two nearly constant
+    learners); the same map on both sides, so the level is unaffected.
     """
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
@@ -159,6 +162,8 @@ def sequential_test(a: np.ndarray, b: np.ndarray, *, n_per_interim: int, interim
                          f"{n_per_interim}), got {a.size} and {b.size}")
     if not (np.isfinite(a[:need]).all() and np.isfinite(b[:need]).all()):
         raise ValueError("scores must be finite (set censored runs to the budget first)")
+    if resolution > 0:
+        a, b = np.round(a / resolution) * resolution, np.round(b / resolution) * resolution
     spent = _spent(alpha, interims, spending)
     rng = np.random.default_rng(seed)
     T = permutation_statistics(a[:need].reshape(interims, n_per_interim),

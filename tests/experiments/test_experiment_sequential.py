@@ -90,3 +90,10 @@ def test_rejects_bad_input() -> None:
         sequential_test(np.r_[np.inf, np.zeros(19)], np.zeros(20), n_per_interim=5, interims=4)
     with pytest.raises(ValueError, match="spending"):
         sequential_test(np.zeros(20), np.zeros(20), n_per_interim=5, interims=4, spending="x")
+
+
+def test_resolution_turns_negligible_differences_into_ties() -> None:
+    a = np.full(10, 30.9223) - np.linspace(0, 1e-7, 10)
+    b = np.full(10, 30.9223)
+    assert sequential_test(a, b, n_per_interim=5, interims=2).rejected  # consistent, 1e-7
+    assert not sequential_test(a, b, n_per_interim=5, interims=2, resolution=1e-3).rejected
