@@ -4,6 +4,11 @@ Issue texts ask for "a statistical statement for each pairwise claim". We compar
 quantities (e.g. episodes or primitive steps until the greedy policy's value gap falls below a
 threshold) with a Welch t-interval on the difference of means and a bootstrap interval on the
 ratio of means; both are reported with the run counts.
+
+Per-learner numbers get bootstrap CIs (:func:`bootstrap_ci`): episodes (or primitive steps) to
+tolerance, whose censored runs (``inf``) are legal values of a median, and the area under the
+gap curve (:func:`gap_auc`), which is finite for every run. Decisions with the fewest runs come
+from the group-sequential test in :mod:`adpart.experiments.sequential`.
 """
 
 from __future__ import annotations
@@ -114,9 +119,111 @@ def episodes_to_threshold(
 
     Returns:
         ``(K,)`` float episodes; ``inf`` for runs that never stay below the threshold.
+
+    The same rule as :meth:`adpart.learning.curves.LearningCurve.episodes_to_gap` (which
+    returns ``-1`` instead of ``inf`` and reads the evaluated episodes from the curve); this
+    version takes a bare matrix because MAXQ-Q on Parr's maze is scored outside a curve. A test
+    pins the two together.
     """
     gaps = value_gap[:, evaluated - 1]
     ok = gaps <= threshold
     stays = np.flip(np.cumprod(np.flip(ok, axis=1), axis=1), axis=1).astype(bool)
     first = np.argmax(stays, axis=1)
     return np.where(stays.any(axis=1), evaluated[first].astype(np.float64), np.inf)
+
+
+def bootstrap_ci(x: np.ndarray, *, statistic: str = "median", level: float = 0.95,
+                 n_boot: int = 2000, seed: int = 0) -> tuple[float, float, float]:
+    """A statistic of ``x`` and its percentile-bootstrap CI.
+
+    ``statistic`` is ``"median"`` (the lower median, ``inverted_cdf``, so censored ``inf``
+    values are legal and a CI bound may be ``inf`` = "never") or ``"mean"`` (finite ``x``).
+    """
+    x = np.asarray(x, dtype=np.float64)
+    rng = np.random.default_rng(seed)
+    resampled = rng.choice(x, size=(n_boot, x.size))
+    if statistic == "median":
+        est = float(np.quantile(x, 0.5, method="inverted_cdf"))
+        boot = np.quantile(resampled, 0.5, axis=1, method="inverted_cdf")
+    elif statistic == "mean":
+        est, boot = float(x.mean()), resampled.mean(axis=1)
+    else:
+        raise ValueError(f"statistic must be 'median' or 'mean', not {statistic!r}")
+    lo, hi = np.quantile(boot, [0.5 - level / 2, 0.5 + level / 2], method="inverted_cdf")
+    return est, float(lo), float(hi)
+
+
+def gap_auc(gaps: np.ndarray, x: np.ndarray, cap: float) -> np.ndarray:
+    """Per run, the area under the value-gap curve, normalised to a mean gap over ``x``.
+
+    Args:
+        gaps: ``(K, m)`` gaps at the evaluation points ``x``; NaN (a policy with no finite
+            value: it does not finish from some start) and gaps above ``cap`` count as ``cap``,
+            negative gaps (sampling noise of a Monte Carlo score) as 0.
+        x: ``(m,)`` or ``(K, m)`` increasing evaluation points (episodes, or cumulative
+            primitive steps per run).
+        cap: the stated ceiling of a gap.
+
+    Returns:
+        ``(K,)`` trapezoidal area divided by the span of ``x`` (a time-averaged gap; smaller is
+        faster learning). With one evaluation point, that gap.
+    """
+    g = np.clip(np.where(np.isnan(gaps), cap, gaps), 0.0, cap)
+    x = np.broadcast_to(np.asarray(x, dtype=np.float64), g.shape)
+    if g.shape[1] == 1:
+        return g[:, 0].copy()
+    area = (0.5 * (g[:, 1:] + g[:, :-1]) * np.diff(x, axis=1)).sum(axis=1)
+    return area / (x[:, -1] - x[:, 0])
+
+
+def gap_auc_steps(gaps: np.ndarray, cum_steps: np.ndarray, horizon: float,
+                  cap: float, start: float = 0.0) -> np.ndarray:
+    """Per run, the mean gap over primitive steps ``[start, horizon]`` of training.
+
+    The gap at step ``t`` is that of the latest evaluation at or before ``t`` (the greedy
+    policy the learner would hand over then), ``cap`` before the first one; NaN counts as
+    ``cap``, negative gaps as 0. A run whose training ended before ``horizon`` keeps its last
+    gap (choose ``horizon`` <= every run's total to avoid relying on that). Comparing learners
+    whose first evaluations fall at different step counts, let ``start`` be the latest first
+    evaluation of all their runs, so that none is charged ``cap`` for *when* it is first
+    scored.
+
+    Args:
+        gaps: ``(K, m)`` gaps at the evaluation points.
+        cum_steps: ``(K, m)`` cumulative primitive steps at those points (non-decreasing).
+        horizon: the common step budget of the comparison.
+        cap: ceiling of a gap.
+
+    Returns:
+        ``(K,)`` area / ``horizon``.
+    """
+    g = np.clip(np.where(np.isnan(gaps), cap, gaps), 0.0, cap)
+    K = g.shape[0]
+    if not 0.0 <= start < horizon:
+        raise ValueError(f"need 0 <= start < horizon, got start={start}, horizon={horizon}")
+    t = np.clip(np.asarray(cum_steps, dtype=np.float64), start, horizon)
+    starts = np.concatenate([np.full((K, 1), float(start)), t], axis=1)  # segment starts
+    ends = np.concatenate([t, np.full((K, 1), float(horizon))], axis=1)
+    values = np.concatenate([np.full((K, 1), cap), g], axis=1)    # gap held on each segment
+    return (values * (ends - starts)).sum(axis=1) / (horizon - start)
+
+
+def ratio_of_medians_ci(a: np.ndarray, b: np.ndarray, *, level: float = 0.95,
+                        n_boot: int = 2000, seed: int = 0) -> tuple[float, float, float]:
+    """``median(a) / median(b)`` with a percentile-bootstrap CI (the two samples resampled
+    independently); lower medians, so censored ``inf`` values are legal (an ``inf`` bound
+    means "at least this large" cannot be excluded)."""
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    rng = np.random.default_rng(seed)
+    ma = np.quantile(rng.choice(a, size=(n_boot, a.size)), 0.5, axis=1, method="inverted_cdf")
+    mb = np.quantile(rng.choice(b, size=(n_boot, b.size)), 0.5, axis=1, method="inverted_cdf")
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = ma / mb
+    r = np.where(np.isnan(r), np.inf, r)  # inf / inf: undefined, counted as unbounded
+    with np.errstate(divide="ignore", invalid="ignore"):
+        est = (np.quantile(a, 0.5, method="inverted_cdf")
+               / np.quantile(b, 0.5, method="inverted_cdf"))
+    est = np.inf if np.isnan(est) else est
+    lo, hi = np.quantile(r, [0.5 - level / 2, 0.5 + level / 2], method="inverted_cdf")
+    return float(est), float(lo), float(hi)

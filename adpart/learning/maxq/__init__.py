@@ -6,6 +6,12 @@ See ``docs/maxq.md``. :class:`TaskGraph` / :class:`Subtask` describe a hierarchy
 
 from __future__ import annotations
 
+from adpart.learning.maxq.exact import (
+    RecursiveSolution,
+    polled_policy,
+    reachable_states,
+    recursively_optimal,
+)
 from adpart.learning.maxq.graphs import GRAPHS, get_graph, graph_for, parr_graph, taxi_graph
 from adpart.learning.maxq.maxq_q import (
     MaxQResult,
@@ -22,6 +28,7 @@ __all__ = [
     "CompiledGraph",
     "MaxQResult",
     "MaxQTables",
+    "RecursiveSolution",
     "Subtask",
     "TaskGraph",
     "decomposed_values",
@@ -31,5 +38,8 @@ __all__ = [
     "hierarchical_rollouts",
     "maxq_q",
     "parr_graph",
+    "polled_policy",
+    "reachable_states",
+    "recursively_optimal",
     "taxi_graph",
 ]
