@@ -32,8 +32,11 @@ def test_absorbing_unreachable_configurations_keeps_values_and_fixes_loop_scores
     s, a = stay[0]
     pol[s] = a
     mu = start_distribution(raw)
-    assert np.isnan(start_values(raw, pol[None], mu)[0])  # the old score: undefined
-    assert np.isfinite(start_values(mdp, pol[None], mu)[0])
+    # start_values evaluates such a policy on the states it reaches: the same as on the
+    # absorbed model (before, the loop made the whole system singular and the score NaN)
+    absorbed_value = start_values(mdp, pol[None], mu)[0]
+    assert np.isfinite(absorbed_value)
+    assert start_values(raw, pol[None], mu)[0] == pytest.approx(absorbed_value, abs=1e-9)
     assert absorb_unreachable(mdp) is mdp
 
 

@@ -109,3 +109,27 @@ def test_distinct_rows_survives_hash_collisions(monkeypatch):
     first, inverse = distinct_rows(rows)
     np.testing.assert_array_equal(rows[first][inverse], rows)
     assert first.size == 2
+
+
+def test_undiscounted_score_ignores_a_loop_no_episode_can_enter():
+    """gamma = 1: a policy looping in states unreachable from the start still gets its value.
+
+    States: 0 -> 1 -> 2 (terminal), -1 a step, episodes start in 0; 3 <-> 4 is a cycle no start
+    reaches. By hand: V(0) = -2. A policy that loops on a reachable state scores NaN.
+    """
+    from adpart.learning.curves import start_values
+    from adpart.mdp.model import FiniteMDP
+
+    S, A = 5, 2
+    P = np.zeros((S, A, S))
+    P[0, 0, 1] = P[1, 0, 2] = 1.0  # forward
+    P[0, 1, 0] = P[1, 1, 1] = 1.0  # stay
+    P[2, :, 2] = 1.0
+    P[3, :, 4] = P[4, :, 3] = 1.0  # the unreachable cycle
+    terminal = np.array([False, False, True, False, False])
+    mu = np.array([1.0, 0, 0, 0, 0])
+    mdp = FiniteMDP.from_dense(P, -np.ones((S, A)), 1.0, terminal=terminal, initial=mu)
+    forward = np.array([[0, 0, 0, 0, 0]])
+    assert start_values(mdp, forward, mu)[0] == pytest.approx(-2.0)
+    stuck = np.array([[0, 1, 0, 0, 0]])  # stays in 1 forever
+    assert np.isnan(start_values(mdp, stuck, mu)[0])
