@@ -36,6 +36,32 @@ def greedy_groups(segment: np.ndarray, values: np.ndarray, width: float) -> np.n
 
 
 @njit(cache=True)
+def refinable_partition(n, init_labels, n_init):  # pragma: no cover - compiled
+    """The refinable partition both refiners start from (Paige-Tarjan's representation).
+
+    ``elems`` lists the states block by block (stable within a block), ``pos[s]`` is the index of
+    ``s`` in ``elems``, ``blk`` the block of each state, and block ``b`` is
+    ``elems[bstart[b]:bend[b]]`` (arrays sized ``n + 1``: blocks never outnumber states).
+    """
+    elems = np.argsort(init_labels, kind="mergesort").astype(np.int64)
+    pos = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        pos[elems[i]] = i
+    blk = init_labels.copy()
+    bstart = np.zeros(n + 1, dtype=np.int64)
+    bend = np.zeros(n + 1, dtype=np.int64)
+    counts = np.zeros(n_init, dtype=np.int64)
+    for i in range(n):
+        counts[init_labels[i]] += 1
+    acc = 0
+    for b in range(n_init):
+        bstart[b] = acc
+        acc += counts[b]
+        bend[b] = acc
+    return elems, pos, blk, bstart, bend
+
+
+@njit(cache=True)
 def lump(n, n_act, pred_ptr, pred_row, pred_val, init_labels, n_init, tol):
     """Coarsest exact lumping of ``n`` states under ``n_act`` matched actions (worklist refinement).
 
@@ -60,21 +86,7 @@ def lump(n, n_act, pred_ptr, pred_row, pred_val, init_labels, n_init, tol):
         ``(labels, n_blocks)``.
     """
     # refinable partition: elems ordered by block, pos[s] index of s in elems
-    elems = np.argsort(init_labels, kind="mergesort").astype(np.int64)
-    pos = np.empty(n, dtype=np.int64)
-    for i in range(n):
-        pos[elems[i]] = i
-    blk = init_labels.copy()
-    bstart = np.zeros(n + 1, dtype=np.int64)
-    bend = np.zeros(n + 1, dtype=np.int64)
-    counts = np.zeros(n_init, dtype=np.int64)
-    for i in range(n):
-        counts[init_labels[i]] += 1
-    acc = 0
-    for b in range(n_init):
-        bstart[b] = acc
-        acc += counts[b]
-        bend[b] = acc
+    elems, pos, blk, bstart, bend = refinable_partition(n, init_labels, n_init)
     nb = n_init
 
     inwl = np.zeros(n + 1, dtype=np.bool_)
@@ -268,21 +280,7 @@ def delta_worklist(n, n_act, pred_ptr, pred_row, pred_val, init_labels, n_init, 
     Returns:
         ``(labels, n_blocks, pops)``.
     """
-    elems = np.argsort(init_labels, kind="mergesort").astype(np.int64)
-    pos = np.empty(n, dtype=np.int64)
-    for i in range(n):
-        pos[elems[i]] = i
-    blk = init_labels.copy()
-    bstart = np.zeros(n + 1, dtype=np.int64)
-    bend = np.zeros(n + 1, dtype=np.int64)
-    counts = np.zeros(n_init, dtype=np.int64)
-    for i in range(n):
-        counts[init_labels[i]] += 1
-    acc = 0
-    for b in range(n_init):
-        bstart[b] = acc
-        acc += counts[b]
-        bend[b] = acc
+    elems, pos, blk, bstart, bend = refinable_partition(n, init_labels, n_init)
     nb = n_init
 
     # the worklist: a min-heap on block size (a block is in it at most once: <= n entries)
