@@ -62,6 +62,17 @@ def refinable_partition(n, init_labels, n_init):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
+def move_to(elems, pos, s, q):  # pragma: no cover - compiled
+    """Swap state ``s`` into slot ``q`` of the refinable partition (its occupant takes ``s``'s)."""
+    p = pos[s]
+    u = elems[q]
+    elems[q] = s
+    pos[s] = q
+    elems[p] = u
+    pos[u] = p
+
+
+@njit(cache=True)
 def lump(n, n_act, pred_ptr, pred_row, pred_val, init_labels, n_init, tol):
     """Coarsest exact lumping of ``n`` states under ``n_act`` matched actions (worklist refinement).
 
@@ -130,13 +141,7 @@ def lump(n, n_act, pred_ptr, pred_row, pred_val, init_labels, n_init, tol):
                 if bmark[b] == 0:
                     tblocks[ntb] = b
                     ntb += 1
-                p = pos[s]
-                q = bstart[b] + bmark[b]
-                u = elems[q]
-                elems[q] = s
-                pos[s] = q
-                elems[p] = u
-                pos[u] = p
+                move_to(elems, pos, s, bstart[b] + bmark[b])
                 bmark[b] += 1
             for ib in range(ntb):
                 b = tblocks[ib]
@@ -342,13 +347,7 @@ def delta_worklist(n, n_act, pred_ptr, pred_row, pred_val, init_labels, n_init, 
                     tblocks[ntb] = b
                     ntb += 1
                 # move s to the end of its block's slice (touched states fill it from the back)
-                p = pos[s]
-                q = bend[b] - 1 - bmark[b]
-                u = elems[q]
-                elems[q] = s
-                pos[s] = q
-                elems[p] = u
-                pos[u] = p
+                move_to(elems, pos, s, bend[b] - 1 - bmark[b])
                 bmark[b] += 1
             for ib in range(ntb):
                 b = tblocks[ib]
