@@ -1,8 +1,13 @@
-"""adpart: state and action hierarchies for RL by action-dependent partitioning."""
+"""adpart: state and action hierarchies for RL by action-dependent partitioning.
+
+``adpart.FiniteMDP`` and ``adpart.SMDPModel`` are loaded on first use, so that importing the
+package (``adpart --version``, ``adpart --help``) does not load numpy.
+"""
+
+from __future__ import annotations
 
 from importlib.metadata import PackageNotFoundError, version
-
-from adpart.mdp.model import FiniteMDP, SMDPModel
+from typing import Any
 
 try:
     __version__ = version("adpart")
@@ -10,3 +15,11 @@ except PackageNotFoundError:  # running from a source tree that was never instal
     __version__ = "0+unknown"
 
 __all__ = ["FiniteMDP", "SMDPModel", "__version__"]
+
+
+def __getattr__(name: str) -> Any:
+    if name in {"FiniteMDP", "SMDPModel"}:
+        from adpart.mdp import model
+
+        return getattr(model, name)
+    raise AttributeError(f"module 'adpart' has no attribute {name!r}")

@@ -28,3 +28,7 @@ class UnknownNameError(AdpartError, KeyError):
 
     def __str__(self) -> str:  # KeyError quotes its argument; we want the plain message
         return str(self.args[0]) if self.args else ""
+
+
+class PluginError(AdpartError, ValueError):
+    """An implementation or its parameters are invalid."""

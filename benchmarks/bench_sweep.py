@@ -24,7 +24,7 @@ from pathlib import Path
 
 from adpart.execution import Executor, LocalExecutor
 from adpart.store import KnowledgeBase
-from adpart.sweep import parse_config, plan_cells, run_cell, run_sweep
+from adpart.workflows.sweep import parse_config, plan_cells, run_cell, run_sweep
 
 CONFIG = {
     "name": "bench",
@@ -106,7 +106,7 @@ def main() -> dict[str, float]:
             lambda: StreamingLocalExecutor(workers=workers), cells, root, "stream"
         )
         try:
-            from adpart.execution_ray import RayExecutor, import_ray
+            from adpart.execution.ray import RayExecutor, import_ray
 
             import_ray()
         except ImportError:

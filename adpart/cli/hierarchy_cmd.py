@@ -110,8 +110,8 @@ def hierarchy_cmd(
     heuristic). The layer is stored as a `hierarchy` partition; learn a new task on it with
     `adpart transfer ENV --task T --partition partition:N`.
     """
-    from adpart.hierarchy import build_hierarchy
     from adpart.store import KnowledgeBase
+    from adpart.workflows.hierarchy import build_hierarchy
 
     params = _params(param)
     chosen = list(split_tasks(tasks)) if tasks is not None else None

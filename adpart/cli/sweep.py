@@ -3,7 +3,7 @@
 Also home of the executor options every fanning-out command shares: ``--executor NAME``,
 ``--executor-opt KEY=VALUE`` (any declared parameter of the executor plugin) and
 ``--ray-address ADDRESS`` (shorthand for ``--executor-opt address=ADDRESS``; environment variable
-``RAY_ADDRESS``). The work itself is :mod:`adpart.sweep`.
+``RAY_ADDRESS``). The work itself is :mod:`adpart.workflows.sweep`.
 """
 
 from __future__ import annotations
@@ -74,7 +74,7 @@ def sweep_cmd(
       adpart sweep grid.toml --executor ray --ray-address 10.0.0.5:6379
     """
     from adpart.store import KnowledgeBase
-    from adpart.sweep import load_config, plan_cells, preview, run_sweep
+    from adpart.workflows.sweep import load_config, plan_cells, preview, run_sweep
 
     cfg = load_config(config)
     cells = plan_cells(cfg)

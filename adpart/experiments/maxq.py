@@ -388,7 +388,7 @@ def _maxq_parr(mdp: Any, s: dict[str, Any], seed: int, v_star: float
     evaluated episodes, fraction of rollouts that reached the goal)``."""
     from adpart.learning.curves import start_distribution
     from adpart.learning.maxq import get_graph, hierarchical_rollouts
-    from adpart.learning.maxq.maxq_q import _Run
+    from adpart.learning.maxq.maxq_q import AgentRun
     from adpart.learning.schedules import parse_schedule
 
     g = get_graph("parr-maze").compile(mdp)
@@ -400,7 +400,7 @@ def _maxq_parr(mdp: Any, s: dict[str, Any], seed: int, v_star: float
     gaps = np.full((K, N), np.nan)
     finished = np.full((K, N), np.nan)
     for k in range(K):
-        agent = _Run(mdp, g, rngs[k], parse_schedule(ALPHA), parse_schedule(EPSILON),
+        agent = AgentRun(mdp, g, rngs[k], parse_schedule(ALPHA), parse_schedule(EPSILON),
                      s["horizon"])
         for e in range(N):
             s0 = int(min(np.searchsorted(cdf, agent.rng.random(), side="right"),

@@ -90,12 +90,12 @@ def _reached(curve: Any, threshold: float, episodes: int) -> np.ndarray:
 )
 def options_three_floor(config: ExperimentConfig) -> ExperimentReport:
     """Discover subgoals on reach-goal, learn options, learn reach-top-west flat and on SMDPs."""
-    from adpart.envs.registry import get_domain
     from adpart.learning.curves import plot_curves
     from adpart.learning.qlearning import q_learning
     from adpart.learning.smdp_q import option_set, smdp_q_learning
     from adpart.mdp.solvers import solve
     from adpart.subgoals import discover_exhaustive
+    from adpart.workflows.resolve import resolve_domain as get_domain
 
     out = Path(config.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -75,9 +75,9 @@ def _two_rooms_settings(config: ExperimentConfig) -> dict[str, Any]:
 )
 def subgoals_two_rooms(config: ExperimentConfig) -> ExperimentReport:
     """Learn two-rooms, discover subgoals on each learned policy, draw the ratios of run 0."""
-    from adpart.envs.registry import get_domain
     from adpart.learning.qlearning import q_learning
     from adpart.subgoals import discover_exhaustive
+    from adpart.workflows.resolve import resolve_domain as get_domain
 
     out = Path(config.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -250,9 +250,9 @@ def _plot_times(times: dict[str, np.ndarray], path: Path) -> str:
 )
 def subgoals_sampling(config: ExperimentConfig) -> ExperimentReport:
     """Subgoals vs samples, time of each method and agreement of the two sets."""
-    from adpart.envs.registry import get_domain
     from adpart.mdp.solvers import solve
     from adpart.subgoals import bernstein_samples, discover_exhaustive, discover_monte_carlo
+    from adpart.workflows.resolve import resolve_domain as get_domain
 
     out = Path(config.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -123,11 +123,11 @@ def _stored_layer(kb: Any, pipe: Any) -> tuple[list[Any], list[Any], Any]:
 def _transfer(config: ExperimentConfig, setup: _Setup, report: ExperimentReport
               ) -> dict[str, Any]:
     """Run the pipeline and the alternative learners; fill ``report`` with the shared parts."""
-    from adpart.envs.registry import get_domain
     from adpart.learning.curves import plot_curves
     from adpart.learning.hierarchical import hierarchical_learning
     from adpart.options.models import option_models
     from adpart.workflows.pipeline import PipelineConfig, run_pipeline
+    from adpart.workflows.resolve import resolve_domain as get_domain
 
     out = Path(config.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -4,7 +4,9 @@
   actions and options, discounted block occupancies, importance weight);
 * :mod:`adpart.hierarchy.estimator` - ``E[t_learn | P]`` of a layer (T_conv, P_refine);
 * :mod:`adpart.hierarchy.greedy` - Algorithm 3, the greedy construction;
-* :mod:`adpart.hierarchy.kb` - the same over the tasks and options of a knowledge base.
+* :mod:`adpart.hierarchy.layers` - the decision layers Algorithm 3 and the all-subgoals heuristic
+  build from learned tasks and options (:mod:`adpart.workflows.hierarchy` reads them from a
+  knowledge base and stores the layer).
 """
 
 from adpart.hierarchy.estimator import (
@@ -15,7 +17,12 @@ from adpart.hierarchy.estimator import (
     t_conv,
 )
 from adpart.hierarchy.greedy import GreedyResult, Step, column_splits, greedy_hierarchy
-from adpart.hierarchy.kb import HierarchyResult, build_hierarchy, load_inputs
+from adpart.hierarchy.layers import (
+    HierarchyInputs,
+    HierarchyResult,
+    all_subgoals_layer,
+    expected_time_layer,
+)
 from adpart.hierarchy.tasks import (
     LearnedTask,
     discounted_occupancy,
@@ -26,17 +33,18 @@ from adpart.hierarchy.tasks import (
 __all__ = [
     "Estimate",
     "GreedyResult",
+    "HierarchyInputs",
     "HierarchyResult",
     "LearnedTask",
     "Step",
-    "build_hierarchy",
+    "all_subgoals_layer",
     "column_splits",
     "discounted_occupancy",
     "expected_time",
+    "expected_time_layer",
     "flat_time",
     "good_columns",
     "greedy_hierarchy",
-    "load_inputs",
     "option_values",
     "t_conv",
     "task_from_model",

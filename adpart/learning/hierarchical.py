@@ -73,7 +73,7 @@ from adpart.mdp.solvers import greedy_policy, solve
 from adpart.options.models import OptionModel, option_models
 from adpart.options.option import Option
 from adpart.options.subgoal_options import subgoal_option
-from adpart.partition._validate import DEFAULT_ATOL, masked_rows
+from adpart.partition import DEFAULT_ATOL, masked_rows
 from adpart.partition.bpsmdp import point_model, theorem_4_5_bound
 from adpart.partition.layer import resolve_baseline
 from adpart.partition.multiphase import MultiPhasePartitioner, PhaseResult

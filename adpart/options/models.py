@@ -34,8 +34,9 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 import scipy.sparse as sp
@@ -43,7 +44,6 @@ import scipy.sparse.linalg as spla
 from scipy.sparse import csgraph
 
 from adpart.errors import ModelError
-from adpart.execution import Executor, SerialExecutor
 from adpart.options.option import Option
 
 if TYPE_CHECKING:
@@ -247,6 +247,16 @@ def option_model(mdp: FiniteMDP, option: Option, *, duration: bool = True) -> Op
     return _exact_model(mdp.P, mdp.R, mdp.gamma, mdp.terminal, option, duration)
 
 
+class ItemMapper(Protocol):
+    """What :func:`option_models` needs of an executor: ``map`` in order, and whether it is
+    ``parallel`` (an executor that is not gets the options in one chunk). Every
+    :class:`adpart.execution.Executor` is one; the core names only this shape."""
+
+    parallel: bool
+
+    def map(self, fn: Callable[[Any], Any], items: Iterable[Any]) -> list[Any]: ...
+
+
 def _model_worker(item: tuple) -> list[OptionModel]:
     """Executor work item: exact models of a chunk of options on one MDP's raw arrays."""
     P, R, gamma, terminal, options, duration = item
@@ -257,11 +267,11 @@ def option_models(
     mdp: FiniteMDP,
     options: list[Option],
     *,
-    executor: Executor | None = None,
+    executor: ItemMapper | None = None,
     duration: bool = True,
     chunks: int | None = None,
 ) -> list[OptionModel]:
-    """Exact models of many options, computed through ``executor`` (serial by default).
+    """Exact models of many options, computed through ``executor`` (in this process by default).
 
     Every option is validated here, in the calling process; the workers receive the MDP's
     arrays and ``chunks`` groups of options (default: two per core, at most one per option).
@@ -271,15 +281,16 @@ def option_models(
         o.check(mdp)
     if not options:
         return []
-    ex = executor or SerialExecutor()
-    n_chunks = chunks or (1 if isinstance(ex, SerialExecutor) else 2 * (os.cpu_count() or 1))
+    parallel = executor is not None and getattr(executor, "parallel", True)
+    n_chunks = chunks or (2 * (os.cpu_count() or 1) if parallel else 1)
     n_chunks = max(1, min(n_chunks, len(options)))
     size = math.ceil(len(options) / n_chunks)
     items = [
         (mdp.P, mdp.R, mdp.gamma, mdp.terminal, options[i:i + size], duration)
         for i in range(0, len(options), size)
     ]
-    return [m for chunk in ex.map(_model_worker, items) for m in chunk]
+    done = executor.map(_model_worker, items) if executor is not None else map(_model_worker, items)
+    return [m for chunk in done for m in chunk]
 
 
 def option_model_by_iteration(

@@ -27,10 +27,9 @@ import scipy.sparse as sp
 from adpart.errors import ModelError
 from adpart.mdp.model import SMDPModel
 from adpart.mdp.solvers import q_from_v
-from adpart.options.models import OptionModel, option_models
+from adpart.options.models import ItemMapper, OptionModel, option_models
 
 if TYPE_CHECKING:
-    from adpart.execution import Executor
     from adpart.mdp.model import FiniteMDP
     from adpart.options.option import Option
 
@@ -105,7 +104,7 @@ def options_smdp(
     options: list[Option],
     *,
     include_primitives: bool = False,
-    executor: Executor | None = None,
+    executor: ItemMapper | None = None,
 ) -> tuple[SMDPModel, list[OptionModel]]:
     """Exact models of ``options`` (through ``executor``) stacked into an SMDP."""
     models = option_models(mdp, options, executor=executor, duration=False)

@@ -7,9 +7,12 @@
 * :class:`MultiPhasePartitioner` - phases 1-3 of section 4.2.1.2, on the new task's model;
 * :func:`reachable_states`, :func:`decision_rewards`, :func:`layer_counts` - partition hygiene
   (:mod:`adpart.partition.layer`: terminal block, unreachable states, eq. 4.7's rewards);
-* :class:`BPSMDP` - interval models, interval value iteration and a point model (3.2.1, 4.3.3).
+* :class:`BPSMDP` - interval models, interval value iteration and a point model (3.2.1, 4.3.3);
+* :func:`check_delta`, :func:`check_epsilon`, :data:`DEFAULT_ATOL`, :func:`masked_rows` - the
+  argument checks and the row selection the algorithms share, for callers that prepare inputs.
 """
 
+from adpart.partition._validate import DEFAULT_ATOL, check_delta, check_epsilon, masked_rows
 from adpart.partition.bpsmdp import (
     BPSMDP,
     IntervalValues,
@@ -26,16 +29,20 @@ from adpart.partition.refine import refine
 
 __all__ = [
     "BPSMDP",
+    "DEFAULT_ATOL",
     "IntervalValues",
     "MultiPhasePartitioner",
     "Partition",
     "StabilityReport",
     "canonical_labels",
+    "check_delta",
+    "check_epsilon",
     "check_stability",
     "combine_labels",
     "decision_rewards",
     "exact_lumping",
     "layer_counts",
+    "masked_rows",
     "phase1",
     "phase2",
     "phase3",

@@ -26,7 +26,6 @@ BUILTIN_PLUGINS: dict[str, str] = {
     "learners": "adpart.plugins.builtin.learners",
     "maxq": "adpart.plugins.builtin.maxq",
     "hierarchical": "adpart.plugins.builtin.hierarchical",
-    "ray": "adpart.plugins.builtin.ray_executor",
     "executors": "adpart.plugins.builtin.executors",
     "criteria": "adpart.plugins.builtin.criteria",
     "detectors": "adpart.plugins.builtin.detectors",

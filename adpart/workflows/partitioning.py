@@ -41,8 +41,14 @@ from adpart.execution import Executor
 from adpart.mdp.model import FiniteMDP, SMDPModel
 from adpart.options.models import OptionModel, option_models
 from adpart.options.smdp import stack_models
-from adpart.partition import MultiPhasePartitioner, Partition, check_stability, value_gap
-from adpart.partition._validate import check_delta, check_epsilon
+from adpart.partition import (
+    MultiPhasePartitioner,
+    Partition,
+    check_delta,
+    check_epsilon,
+    check_stability,
+    value_gap,
+)
 from adpart.partition.layer import decision_view, layer_counts, resolve_baseline
 from adpart.workflows.options import OptionSet, resolve_option_set
 from adpart.workflows.resolve import resolve_domain

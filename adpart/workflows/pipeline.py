@@ -266,8 +266,8 @@ def hierarchy_layer(
     ``option_ids`` are the options the learner may fall back on when the layer offers none
     (:func:`_with_options`).
     """
-    from adpart.hierarchy import build_hierarchy
     from adpart.plugins import get_registry
+    from adpart.workflows.hierarchy import build_hierarchy
 
     resolved = get_registry().get("hierarchy-estimator", estimator).resolve_params(params)
     env = kb.find_environment(env_name)
@@ -360,7 +360,7 @@ def predict_fallback(kb: Any, env: str, task_ids: list[int], params: dict[str, A
     its ``E[t_learn]`` with the flat MDP's (:mod:`adpart.hierarchy.estimator`). Returns
     ``{"fallback": bool, "estimate": ..., "flat_estimate": ..., "blocks": ...}``.
     """
-    from adpart.hierarchy import build_hierarchy
+    from adpart.workflows.hierarchy import build_hierarchy
 
     res = build_hierarchy(kb, env, estimator="expected-learning-time", tasks=task_ids,
                           params=params, store=False)

@@ -12,7 +12,7 @@ pytest.importorskip("ray")
 
 from adpart.cli.common import AdpartGroup
 from adpart.cli.sweep import sweep_cmd
-from adpart.plugins import manager, reset_registry
+from adpart.plugins import reset_registry
 
 
 @click.group(cls=AdpartGroup)
@@ -24,9 +24,8 @@ group.add_command(sweep_cmd)
 
 
 @pytest.fixture(autouse=True)
-def ray_plugin(monkeypatch):
-    """Register the ray executor as the ``ray`` entry point of pyproject.toml does."""
-    monkeypatch.setitem(manager.BUILTIN_PLUGINS, "ray", "adpart.plugins.builtin.ray_executor")
+def fresh_registry():
+    """A registry built anew, so the built-in ``ray`` executor is looked up as a user would."""
     reset_registry()
     yield
     reset_registry()

@@ -9,7 +9,7 @@ import pytest
 
 pytest.importorskip("ray")
 
-from adpart.execution_ray import ClusterError, RayExecutor
+from adpart.execution.ray import ClusterError, RayExecutor
 
 
 def _slow_square(x: int) -> int:

@@ -6,8 +6,8 @@ import sys
 
 import pytest
 
-import adpart.plugins.builtin.ray_executor as ray_plugin
-from adpart.execution_ray import ClusterError, RayExecutor, import_ray
+import adpart.plugins.builtin.executors as executors_plugin
+from adpart.execution.ray import ClusterError, RayExecutor, import_ray
 from adpart.plugins import build_registry, make_plugin_manager
 
 
@@ -19,8 +19,8 @@ def no_ray(monkeypatch):
 
 def test_ray_plugin_registers_without_ray(no_ray):
     pm = make_plugin_manager(load_entrypoints=False)
-    if not pm.has_plugin("ray"):
-        pm.register_checked(ray_plugin, "ray", "adpart", "test")
+    if not pm.has_plugin("executors"):
+        pm.register_checked(executors_plugin, "executors", "adpart", "test")
     spec = build_registry(pm).get("executor", "ray")
     assert spec.factory is RayExecutor
     assert [p.name for p in spec.params] == ["address", "num-cpus", "max-retries",
@@ -37,7 +37,7 @@ def test_ray_executor_without_ray_names_the_extra(no_ray):
 
 
 def test_ray_module_does_not_import_ray_at_import_time():
-    code = ("import sys, adpart.plugins.builtin.ray_executor, adpart.sweep, adpart.cli.sweep; "
+    code = ("import sys, adpart.plugins.builtin.executors, adpart.workflows.sweep, adpart.cli.sweep; "
             "assert 'ray' not in sys.modules")
     import subprocess
 

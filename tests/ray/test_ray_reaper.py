@@ -1,4 +1,4 @@
-"""A SIGKILLed driver leaves no Ray process behind (the reaper, adpart/ray_reaper.py).
+"""A SIGKILLed driver leaves no Ray process behind (the reaper, adpart/execution/reaper.py).
 
 Without the reaper the raylet's dashboard and runtime-env agents outlive a killed driver
 (re-parented to init); the test kills a real driver that started a local Ray and checks that every
@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from adpart.ray_reaper import ray_descendants
+from adpart.execution.reaper import ray_descendants
 
 pytest.importorskip("ray")
 pytestmark = pytest.mark.skipif(not Path("/proc").is_dir(), reason="needs /proc")
@@ -25,7 +25,7 @@ pytestmark = pytest.mark.skipif(not Path("/proc").is_dir(), reason="needs /proc"
 DRIVER = textwrap.dedent(
     """
     import os, sys, time
-    from adpart.execution_ray import RayExecutor
+    from adpart.execution.ray import RayExecutor
     RayExecutor(num_cpus=1).connect()
     print("ready", flush=True)
     time.sleep(300)

@@ -19,9 +19,9 @@ import pytest
 pytest.importorskip("ray")
 
 from adpart.execution import LocalExecutor
-from adpart.execution_ray import RayExecutor
+from adpart.execution.ray import RayExecutor
 from adpart.store import KnowledgeBase
-from adpart.sweep import done_cells, load_config, plan_cells, run_cell, run_sweep
+from adpart.workflows.sweep import done_cells, load_config, plan_cells, run_cell, run_sweep
 
 
 def _stored(kb: KnowledgeBase) -> dict[str, tuple]:

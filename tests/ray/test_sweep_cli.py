@@ -88,7 +88,7 @@ def test_sweep_cli_config_error_names_the_key(tmp_path):
 
 
 def test_sweep_cli_failed_cells_exit_nonzero(tmp_path, monkeypatch):
-    import adpart.sweep as sweep_mod
+    import adpart.workflows.sweep as sweep_mod
     from adpart.errors import TaskError
 
     real = sweep_mod.run_learning

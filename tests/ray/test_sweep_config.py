@@ -8,7 +8,7 @@ from dataclasses import asdict
 
 import pytest
 
-from adpart.sweep import SweepConfigError, cell_key, load_config, parse_config, plan_cells
+from adpart.workflows.sweep import SweepConfigError, cell_key, load_config, parse_config, plan_cells
 
 BASE = {"seeds": [0, 1], "environments": ["two-rooms"], "runs": 1, "episodes": 5}
 

@@ -8,7 +8,8 @@ from pathlib import Path
 import pytest
 
 from adpart.store import KnowledgeBase
-from adpart.sweep import (
+from adpart.workflows import record_learning, run_learning
+from adpart.workflows.sweep import (
     SweepError,
     cell_key,
     done_cells,
@@ -18,7 +19,6 @@ from adpart.sweep import (
     run_cell,
     run_sweep,
 )
-from adpart.workflows import record_learning, run_learning
 
 CONFIG = {"seeds": [0, 1], "environments": ["two-rooms"], "runs": 1, "episodes": 10,
           "eval_every": 5, "params": {"alpha": ["0.1", "0.5"]}}

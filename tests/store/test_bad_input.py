@@ -18,7 +18,7 @@ from adpart.cli import cli
 from adpart.cli.kb import kb as kb_group
 from adpart.errors import UnknownNameError
 from adpart.store import KnowledgeBase, StoreError
-from adpart.sweep import SweepConfigError, parse_config, plan_cells
+from adpart.workflows.sweep import SweepConfigError, parse_config, plan_cells
 
 PIPELINE = ["pipeline", "three-floor", "--tasks", "reach-goal,reach-top-west", "--runs", "1",
             "--episodes", "5", "--first-episodes", "5", "-q"]

@@ -13,6 +13,7 @@ from adpart.envs.registry import get_domain
 from adpart.errors import TaskError
 from adpart.mdp.model import FiniteMDP
 from adpart.mdp.solvers import solve
+from adpart.plugins.builtin.detectors import Betweenness, CountExhaustive, CountMonteCarlo
 from adpart.subgoals import (
     arrival_counts,
     bernstein_samples,
@@ -24,7 +25,6 @@ from adpart.subgoals import (
     t_test_threshold,
     transition_graph,
 )
-from adpart.subgoals.detectors import Betweenness, CountExhaustive, CountMonteCarlo
 
 
 def _tiny_mdp(seed: int, S: int) -> FiniteMDP:

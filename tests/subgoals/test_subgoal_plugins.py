@@ -9,9 +9,9 @@ import numpy as np
 from adpart.envs.registry import get_domain
 from adpart.mdp.solvers import solve
 from adpart.plugins.builtin import detectors as builtin
+from adpart.plugins.builtin.detectors import RewardVariation
 from adpart.plugins.registry import Registrar, Registry
 from adpart.subgoals import reward_variation_states
-from adpart.subgoals.detectors import RewardVariation
 
 
 def test_subgoal_registration_and_json():

@@ -271,7 +271,7 @@ def _static(g: CompiledGraph) -> _Static:
     return _STATIC[g]
 
 
-class _Run:
+class AgentRun:
     """One MAXQ-Q agent: the recursive procedure of Dietterich's Table 4.
 
     The hot loop works on Python lists (scalar reads and writes on lists are several times
@@ -455,7 +455,7 @@ def hierarchical_rollouts(
     n = count(episodes, "episodes")
     H = count(max_steps, "max_steps")
     rng = np.random.default_rng(seed)
-    agent = _Run(mdp, graph, rng, parse_schedule(0.0), parse_schedule(0.0), H)
+    agent = AgentRun(mdp, graph, rng, parse_schedule(0.0), parse_schedule(0.0), H)
     agent.C = [[t.tolist() for t in row] for row in tables.C]
     agent.Ct = [[t.tolist() for t in row] if agent.tilde[j] else agent.C[j]
                 for j, row in enumerate(tables.Ct)]
@@ -518,7 +518,7 @@ def maxq_q(
     v_star = optimal_start_value(mdp, mu, reference_values)
     cdf = np.cumsum(mu)
     rngs = np.random.default_rng(root_seed).spawn(K)
-    agents = [_Run(mdp, graph, rngs[k], alpha_s, eps_s, H) for k in range(K)]
+    agents = [AgentRun(mdp, graph, rngs[k], alpha_s, eps_s, H) for k in range(K)]
     out = {c: np.zeros((K, N), dtype=np.int64) for c in ("steps", "decisions")}
     out_r = {c: np.zeros((K, N)) for c in ("return", "discounted_return")}
     eval_value = np.full((K, N), np.nan)

@@ -14,11 +14,11 @@ from typing import Any
 import numpy as np
 
 from adpart.errors import ModelError
-from adpart.partition import Partition, exact_lumping, refine
-from adpart.partition._validate import DEFAULT_ATOL
+from adpart.params import Param
+from adpart.partition import DEFAULT_ATOL, Partition, exact_lumping, refine
 from adpart.partition.multiphase import initial_termination_labels
 from adpart.plugins.hookspecs import hookimpl
-from adpart.plugins.registry import Param, Registrar
+from adpart.plugins.registry import Registrar
 
 
 class BisimulationCriterion:

@@ -4,7 +4,8 @@ Call signature (``register_hierarchy_estimators``): ``cls(**params).build(knowle
 environment, *, tasks=None, store=True) -> HierarchyResult`` - the decision layer for the next task
 of ``environment`` (its name in the knowledge base) from the tasks learned there so far (``tasks``
 restricts them: names, ``task:N`` refs or ids), stored as a ``hierarchy`` partition unless
-``store=False``. Both are thin layers over :mod:`adpart.hierarchy.kb`; docs/hierarchy.md has the
+``store=False``. Both read and store through :mod:`adpart.workflows.hierarchy` and build with
+:mod:`adpart.hierarchy.layers`; docs/hierarchy.md has the
 formulas and interpretations.
 """
 
@@ -14,17 +15,17 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
-from adpart.hierarchy.kb import (
+from adpart.hierarchy.layers import (
     DEFAULT_THRESHOLD_SCALE,
     HierarchyResult,
     all_subgoals_layer,
     expected_time_layer,
-    finish,
     flat_estimate,
-    load_inputs,
 )
+from adpart.params import Param
 from adpart.plugins.hookspecs import hookimpl
-from adpart.plugins.registry import Param, Registrar
+from adpart.plugins.registry import Registrar
+from adpart.workflows.hierarchy import finish, load_inputs
 
 _COMMON = (
     Param("c", "float", 1.0, "constant c of T_conv = c |P|^2 |O|", min=0.0),

@@ -1,8 +1,14 @@
-"""Built-in executors: ``serial`` (in-process) and ``local`` (a process pool)."""
+"""Built-in executors: ``serial`` (in-process), ``local`` (a process pool) and ``ray``.
+
+Registering ``ray`` imports only :mod:`adpart.execution.ray`, which imports Ray lazily, so it is
+listed by ``adpart plugins`` whether or not Ray is installed; using it without Ray raises an error
+naming ``pip install 'adpart[ray]'``.
+"""
 
 from __future__ import annotations
 
 from adpart.execution import LocalExecutor, SerialExecutor
+from adpart.execution.ray import RayExecutor
 from adpart.plugins.hookspecs import hookimpl
 from adpart.plugins.registry import Registrar
 
@@ -11,3 +17,4 @@ from adpart.plugins.registry import Registrar
 def register_executors(register: Registrar) -> None:
     register(LocalExecutor)
     register(SerialExecutor)
+    register(RayExecutor)

@@ -14,9 +14,10 @@ from collections.abc import Callable, Sequence
 
 from adpart.errors import TaskError
 from adpart.mdp.model import FiniteMDP
+from adpart.params import Param
 from adpart.plugins.builtin.learners import ALPHA, EPSILON, MAX_STEPS, kernel, q_init
 from adpart.plugins.hookspecs import hookimpl
-from adpart.plugins.registry import Param, Registrar
+from adpart.plugins.registry import Registrar
 
 
 class SMDPQLearner:

@@ -5,8 +5,9 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from adpart.mdp.model import FiniteMDP
+from adpart.params import Param
 from adpart.plugins.hookspecs import hookimpl
-from adpart.plugins.registry import Param, Registrar
+from adpart.plugins.registry import Registrar
 
 
 def _probability_schedule(what: str) -> Callable[[str], object]:

@@ -1,6 +1,6 @@
-"""Stop the Ray processes a killed driver leaves behind (``python -m adpart.ray_reaper PID``).
+"""Stop the Ray processes a killed driver leaves behind (``python -m adpart.execution.reaper PID``).
 
-A local Ray started by :class:`adpart.execution_ray.RayExecutor` shuts down with the executor,
+A local Ray started by :class:`adpart.execution.ray.RayExecutor` shuts down with the executor,
 and its GCS server and raylet fate-share with the driver process. But when the driver is killed
 with SIGKILL, the raylet's children - the dashboard agent and the runtime-env agent - are
 re-parented to init and stay alive (measured: both still running 8 s after the kill). The

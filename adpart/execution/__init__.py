@@ -13,7 +13,7 @@ from collections.abc import Callable, Iterable
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any, TypeVar
 
-from adpart.plugins.registry import Param
+from adpart.params import Param
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -29,6 +29,8 @@ class Executor(ABC):
     name: str = ""
     description: str = ""
     params: tuple[Param, ...] = ()
+    #: whether items may run at once in other processes (work is then split into chunks)
+    parallel: bool = True
 
     @abstractmethod
     def map(self, fn: Callable[[T], R], items: Iterable[T]) -> list[R]:
@@ -48,6 +50,7 @@ class Executor(ABC):
 class SerialExecutor(Executor):
     name = "serial"
     description = "runs every item in this process, one after another (debugging, small jobs)"
+    parallel = False
 
     def map(self, fn: Callable[[T], R], items: Iterable[T]) -> list[R]:
         return [fn(item) for item in items]

@@ -30,7 +30,7 @@ import numpy as np
 
 from adpart.errors import AdpartError
 from adpart.execution import WORKER_THREAD_ENV, Executor
-from adpart.plugins.registry import Param
+from adpart.params import Param
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -59,7 +59,7 @@ def import_ray() -> Any:
 
 
 def _start_reaper() -> None:
-    """Start :mod:`adpart.ray_reaper` for this process (where ``/proc`` exists), in its own
+    """Start :mod:`adpart.execution.reaper` for this process (where ``/proc`` exists), in its own
     session so that a signal to the driver's process group does not reach it."""
     import os
     import subprocess
@@ -68,7 +68,7 @@ def _start_reaper() -> None:
     if not os.path.isdir("/proc"):
         return
     subprocess.Popen(
-        [sys.executable, "-m", "adpart.ray_reaper", str(os.getpid())],
+        [sys.executable, "-m", "adpart.execution.reaper", str(os.getpid())],
         stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
         start_new_session=True, close_fds=True,
     )

@@ -1,0 +1,199 @@
+"""Decision layers for the next task from what earlier tasks learned (dissertation section 4.4).
+
+:class:`HierarchyInputs` holds the learned tasks (:class:`~adpart.hierarchy.tasks.LearnedTask`)
+and candidate options over one column set (the primitive actions, then the options).
+:func:`expected_time_layer` runs Algorithm 3 on them; :func:`all_subgoals_layer` is the seed's
+heuristic (every subgoal option in every block where it is admissible, then the multi-phase
+partition). Reading the inputs from a knowledge base and storing the layer is the job of
+:mod:`adpart.workflows.hierarchy`.
+
+Interpretations (docs/hierarchy.md): the estimator's threshold ``L`` defaults to
+``threshold_scale`` (1%) of the task's value range; blocks the construction left without any
+action get the primitive actions admissible in all their states (the hierarchical learner needs
+a decision in every block, and where no learned task goes nothing better is known); only option
+columns some block offers are kept with the layer.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from adpart.errors import TaskError
+from adpart.hierarchy.estimator import expected_time, flat_time
+from adpart.hierarchy.greedy import Step, column_splits, greedy_hierarchy
+from adpart.hierarchy.tasks import LearnedTask
+from adpart.mdp.model import FiniteMDP
+from adpart.options.option import Option
+from adpart.partition.partition import Partition, block_all
+
+#: Default estimator threshold L as a fraction of each task's value range (module docstring).
+DEFAULT_THRESHOLD_SCALE = 0.01
+
+
+@dataclass(frozen=True, eq=False)
+class HierarchyInputs:
+    """Everything one construction needs: the learned tasks, the options, their columns.
+
+    Attributes:
+        environment: the environment record.
+        task_records, policy_records: the tasks used and the policy standing for each.
+        tasks: the estimator's inputs, one per task record.
+        option_records, options: the candidate options (columns ``A..A+O-1``).
+        action_names: names of all ``A + O`` columns.
+        admissible: ``(S, A+O)`` where each column may start.
+        termination: ``(S, A+O)`` beta = 1 (True for every primitive column).
+        mdp: the MDP of the newest task (dynamics shared by all).
+        parent_ids: partitions the used tasks were learned on (their runs') or built for.
+    """
+
+    environment: Any
+    task_records: list[Any]
+    policy_records: list[Any]
+    tasks: list[LearnedTask]
+    option_records: list[Any]
+    options: list[Option]
+    action_names: list[str]
+    admissible: np.ndarray
+    termination: np.ndarray
+    mdp: FiniteMDP
+    parent_ids: list[int]
+
+
+@dataclass(frozen=True, eq=False)
+class HierarchyResult:
+    """A decision layer built for the next task.
+
+    Attributes:
+        estimator: the plugin name that built it.
+        partition: labels and per-block columns, columns = primitive actions then ``option_ids``.
+        option_ids: the options the layer uses (record ids), in column order.
+        column_names: names of the partition's columns.
+        trace: ``E[t_learn]`` per step (Algorithm 3), or one value for a fixed layer.
+        estimate: ``E[t_learn]`` of the stored layer (after filling empty blocks).
+        steps: Algorithm 3's accepted refinements (empty for ``all-subgoals``).
+        task_ids: the learned tasks used.
+        partition_id: the stored ``hierarchy`` partition, or None when not stored.
+        seconds: ``{"inputs": ..., "construction": ...}``.
+        parameters: the estimator's parameters (stored as provenance).
+        flat_estimate: ``E[t_learn | flat]`` (the "no abstraction" candidate), None when not
+            compared.
+        fallback: True when the flat MDP is predicted to learn faster than the layer: the next
+            task should be learned flat (the layer is still stored, for the record).
+    """
+
+    estimator: str
+    partition: Partition
+    option_ids: list[int]
+    column_names: list[str]
+    trace: list[float]
+    estimate: float | None
+    steps: list[Step]
+    task_ids: list[int]
+    partition_id: int | None
+    seconds: dict[str, float] = field(default_factory=dict)
+    parameters: dict[str, Any] = field(default_factory=dict)
+    flat_estimate: float | None = None
+    fallback: bool = False
+
+    @property
+    def n_blocks(self) -> int:
+        return self.partition.n_blocks
+
+    def block_columns(self) -> list[list[str]]:
+        """The names of the columns offered in each block."""
+        names = np.asarray(self.column_names, dtype=object)
+        return [list(names[row]) for row in self.partition.admissible]
+
+    def summary(self) -> dict[str, Any]:
+        """A JSON-able summary (for ``--json`` and experiment records)."""
+        return {
+            "estimator": self.estimator,
+            "partition": None if self.partition_id is None else f"partition:{self.partition_id}",
+            "blocks": self.n_blocks,
+            "options": [f"option:{i}" for i in self.option_ids],
+            "tasks": [f"task:{i}" for i in self.task_ids],
+            "estimate": self.estimate,
+            "flat_estimate": self.flat_estimate,
+            "fallback": self.fallback,
+            "trace": list(self.trace),
+            "steps": len(self.steps),
+            "seconds": dict(self.seconds),
+            "parameters": dict(self.parameters),
+        }
+
+
+# --------------------------------------------------------------------------- layers
+
+
+def fill_empty_blocks(partition: Partition, admissible: np.ndarray, n_primitives: int) -> Partition:
+    """Blocks offering no column get every primitive action admissible in all their states."""
+    adm = partition.admissible.copy()
+    empty = ~adm.any(axis=1)
+    if empty.any():
+        allowed = block_all(partition.labels, partition.n_blocks, admissible[:, :n_primitives])
+        adm[empty, :n_primitives] = allowed[empty]
+    return partition.with_admissible(adm)
+
+
+def prune_unused_options(partition: Partition, n_primitives: int) -> tuple[Partition, np.ndarray]:
+    """Drop option columns no block offers; return the layer and the kept option indices."""
+    used = np.flatnonzero(partition.admissible[:, n_primitives:].any(axis=0))
+    cols = np.r_[np.arange(n_primitives), n_primitives + used]
+    return partition.with_admissible(partition.admissible[:, cols]), used
+
+
+def expected_time_layer(
+    inputs: HierarchyInputs, *, c: float = 1.0, max_steps: int | None = None
+) -> tuple[Partition, list[float], list[Step], float]:
+    """Algorithm 3 over ``inputs``; returns ``(filled layer, trace, steps, its estimate)``."""
+    A = inputs.mdp.n_actions
+    result = greedy_hierarchy(
+        inputs.tasks, inputs.admissible, n_primitives=A,
+        splits=column_splits(inputs.admissible, inputs.termination), c=c, max_steps=max_steps,
+    )
+    filled = fill_empty_blocks(result.partition, inputs.admissible, A)
+    est = expected_time(inputs.tasks, filled, n_primitives=A, c=c).total
+    return filled, result.trace, result.steps, est
+
+
+def flat_estimate(inputs: HierarchyInputs, *, c: float = 1.0) -> float:
+    """``E[t_learn | flat]`` over the inputs' primitive actions (the "no abstraction" layer)."""
+    return flat_time(inputs.admissible[:, :inputs.mdp.n_actions], c)
+
+
+def all_subgoals_layer(
+    inputs: HierarchyInputs, *, delta: float = 0.0, c: float = 1.0
+) -> tuple[Partition, float]:
+    """The seed's heuristic: multi-phase partition (phases 1-2) over every subgoal option.
+
+    Every option is offered in every block where all states may start it; blocks left without
+    one get the primitive actions (:func:`fill_empty_blocks`). Returns the layer over the
+    inputs' columns and its ``E[t_learn]``.
+    """
+    from adpart.learning.smdp_q import option_set
+    from adpart.partition import MultiPhasePartitioner, refine
+    from adpart.partition.partition import combine_labels
+
+    if not inputs.options:
+        raise TaskError(
+            f"environment {inputs.environment.name!r} has no stored subgoal options; build them "
+            "with `adpart options` first"
+        )
+    _, smdp = option_set(inputs.mdp, inputs.options, include_primitives=True)
+    cols = np.arange(inputs.mdp.n_actions, smdp.n_actions)
+    partitioner = MultiPhasePartitioner(smdp, inputs.termination, delta=delta)
+    start = combine_labels(*(partitioner.phase1(int(o)).labels for o in cols))
+    # states no option may start (the subgoals themselves) stay in blocks of their own pattern;
+    # they get the primitive actions below instead of failing the cover check of phase 2
+    layer = refine(Partition.from_labels(start, smdp.admissible), smdp, options=cols,
+                   delta=delta, epsilon=None, require_admissible=False)
+    layer = layer.with_admissible(layer.admissible & block_all(
+        layer.labels, layer.n_blocks, inputs.admissible))
+    A = inputs.mdp.n_actions
+    filled = fill_empty_blocks(layer, inputs.admissible, A)
+    return filled, expected_time(inputs.tasks, filled, n_primitives=A, c=c).total
+
+
