@@ -1,6 +1,7 @@
 """Learners: flat Q-learning in lock-step, learning curves and step-size schedules.
 
-Public API: :func:`q_learning` and its :class:`QLearningResult`; :class:`LearningCurve` and
+Public API: :func:`q_learning` and its :class:`QLearningResult`; :class:`LearnResult`, the base of
+every learner's result (the learner plugins' contract); :class:`LearningCurve` and
 :func:`plot_curves`; the schedules :func:`constant`, :func:`visit_count`, :func:`exponential`
 and :func:`parse_schedule`. See ``docs/learning.md``.
 """
@@ -9,6 +10,7 @@ from __future__ import annotations
 
 from adpart.learning.curves import LearningCurve, plot_curves
 from adpart.learning.qlearning import QLearningResult, q_learning
+from adpart.learning.result import LearnResult
 from adpart.learning.schedules import (
     Schedule,
     constant,
@@ -18,6 +20,7 @@ from adpart.learning.schedules import (
 )
 
 __all__ = [
+    "LearnResult",
     "LearningCurve",
     "QLearningResult",
     "Schedule",

@@ -54,7 +54,7 @@ whose values lie in [-20, 0]. Theorem 4.5's bound is reported beside ``L``.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -65,6 +65,7 @@ from adpart.learning.curves import (
     start_distribution,
     start_values,
 )
+from adpart.learning.result import LearnResult
 from adpart.learning.schedules import Schedule, constant, visit_count
 from adpart.learning.settings import count, run_settings
 from adpart.learning.smdp_q import drive, kernel_function, make_state, option_set
@@ -110,7 +111,7 @@ MIN_VISITS = 2
 
 
 @dataclass(frozen=True, eq=False)
-class HierarchicalResult:
+class HierarchicalResult(LearnResult):
     """What :func:`hierarchical_learning` returns.
 
     Attributes:
@@ -125,21 +126,12 @@ class HierarchicalResult:
         seed, v_star_start, option_names, parameters: as :class:`SMDPQResult`.
     """
 
-    Q: np.ndarray
     block_Q: list[np.ndarray]
     partitions: list[Partition]
     Q_flat: np.ndarray
-    curve: LearningCurve
     blocks: np.ndarray
     refinements: list[dict[str, int]]
-    seed: int
-    v_star_start: float
     option_names: tuple[str, ...]
-    parameters: dict[str, object] = field(default_factory=dict)
-
-    @property
-    def runs(self) -> int:
-        return self.Q.shape[0]
 
     @property
     def n_refinements(self) -> np.ndarray:
@@ -148,11 +140,6 @@ class HierarchicalResult:
         for event in self.refinements:
             counts[event["run"]] += 1
         return counts
-
-    def greedy_policies(self) -> np.ndarray:
-        """``(K, S)`` greedy option indices (lowest on ties), as evaluated."""
-        K, S, O = self.Q.shape  # noqa: E741 (the thesis' symbol)
-        return greedy_policy(self.Q.reshape(K * S, O)).reshape(K, S)
 
     def blocks_table(self) -> dict[str, np.ndarray]:
         """Blocks over time as columns ``run``, ``episode`` (1-based), ``blocks``."""

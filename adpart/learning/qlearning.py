@@ -31,7 +31,7 @@ Design choices (documented in ``docs/learning.md``):
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -43,6 +43,7 @@ from adpart.learning.curves import (
     start_distribution,
     start_values,
 )
+from adpart.learning.result import LearnResult
 from adpart.learning.schedules import Schedule, constant, visit_count
 from adpart.learning.settings import run_settings
 from adpart.mdp.model import FiniteMDP
@@ -62,33 +63,17 @@ def default_kernel() -> str:
 
 
 @dataclass(frozen=True, eq=False)
-class QLearningResult:
+class QLearningResult(LearnResult):
     """What :func:`q_learning` returns.
 
     Attributes:
         Q: ``(K, S, A)`` float64 action values of every run; ``-inf`` on inadmissible pairs.
         visits: ``(K, S, A)`` int64 number of updates of each pair.
-        curve: the per-run, per-episode :class:`~adpart.learning.curves.LearningCurve`.
-        seed: the seed actually used (drawn from OS entropy and recorded when none was given).
-        v_star_start: ``sum_s mu(s) V*(s)``, the reference of the value gap.
-        parameters: JSON-ready settings (schedules, limits, kernel) for provenance records.
+        curve, seed, v_star_start, parameters: as :class:`~adpart.learning.result.LearnResult`
+            (the seed is drawn from OS entropy and recorded when none was given).
     """
 
-    Q: np.ndarray
     visits: np.ndarray
-    curve: LearningCurve
-    seed: int
-    v_star_start: float
-    parameters: dict[str, object] = field(default_factory=dict)
-
-    @property
-    def runs(self) -> int:
-        return self.Q.shape[0]
-
-    def greedy_policies(self) -> np.ndarray:
-        """``(K, S)`` int64 greedy policies (lowest action index on ties), as evaluated."""
-        K, S, A = self.Q.shape
-        return greedy_policy(self.Q.reshape(K * S, A)).reshape(K, S)
 
 
 def _initial_state(

@@ -7,7 +7,7 @@ Its "learning curve" has one row per Bellman sweep instead of per episode: ``ste
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -18,26 +18,14 @@ from adpart.learning.curves import (
     start_distribution,
     start_values,
 )
+from adpart.learning.result import LearnResult
 from adpart.mdp.model import FiniteMDP
 from adpart.mdp.solvers import greedy_policy, q_from_v
 
 
 @dataclass(frozen=True, eq=False)
-class ReferenceResult:
-    """The result of :func:`value_iteration_curve`, shaped like a learner's result (one run)."""
-
-    Q: np.ndarray
-    curve: LearningCurve
-    seed: int
-    v_star_start: float
-    parameters: dict[str, object] = field(default_factory=dict)
-
-    @property
-    def runs(self) -> int:
-        return self.Q.shape[0]
-
-    def greedy_policies(self) -> np.ndarray:
-        return greedy_policy(self.Q[0])[None, :]
+class ReferenceResult(LearnResult):
+    """The result of :func:`value_iteration_curve`: a learner's result with one run."""
 
 
 def value_iteration_curve(mdp: FiniteMDP, *, sweeps: int, seed: int = 0) -> ReferenceResult:

@@ -37,7 +37,7 @@ in :mod:`adpart.learning._smdp_kernels`. Choices (docs/hierarchical-learning.md)
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -50,6 +50,7 @@ from adpart.learning.curves import (
     start_values,
 )
 from adpart.learning.qlearning import BLOCK_ROWS
+from adpart.learning.result import LearnResult
 from adpart.learning.schedules import Schedule, constant, visit_count
 from adpart.learning.settings import run_settings
 from adpart.mdp.model import FiniteMDP, SMDPModel
@@ -62,36 +63,20 @@ __all__ = ["SMDPQResult", "compile_options", "option_set", "smdp_q_learning"]
 
 
 @dataclass(frozen=True, eq=False)
-class SMDPQResult:
+class SMDPQResult(LearnResult):
     """What :func:`smdp_q_learning` returns.
 
     Attributes:
         Q: ``(K, S, O)`` option values of every run; ``-inf`` where the option may not start.
         visits: ``(K, S, O)`` number of updates of each pair.
-        curve: the per-run, per-episode :class:`LearningCurve` (``steps`` primitive, ``decisions``
-            option choices).
-        seed: the seed used.
-        v_star_start: ``sum_s mu(s) V*(s)`` of the flat MDP, the reference of the value gap.
         option_names: the ``O`` option names, in column order.
-        parameters: JSON-ready settings.
+        curve, seed, v_star_start, parameters: as :class:`~adpart.learning.result.LearnResult`
+            (the curve's ``steps`` are primitive steps, ``decisions`` option choices; the value
+            gap is taken against the flat MDP's ``V*``).
     """
 
-    Q: np.ndarray
     visits: np.ndarray
-    curve: LearningCurve
-    seed: int
-    v_star_start: float
     option_names: tuple[str, ...]
-    parameters: dict[str, object] = field(default_factory=dict)
-
-    @property
-    def runs(self) -> int:
-        return self.Q.shape[0]
-
-    def greedy_policies(self) -> np.ndarray:
-        """``(K, S)`` greedy option indices (lowest on ties), as evaluated."""
-        K, S, O = self.Q.shape  # noqa: E741 (the thesis' symbol)
-        return greedy_policy(self.Q.reshape(K * S, O)).reshape(K, S)
 
 
 def option_set(

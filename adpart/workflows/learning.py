@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from adpart.errors import TaskError
+from adpart.errors import PluginError, TaskError
 from adpart.execution import Executor, SerialExecutor
 from adpart.learning.curves import LearningCurve
 from adpart.plugins import get_registry
@@ -140,12 +140,48 @@ def _learn_batch(job: dict[str, Any]) -> dict[str, Any]:
         progress=job.get("progress"),
         **extra,
     )
+    runs = 1 if getattr(learner, "single_run", False) else job["runs"]
+    check_learn_result(result, job["learner"], runs=runs, n_states=mdp.n_states)
     return {
         "Q": result.Q,
         "curve": result.curve.to_dict(),
         "metadata": dict(result.curve.metadata),
         "v_star_start": result.v_star_start,
     }
+
+
+def _check_accepts(spec: Any, request: LearnRequest) -> None:
+    """Refuse options or a partition for a learner that does not declare them (``accepts``)."""
+    accepts = frozenset(getattr(spec.factory, "accepts", ()))
+    for what, given in (("options", request.options), ("partition", request.partition)):
+        if given is not None and what not in accepts:
+            users = sorted(s.name for s in get_registry().all("learner")
+                           if what in getattr(s.factory, "accepts", ()))
+            raise PluginError(
+                f"learner {spec.name!r} does not learn over {what}; drop --{what} or pick "
+                f"--learner {' or '.join(users) or '(none installed)'}"
+            )
+
+
+def check_learn_result(result: Any, learner: str, *, runs: int, n_states: int) -> None:
+    """The learner's result has what the workflows read (the :class:`LearnResult` fields).
+
+    Raises:
+        PluginError: naming the learner and the missing or misshapen field.
+    """
+    missing = [f for f in ("Q", "curve", "v_star_start") if not hasattr(result, f)]
+    if missing:
+        raise PluginError(
+            f"learner {learner!r} returned a {type(result).__name__} without "
+            f"{', '.join(missing)}; a learner returns an adpart.learning.LearnResult"
+        )
+    Q = np.asarray(result.Q)
+    if Q.ndim != 3 or Q.shape[:2] != (runs, n_states):
+        raise PluginError(
+            f"learner {learner!r} returned Q of shape {Q.shape}; expected ({runs}, {n_states}, C)"
+        )
+    if not isinstance(result.curve, LearningCurve):
+        raise PluginError(f"learner {learner!r} returned a curve that is not a LearningCurve")
 
 
 def run_learning(
@@ -161,6 +197,7 @@ def run_learning(
     needed when the request names options or a partition.
     """
     spec = get_registry().get("learner", request.learner)
+    _check_accepts(spec, request)
     params = spec.resolve_params(request.params)
     domain = resolve_domain(request.env)
     task = domain.task(request.task)

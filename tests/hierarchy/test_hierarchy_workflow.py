@@ -7,12 +7,12 @@ import pytest
 
 from adpart.errors import TaskError
 from adpart.hierarchy import discounted_occupancy, expected_time, option_values
-from adpart.workflows.hierarchy import build_hierarchy, load_inputs
 from adpart.mdp.solvers import q_from_v, solve
 from adpart.options import doorway_options, option_model
 from adpart.partition import Partition
 from adpart.partition.partition import block_all
 from adpart.store import KnowledgeBase
+from adpart.workflows.hierarchy import build_hierarchy, load_inputs
 from tests.hierarchy.conftest import store_domain
 
 

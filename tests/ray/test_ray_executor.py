@@ -28,6 +28,12 @@ def _fail(x: int) -> int:
     return x
 
 
+def test_ray_executor_passes_the_executor_conformance_check(ray_cluster):
+    from adpart.testing import check_executor
+
+    check_executor(RayExecutor)
+
+
 def test_ray_map_returns_results_in_order(ray_cluster):
     with RayExecutor() as ex:
         assert ex.map(_slow_square, range(5)) == [0, 1, 4, 9, 16]

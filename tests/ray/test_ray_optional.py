@@ -37,8 +37,8 @@ def test_ray_executor_without_ray_names_the_extra(no_ray):
 
 
 def test_ray_module_does_not_import_ray_at_import_time():
-    code = ("import sys, adpart.plugins.builtin.executors, adpart.workflows.sweep, adpart.cli.sweep; "
-            "assert 'ray' not in sys.modules")
+    code = ("import sys, adpart.plugins.builtin.executors, adpart.workflows.sweep, "
+            "adpart.cli.sweep; assert 'ray' not in sys.modules")
     import subprocess
 
     subprocess.run([sys.executable, "-c", code], check=True)

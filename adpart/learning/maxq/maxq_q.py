@@ -38,7 +38,7 @@ import math
 import weakref
 from bisect import bisect_right
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -50,6 +50,7 @@ from adpart.learning.curves import (
     start_values,
 )
 from adpart.learning.maxq.taskgraph import CompiledGraph
+from adpart.learning.result import LearnResult
 from adpart.learning.schedules import Schedule, parse_schedule
 from adpart.learning.settings import count, run_settings
 from adpart.mdp.model import FiniteMDP
@@ -213,7 +214,7 @@ def root_q(g: CompiledGraph, tables: MaxQTables) -> np.ndarray:
 
 
 @dataclass(frozen=True, eq=False)
-class MaxQResult:
+class MaxQResult(LearnResult):
     """What :func:`maxq_q` returns (the learner-result shape of :mod:`adpart.learning`).
 
     Attributes:
@@ -227,18 +228,9 @@ class MaxQResult:
         parameters: JSON-ready settings.
     """
 
-    Q: np.ndarray
     policies: np.ndarray
     tables: list[MaxQTables]
     graph: CompiledGraph
-    curve: LearningCurve
-    seed: int
-    v_star_start: float
-    parameters: dict[str, object] = field(default_factory=dict)
-
-    @property
-    def runs(self) -> int:
-        return self.Q.shape[0]
 
     def greedy_policies(self) -> np.ndarray:
         return self.policies

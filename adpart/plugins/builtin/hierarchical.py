@@ -13,8 +13,11 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 
 from adpart.errors import TaskError
+from adpart.learning.result import LearnResult
 from adpart.mdp.model import FiniteMDP
+from adpart.options.option import Option
 from adpart.params import Param
+from adpart.partition.partition import Partition
 from adpart.plugins.builtin.learners import ALPHA, EPSILON, MAX_STEPS, kernel, q_init
 from adpart.plugins.hookspecs import hookimpl
 from adpart.plugins.registry import Registrar
@@ -25,6 +28,7 @@ class SMDPQLearner:
 
     name = "smdp-q"
     description = "SMDP Q-learning over options (plus primitive actions), runs in lock-step"
+    accepts = frozenset({"options"})
     params = (
         ALPHA,
         EPSILON,
@@ -46,11 +50,10 @@ class SMDPQLearner:
 
     def learn(self, mdp: FiniteMDP, *, runs: int, episodes: int, seed: int, eval_every: int,
               progress: Callable[[int, int], object] | None = None,
-              options: Sequence[object] | None = None, partition: object = None) -> object:
+              options: Sequence[Option] | None = None,
+              partition: Partition | None = None) -> LearnResult:
         from adpart.learning.smdp_q import smdp_q_learning
 
-        if partition is not None:
-            raise TaskError("smdp-q learns over states; use --learner hierarchical for a partition")
         opts = list(options or [])
         return smdp_q_learning(
             mdp, opts, include_primitives=self.primitives or not opts, runs=runs,
@@ -65,6 +68,7 @@ class HierarchicalLearner:
 
     name = "hierarchical"
     description = "SMDP Q on a partition's blocks, refined where flat and abstract values disagree"
+    accepts = frozenset({"options", "partition"})
     params = (
         Param("mode", "str", "inconsistency", "how the goal becomes reachable (section 4.3)",
               choices=("inconsistency", "action-refinement", "reward-variation")),
@@ -106,7 +110,8 @@ class HierarchicalLearner:
 
     def learn(self, mdp: FiniteMDP, *, runs: int, episodes: int, seed: int, eval_every: int,
               progress: Callable[[int, int], object] | None = None,
-              options: Sequence[object] | None = None, partition: object = None) -> object:
+              options: Sequence[Option] | None = None,
+              partition: Partition | None = None) -> LearnResult:
         from adpart.learning.hierarchical import hierarchical_learning
 
         if not options:

@@ -94,6 +94,7 @@ class ValueIterationLearner:
     name = "value-iteration"
     description = "exact value iteration on the model (reference; one run, a row per sweep)"
     params = ()
+    single_run = True
 
     def learn(
         self,

@@ -19,6 +19,7 @@ class MaxQLearner:
 
     name = "maxq-q"
     description = "MAXQ-Q hierarchical Q-learning over a task graph (taxi, taxi-fickle)"
+    example_environment = "taxi"
     params = (
         Param("graph", "str", "auto", "task graph; auto picks it from the MDP's features",
               choices=("auto", *GRAPHS)),
