@@ -12,15 +12,9 @@ from typing import Any
 import click
 import numpy as np
 
-from adpart.errors import AdpartError
+from adpart.cli.group import CLIError
 from adpart.execution import Executor
 from adpart.plugins import PluginSpec, PluginWarning, Registry, get_registry
-
-
-class CLIError(click.ClickException):
-    """One line on stderr (``Error: ...``) and exit status 2: bad input the user can fix."""
-
-    exit_code = 2
 
 
 class FiniteFloat(click.ParamType):
@@ -56,16 +50,6 @@ class FiniteFloat(click.ParamType):
         elif self.max is not None and out > self.max:
             raise CLIError(f"{option} = {value} must be <= {self.max:g}{what}")
         return out
-
-
-class AdpartGroup(click.Group):
-    """A click group that reports every :class:`AdpartError` as one line and exit status 2."""
-
-    def invoke(self, ctx: click.Context) -> Any:
-        try:
-            return super().invoke(ctx)
-        except AdpartError as exc:
-            raise CLIError(str(exc)) from exc
 
 
 def registry() -> Registry:

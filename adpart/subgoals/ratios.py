@@ -16,7 +16,6 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-from scipy import stats
 
 from adpart.errors import TaskError
 from adpart.subgoals.montecarlo import Trajectories
@@ -104,6 +103,8 @@ def check_level(p: float) -> float:
 
 @lru_cache(maxsize=256)
 def _t_quantile(q: float, dof: int) -> float:
+    from scipy import stats  # ~0.4 s to import; only detection needs it
+
     return float(stats.t.ppf(q, dof))
 
 

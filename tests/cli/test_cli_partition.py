@@ -10,16 +10,13 @@ import pytest
 from click.testing import CliRunner
 
 from adpart.cli import cli
-from adpart.cli.common import AdpartGroup
-from adpart.cli.partition_cmd import partition_cmd
 from adpart.options.smdp import stack_models
 from adpart.partition import Partition, check_stability, exact_lumping
 from adpart.store import KnowledgeBase
 from adpart.workflows.options import load_options, options_for_subgoals
 from adpart.workflows.resolve import resolve_domain
 
-#: The main group with `partition` attached (the lead wires it into adpart.cli itself).
-GROUP = AdpartGroup(commands={**cli.commands, "partition": partition_cmd})
+GROUP = cli
 
 
 def run(*args: str) -> object:

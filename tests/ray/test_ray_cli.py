@@ -10,12 +10,12 @@ from click.testing import CliRunner
 
 pytest.importorskip("ray")
 
-from adpart.cli.common import AdpartGroup
+from adpart.cli.group import LazyGroup
 from adpart.cli.sweep import sweep_cmd
 from adpart.plugins import reset_registry
 
 
-@click.group(cls=AdpartGroup)
+@click.group(cls=LazyGroup)
 def group() -> None:
     """The main group, as far as this command is concerned."""
 

@@ -8,7 +8,7 @@ import click
 import pytest
 from click.testing import CliRunner
 
-from adpart.cli.common import AdpartGroup
+from adpart.cli.group import LazyGroup
 from adpart.cli.sweep import sweep_cmd
 
 GRID = """
@@ -22,7 +22,7 @@ alpha = ["0.1", "0.5"]
 """
 
 
-@click.group(cls=AdpartGroup)
+@click.group(cls=LazyGroup)
 def group() -> None:
     """The main group, as far as this command is concerned."""
 
