@@ -117,21 +117,37 @@ def plugin_options_command(kind: str) -> type[click.Command]:
     return PluginOptionsCommand
 
 
+_CLICK_TYPES = {"int": click.INT, "float": click.FLOAT, "bool": click.BOOL, "str": click.STRING}
+
+
 def _plugin_options(reg: Registry, kind: str) -> list[click.Option]:
-    owners: dict[str, list[str]] = {}
-    helps: dict[str, str] = {}
+    """One ``--<name>`` per parameter name declared by some ``kind`` plugin.
+
+    The option is typed when every plugin declaring the name agrees on the type (else TEXT; the
+    chosen plugin converts it), and its help gives each plugin's own default, e.g.
+    ``[q-learning, smdp-q: 1/n^0.8; maxq-q: 0.5]``.
+    """
+    declared: dict[str, list[tuple[str, Any]]] = {}
     for spec in reg.all(kind):
         for p in spec.params:
-            owners.setdefault(p.name, []).append(spec.name)
-            helps.setdefault(p.name, f"{p.help} (default {p.default})")
-    return [
-        click.Option(
-            [f"--{name}", f"plugin_{name.replace('-', '_')}"],
-            default=None,
-            help=f"{helps[name]} [{kind}: {', '.join(owners[name])}]",
-        )
-        for name in owners
-    ]
+            declared.setdefault(p.name, []).append((spec.name, p))
+    options = []
+    for name, owners in declared.items():
+        types = {p.type for _, p in owners}
+        choices = {p.choices for _, p in owners}
+        if len(choices) == 1 and None not in choices:
+            ptype: click.ParamType = click.Choice(next(iter(choices)))
+        else:
+            ptype = _CLICK_TYPES[types.pop()] if len(types) == 1 else click.STRING
+        by_default: dict[str, list[str]] = {}
+        for plugin, p in owners:
+            by_default.setdefault(str(p.default), []).append(plugin)
+        defaults = "; ".join(f"{', '.join(plugins)}: {value}"
+                             for value, plugins in by_default.items())
+        options.append(click.Option(
+            [f"--{name}", f"plugin_{name.replace('-', '_')}"], type=ptype, default=None,
+            help=f"{owners[0][1].help} [{defaults}]"))
+    return options
 
 
 def split_plugin_options(spec: PluginSpec, plugin_options: dict[str, Any]) -> dict[str, Any]:

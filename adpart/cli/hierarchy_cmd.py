@@ -14,22 +14,17 @@ from typing import Any
 import click
 import numpy as np
 
-from adpart.cli.common import CLIError, echo_json, kb_location_options
+from adpart.cli.common import (
+    CLIError,
+    echo_json,
+    kb_location_options,
+    plugin_options_command,
+    registry,
+    split_plugin_options,
+)
 from adpart.cli.pipeline_cmd import split_tasks
 from adpart.errors import AdpartError
 from adpart.store.location import KBLocation
-
-
-def _params(pairs: tuple[str, ...]) -> dict[str, str]:
-    out: dict[str, str] = {}
-    for pair in pairs:
-        key, eq, value = pair.partition("=")
-        if not eq or not key.strip():
-            raise CLIError(
-                f"--param takes KEY=VALUE (e.g. --param threshold-scale=0.001); got {pair!r}"
-            )
-        out[key.strip()] = value.strip()
-    return out
 
 
 def _plot(env: str, result: Any, path: Path, task_names: list[str]) -> list[str]:
@@ -64,7 +59,7 @@ def _plot(env: str, result: Any, path: Path, task_names: list[str]) -> list[str]
     return written
 
 
-@click.command(name="hierarchy")
+@click.command(name="hierarchy", cls=plugin_options_command("hierarchy-estimator"))
 @click.argument("env")
 @click.option(
     "--estimator",
@@ -78,12 +73,6 @@ def _plot(env: str, result: Any, path: Path, task_names: list[str]) -> list[str]
     help="Learned tasks to build from (names or task:N; default: every learned task).",
 )
 @click.option(
-    "--param",
-    multiple=True,
-    metavar="KEY=VALUE",
-    help="An estimator parameter (repeatable), e.g. --param threshold-scale=0.001.",
-)
-@click.option(
     "--plot",
     "plot_path",
     type=click.Path(dir_okay=False, path_type=Path),
@@ -95,11 +84,11 @@ def hierarchy_cmd(
     env: str,
     estimator: str,
     tasks: str | None,
-    param: tuple[str, ...],
     plot_path: Path | None,
     as_json: bool,
     kb_path: str | None,
     kb_artifacts: str | None,
+    **plugin_options: Any,
 ) -> None:
     """Build and store the decision layer for the next task of ENV (section 4.4, Algorithm 3).
 
@@ -113,7 +102,11 @@ def hierarchy_cmd(
     from adpart.store import KnowledgeBase
     from adpart.workflows.hierarchy import build_hierarchy
 
-    params = _params(param)
+    try:
+        params = split_plugin_options(registry().get("hierarchy-estimator", estimator),
+                                      plugin_options)
+    except AdpartError as exc:
+        raise CLIError(str(exc)) from exc
     chosen = list(split_tasks(tasks)) if tasks is not None else None
     if chosen is not None and not chosen:
         raise CLIError("--tasks is empty; give task names or task:N refs separated by commas")

@@ -35,7 +35,8 @@ from adpart.workflows.partitioning import partition_environment, plot_partition
     help="Eq. 4.6: largest spread of a block's discounted mass into another block, in [0, 1].",
 )
 @click.option(
-    "--epsilon",
+    "--reward-epsilon",
+    "epsilon",
     type=FiniteFloat(min=0.0, what="eq. 4.7's epsilon"),
     default=10.0,
     show_default=True,

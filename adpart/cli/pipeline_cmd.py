@@ -129,7 +129,8 @@ def _say(quiet: bool):  # type: ignore[no-untyped-def]
     help="delta of eq. 4.6 (transition homogeneity) in [0, 1].",
 )
 @click.option(
-    "--epsilon",
+    "--reward-epsilon",
+    "epsilon",
     type=FiniteFloat(min=0.0, what="eq. 4.7's epsilon"),
     default=10.0,
     show_default=True,
@@ -168,7 +169,8 @@ def _say(quiet: bool):  # type: ignore[no-untyped-def]
     metavar="KEY=VALUE",
     help="A hierarchical-learner parameter, e.g. --hier-opt mode=inconsistency.",
 )
-@click.option("--no-baseline", is_flag=True, help="Skip learning later tasks flat for comparison.")
+@click.option("--baseline/--no-baseline", default=True, show_default=True,
+              help="Also learn each later task flat, for comparison.")
 @click.option(
     "--hierarchy",
     metavar="NAME",
@@ -207,7 +209,7 @@ def pipeline_cmd(
     flat_opt: tuple[str, ...],
     no_fallback: bool,
     hier_opt: tuple[str, ...],
-    no_baseline: bool,
+    baseline: bool,
     hierarchy: str | None,
     hierarchy_opt: tuple[str, ...],
     out: Path | None,
@@ -249,7 +251,7 @@ def pipeline_cmd(
         eval_every=eval_every,
         flat_params=_key_values(flat_opt, "--flat-opt"),
         hierarchical_params=_key_values(hier_opt, "--hier-opt"),
-        baseline=not no_baseline,
+        baseline=baseline,
         hierarchy=hierarchy,
         hierarchy_params=_key_values(hierarchy_opt, "--hierarchy-opt"),
         flat_learner=flat_learner,
@@ -298,7 +300,8 @@ def pipeline_cmd(
     metavar="KEY=VALUE",
     help="A hierarchical-learner parameter, e.g. --hier-opt mode=action-refinement.",
 )
-@click.option("--baseline", is_flag=True, help="Also learn the task flat for comparison.")
+@click.option("--baseline/--no-baseline", default=False, show_default=True,
+              help="Also learn the task flat, for comparison.")
 @click.option(
     "--out",
     type=click.Path(file_okay=False, path_type=Path),

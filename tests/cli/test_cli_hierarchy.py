@@ -15,7 +15,7 @@ from adpart.store import KnowledgeBase
 
 PIPELINE = [
     "pipeline", "two-rooms", "--tasks", "reach-goal,goal:x=9,y=5,goal:x=2,y=2",
-    "--runs", "2", "--episodes", "100", "--first-episodes", "500", "--epsilon", "1",
+    "--runs", "2", "--episodes", "100", "--first-episodes", "500", "--reward-epsilon", "1",
     "--flat-opt", "alpha=1", "--flat-opt", "epsilon=0.5",
     "--hier-opt", "alpha=1", "--hier-opt", "epsilon=0.3",
     "--hierarchy", "expected-learning-time", "--no-fallback",
@@ -119,8 +119,9 @@ def test_hierarchy_command_stores_the_layer_it_prints(pipeline_kb, tmp_path):
     [
         (["--estimator", "no-such"], "no-such"),
         (["--tasks", "not-learned"], "not-learned"),
-        (["--param", "threshold"], "KEY=VALUE"),
-        (["--param", "bogus=1"], "bogus"),
+        (["--c", "-1"], "--c must be >= 0.0"),
+        (["--estimator", "all-subgoals", "--max-steps", "3"],
+         "--max-steps is not a parameter of hierarchy-estimator 'all-subgoals'"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(pipeline_kb, args, needle):

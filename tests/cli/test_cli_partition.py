@@ -74,7 +74,7 @@ def test_primitive_exact_partition_matches_exact_lumping_and_is_exported(tmp_pat
         "primitive",
         "--delta",
         "0",
-        "--epsilon",
+        "--reward-epsilon",
         "0",
         "--task",
         "reach-goal",
@@ -138,7 +138,7 @@ def test_primitive_exact_partition_matches_exact_lumping_and_is_exported(tmp_pat
         "primitive",
         "--delta",
         "0",
-        "--epsilon",
+        "--reward-epsilon",
         "0",
         "--task",
         "reach-goal",
@@ -161,7 +161,7 @@ def test_options_phases_stored_phase1_reused_and_checked(kb_with_options):
         subgoal_set,
         "--delta",
         "0.3",
-        "--epsilon",
+        "--reward-epsilon",
         "10",
         "--task",
         "reach-goal",
@@ -225,7 +225,7 @@ def test_stored_models_are_recomputed_for_a_task_they_were_not_built_for(kb_with
     finally:
         kb.close()
     refs = ",".join(c.ref for c in copies)
-    args = ("--delta", "0", "--epsilon", "0", "--task", "reach-goal", "--kb", str(kb_dir))
+    args = ("--delta", "0", "--reward-epsilon", "0", "--task", "reach-goal", "--kb", str(kb_dir))
     copied = run_json("partition", "two-rooms", "--options", refs, *args)
     original = run_json("partition", "two-rooms", "--options", ",".join(r.ref for r in rec), *args)
     assert copied["phase3"]["recomputed_option_models"]
@@ -239,7 +239,7 @@ def test_stored_models_are_recomputed_for_a_task_they_were_not_built_for(kb_with
     [
         (["--delta", "1.5"], "is outside [0, 1]"),
         (["--delta", "-0.1"], "is outside [0, 1]"),
-        (["--epsilon", "-1"], "must be >= 0"),
+        (["--reward-epsilon", "-1"], "must be >= 0"),
         (["--options", "option:99"], "option:99"),
         (["--options", "subgoal-set:99"], "subgoal-set:99"),
         (["--options", "policy:1"], "a option is needed"),
@@ -307,7 +307,7 @@ def test_options_of_another_environment_and_uncovered_states(kb_with_options):
 def test_phases_run_on_the_tasks_model_and_report_the_layer(kb_with_options):
     """Phase 1 is keyed by the task's terminal states; blocks are split by reachability."""
     kb_dir, subgoal_set, _ = kb_with_options
-    common = ("--delta", "0.3", "--epsilon", "10", "--kb", str(kb_dir))
+    common = ("--delta", "0.3", "--reward-epsilon", "10", "--kb", str(kb_dir))
     first = run_json("partition", "two-rooms", "--options", subgoal_set, "--task", "reach-goal",
                      *common)
     mdp = resolve_domain("two-rooms").mdp("reach-goal")

@@ -27,7 +27,7 @@ PIPELINE = [
     "200",
     "--first-episodes",
     "500",
-    "--epsilon",
+    "--reward-epsilon",
     "1",
     "--flat-opt",
     "alpha=1",

@@ -31,7 +31,7 @@ def _cli(*args: str):
 @pytest.mark.parametrize(("args", "message"), [
     (["--delta", "-0.1"], "--delta = -0.1 is outside [0, 1]"),
     (["--delta", "nan"], "--delta = nan must be a finite number (nan and inf are refused)"),
-    (["--epsilon", "inf"], "--epsilon = inf must be a finite number"),
+    (["--reward-epsilon", "inf"], "--reward-epsilon = inf must be a finite number"),
     (["--hier-opt", "bogus=1"], "--hier-opt: learner 'hierarchical' has no parameter --bogus"),
     (["--hier-opt", "threshold-scale=nan"],
      "--hier-opt: learner 'hierarchical': --threshold-scale must be a finite number"),

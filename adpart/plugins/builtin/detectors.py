@@ -58,7 +58,8 @@ class CountMonteCarlo:
     params = (
         _P, _TRAJ, _N,
         Param("batch", "int", 50, "trajectories per batch", min=1),
-        Param("epsilon", "float", 2.0, "count accuracy eps_N of eq. 4.3 / theorem 4.3", min=0.0),
+        Param("count-epsilon", "float", 2.0, "count accuracy eps_N of eq. 4.3 / theorem 4.3",
+              min=0.0),
         Param("confidence", "float", 0.9, "probability p of eq. 4.3, in (0, 1)", min=0.0),
         Param("stable-batches", "int", 3, "stop when the subgoals are unchanged this many batches",
               min=1),
@@ -69,11 +70,11 @@ class CountMonteCarlo:
     )
 
     def __init__(self, p: float = 0.025, trajectories: int = 30, n: int = 0, batch: int = 50,
-                 epsilon: float = 2.0, confidence: float = 0.9, stable_batches: int = 3,
+                 count_epsilon: float = 2.0, confidence: float = 0.9, stable_batches: int = 3,
                  stop: str = "passes", max_samples: int = 50_000,
                  on_loop: str = "truncate") -> None:
         self.kw = {"p": p, "trajectories": trajectories, "n": n, "batch": batch,
-                   "epsilon": epsilon, "confidence": confidence, "stable_batches": stable_batches,
+                   "epsilon": count_epsilon, "confidence": confidence, "stable_batches": stable_batches,
                    "stop": stop, "max_samples": max_samples, "on_loop": on_loop}
 
     def detect(self, mdp: FiniteMDP, policy: np.ndarray, rng: np.random.Generator) -> SubgoalResult:
