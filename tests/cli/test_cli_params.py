@@ -20,7 +20,7 @@ def _help(*command: str) -> str:
 
 def _option_line(text: str, option: str) -> str:
     """The help entry of ``option`` with its continuation lines, whitespace collapsed."""
-    block = re.search(rf"^  {re.escape(option)}\b.*?(?=^  -|\Z)", text, re.M | re.S)
+    block = re.search(rf"^  {re.escape(option)}\b.*?(?=^  -|\Z)", text, re.MULTILINE | re.DOTALL)
     assert block, f"{option} not in help"
     return " ".join(block.group(0).split())
 
@@ -58,5 +58,5 @@ def test_hierarchy_takes_its_estimators_parameters_as_options():
 
 
 def test_the_documented_help_excerpt_is_what_learn_help_prints():
-    block = re.search(r"```\n(  --alpha.*?)```", DOCS.read_text(), re.S).group(1)
+    block = re.search(r"```\n(  --alpha.*?)```", DOCS.read_text(), re.DOTALL).group(1)
     assert " ".join(block.split()) in _option_line(_help("learn"), "--alpha")

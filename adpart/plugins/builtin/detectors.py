@@ -74,7 +74,8 @@ class CountMonteCarlo:
                  stop: str = "passes", max_samples: int = 50_000,
                  on_loop: str = "truncate") -> None:
         self.kw = {"p": p, "trajectories": trajectories, "n": n, "batch": batch,
-                   "epsilon": count_epsilon, "confidence": confidence, "stable_batches": stable_batches,
+                   "epsilon": count_epsilon, "confidence": confidence,
+                   "stable_batches": stable_batches,
                    "stop": stop, "max_samples": max_samples, "on_loop": on_loop}
 
     def detect(self, mdp: FiniteMDP, policy: np.ndarray, rng: np.random.Generator) -> SubgoalResult:
