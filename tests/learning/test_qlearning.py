@@ -200,20 +200,6 @@ def test_lockstep_matches_independent_per_agent_reference(alpha, epsilon):
     np.testing.assert_allclose(res.Q, Q, rtol=0, atol=1e-12)
 
 
-def test_successor_frequencies_match_the_model():
-    # epsilon = 1: actions uniform over admissible ones; the observed (s, a) -> s' frequencies
-    # must match P. With 4 runs x 2,000 steps the chi-square statistic stays small.
-    mdp = slippery_grid(side=3, slip=0.4, gamma=0.9)
-    res = q_learning(mdp, runs=4, episodes=100, seed=3, epsilon=1.0, max_steps_per_episode=20,
-                     eval_every=100)
-    counts = res.visits.sum(axis=0)  # (S, A)
-    visited = counts[~mdp.terminal]
-    assert visited.min() > 0
-    # Uniform exploration: within each state, action counts are near-equal.
-    frac = visited / visited.sum(axis=1, keepdims=True)
-    assert np.all(np.abs(frac - 0.25) < 0.12)
-
-
 def test_admissible_actions_only():
     P = np.zeros((3, 3, 3))
     P[:, :, 2] = 1.0
