@@ -29,11 +29,7 @@ from adpart.store.location import KBLocation
 
 def _plot(env: str, result: Any, path: Path, task_names: list[str]) -> list[str]:
     """The layer on the map at ``path`` and, for Algorithm 3, the trace at ``<stem>_trace.png``."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    from adpart.plotting import new_figure
     from adpart.workflows.partitioning import plot_partition
 
     title = (f"{env}: {result.estimator}, {result.n_blocks} blocks, "
@@ -41,7 +37,7 @@ def _plot(env: str, result: Any, path: Path, task_names: list[str]) -> list[str]
     written = [plot_partition(env, result.partition.labels, str(path), title=title)]
     if len(result.trace) > 1:
         trace_path = path.with_name(f"{path.stem}_trace{path.suffix or '.png'}")
-        fig, ax = plt.subplots(figsize=(6, 3.6))
+        fig, ax = new_figure((6, 3.6))
         ax.semilogy(np.arange(len(result.trace)), result.trace, marker="o")
         ax.set_xlabel("accepted refinement (Algorithm 3)")
         ax.set_ylabel("E[t_learn | P]")
@@ -53,8 +49,6 @@ def _plot(env: str, result: Any, path: Path, task_names: list[str]) -> list[str]
             raise CLIError(
                 f"cannot write {trace_path}: {exc.strerror}; choose another --plot"
             ) from exc
-        finally:
-            plt.close(fig)
         written.append(str(trace_path))
     return written
 

@@ -223,9 +223,7 @@ class DomainEnv(gymnasium.Env[int, int]):
             canvas.draw()
             return np.asarray(canvas.buffer_rgba())[..., :3].copy()
         finally:
-            import matplotlib.pyplot as plt
-
-            plt.close(fig)
+            fig.clear()
 
 
 def register_envs() -> list[str]:

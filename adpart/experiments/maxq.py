@@ -110,12 +110,9 @@ def _censored(to_tol: np.ndarray, total: np.ndarray) -> np.ndarray:
 
 def _plot(series: dict[str, tuple[np.ndarray, np.ndarray]], path: Path, xlabel: str,
           ylabel: str, title: str, log: bool = False) -> str:
-    import matplotlib
+    from adpart.plotting import new_figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(7, 4.2))
+    fig, ax = new_figure((7, 4.2))
     for name, (x, y) in series.items():
         ax.plot(x, y, label=name)
     ax.set_xlabel(xlabel)
@@ -126,7 +123,6 @@ def _plot(series: dict[str, tuple[np.ndarray, np.ndarray]], path: Path, xlabel: 
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     return str(path)
 
 

@@ -86,12 +86,9 @@ def _to_threshold(curve: Any, threshold: float, episodes: int) -> np.ndarray:
 
 def _plot_curves(curves: dict[str, Any], column: str, path: Path, ylabel: str, title: str
                  ) -> str:
-    import matplotlib
+    from adpart.plotting import new_figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(7, 4.2))
+    fig, ax = new_figure((7, 4.2))
     for name, curve in curves.items():
         m = curve.matrix(column)
         x = np.arange(1, m.shape[1] + 1)
@@ -106,7 +103,6 @@ def _plot_curves(curves: dict[str, Any], column: str, path: Path, ylabel: str, t
     ax.legend()
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     return str(path)
 
 

@@ -39,17 +39,9 @@ import numpy as np
 
 from adpart.errors import AdpartError
 from adpart.experiments.base import ExperimentConfig, ExperimentReport, experiment
+from adpart.plotting import new_figure
 
 P_LEVEL = 0.025
-
-
-def _plt() -> Any:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
 
 
 def jaccard(a: np.ndarray, b: np.ndarray) -> float:
@@ -189,57 +181,49 @@ def _sampling_settings(config: ExperimentConfig) -> dict[str, Any]:
 
 def _plot_sampling(curves: np.ndarray, jac: np.ndarray, samples: np.ndarray, n_exh: np.ndarray,
                    stops: np.ndarray, path: Path) -> str:
-    plt = _plt()
-    fig, ax = plt.subplots(figsize=(7, 4.2))
-    try:
-        mean = curves.mean(axis=0)
-        ax.plot(samples, mean, label=f"Monte Carlo: subgoals (mean of {curves.shape[0]} runs)")
-        ax.fill_between(samples, curves.min(axis=0), curves.max(axis=0), alpha=0.2, lw=0)
-        ax.axhline(n_exh.mean(), color="k", ls="--", lw=1,
-                   label=f"exhaustive: subgoals (mean {n_exh.mean():.1f})")
-        ax.axvline(float(np.mean(stops)), color="tab:red", ls=":", lw=1,
-                   label=f"default stop (mean {np.mean(stops):.0f} samples)")
-        ax.set_xlabel("sampled trajectories")
-        ax.set_ylabel("subgoals found")
-        ax2 = ax.twinx()
-        ax2.plot(samples, jac.mean(axis=0), color="tab:green", lw=1.2,
-                 label="Jaccard with exhaustive set (mean)")
-        ax2.set_ylim(0, 1)
-        ax2.set_ylabel("Jaccard agreement", color="tab:green")
-        lines = ax.get_legend_handles_labels()
-        lines2 = ax2.get_legend_handles_labels()
-        ax.legend(lines[0] + lines2[0], lines[1] + lines2[1], fontsize="small", loc="lower right")
-        ax.set_title("three-floor-arm: subgoals vs samples (Fig. 5.7)")
-        ax.grid(True, alpha=0.3)
-        fig.tight_layout()
-        fig.savefig(path, dpi=110)
-    finally:
-        plt.close(fig)
+    fig, ax = new_figure((7, 4.2))
+    mean = curves.mean(axis=0)
+    ax.plot(samples, mean, label=f"Monte Carlo: subgoals (mean of {curves.shape[0]} runs)")
+    ax.fill_between(samples, curves.min(axis=0), curves.max(axis=0), alpha=0.2, lw=0)
+    ax.axhline(n_exh.mean(), color="k", ls="--", lw=1,
+               label=f"exhaustive: subgoals (mean {n_exh.mean():.1f})")
+    ax.axvline(float(np.mean(stops)), color="tab:red", ls=":", lw=1,
+               label=f"default stop (mean {np.mean(stops):.0f} samples)")
+    ax.set_xlabel("sampled trajectories")
+    ax.set_ylabel("subgoals found")
+    ax2 = ax.twinx()
+    ax2.plot(samples, jac.mean(axis=0), color="tab:green", lw=1.2,
+             label="Jaccard with exhaustive set (mean)")
+    ax2.set_ylim(0, 1)
+    ax2.set_ylabel("Jaccard agreement", color="tab:green")
+    lines = ax.get_legend_handles_labels()
+    lines2 = ax2.get_legend_handles_labels()
+    ax.legend(lines[0] + lines2[0], lines[1] + lines2[1], fontsize="small", loc="lower right")
+    ax.set_title("three-floor-arm: subgoals vs samples (Fig. 5.7)")
+    ax.grid(True, alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
     return str(path)
 
 
 def _plot_times(times: dict[str, np.ndarray], path: Path) -> str:
-    plt = _plt()
-    fig, ax = plt.subplots(figsize=(6.5, 4))
-    try:
-        names = list(times)
-        ms = [1000 * np.asarray(times[n]) for n in names]
-        means = np.array([m.mean() for m in ms])
-        err = np.array([[mean - m.min(), m.max() - mean] for mean, m in zip(means, ms,
-                                                                          strict=True)]).T
-        x = np.arange(len(names))
-        ax.bar(x, means, yerr=err, color=["tab:blue", "tab:orange", "tab:gray"][: len(names)],
-               capsize=4)
-        for i, m in enumerate(means):
-            ax.text(i, m * 1.08, f"{m:.0f} ms", ha="center", va="bottom", fontsize="small")
-        ax.set_xticks(x, [n.replace(" (", "\n(") for n in names])
-        ax.set_yscale("log")
-        ax.set_ylabel("time per discovery (ms; mean, bar = min-max)")
-        ax.set_title("three-floor-arm: time of subgoal discovery (Fig. 5.8)")
-        fig.tight_layout()
-        fig.savefig(path, dpi=110)
-    finally:
-        plt.close(fig)
+    fig, ax = new_figure((6.5, 4))
+    names = list(times)
+    ms = [1000 * np.asarray(times[n]) for n in names]
+    means = np.array([m.mean() for m in ms])
+    err = np.array([[mean - m.min(), m.max() - mean] for mean, m in zip(means, ms,
+                                                                      strict=True)]).T
+    x = np.arange(len(names))
+    ax.bar(x, means, yerr=err, color=["tab:blue", "tab:orange", "tab:gray"][: len(names)],
+           capsize=4)
+    for i, m in enumerate(means):
+        ax.text(i, m * 1.08, f"{m:.0f} ms", ha="center", va="bottom", fontsize="small")
+    ax.set_xticks(x, [n.replace(" (", "\n(") for n in names])
+    ax.set_yscale("log")
+    ax.set_ylabel("time per discovery (ms; mean, bar = min-max)")
+    ax.set_title("three-floor-arm: time of subgoal discovery (Fig. 5.8)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
     return str(path)
 
 

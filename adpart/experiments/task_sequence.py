@@ -62,12 +62,9 @@ def _learn_on(kb: Any, ref: str, task: str, s: dict[str, int], seed: int) -> Any
 
 
 def _plot(curves: dict[str, Any], path: Path, title: str, column: str = "value_gap") -> str:
-    import matplotlib
+    from adpart.plotting import new_figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(7, 4.2))
+    fig, ax = new_figure((7, 4.2))
     for name, curve in curves.items():
         m = curve.matrix(column)
         keep = ~np.isnan(m[0])
@@ -79,17 +76,13 @@ def _plot(curves: dict[str, Any], path: Path, title: str, column: str = "value_g
     ax.legend()
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     return str(path)
 
 
 def _plot_blocks(blocks: dict[str, np.ndarray], path: Path) -> str:
-    import matplotlib
+    from adpart.plotting import new_figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6, 3.6))
+    fig, ax = new_figure((6, 3.6))
     for name, b in blocks.items():
         ax.plot(np.arange(1, b.shape[1] + 1), b.mean(axis=0), label=name)
     ax.set_xlabel("episode")
@@ -98,7 +91,6 @@ def _plot_blocks(blocks: dict[str, np.ndarray], path: Path) -> str:
     ax.legend()
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     return str(path)
 
 

@@ -85,12 +85,9 @@ def _curve_rows(task: str, curves: dict[str, Any], episodes: int
 
 
 def _plot_blocks(blocks: dict[str, np.ndarray], path: Path, title: str) -> str:
-    import matplotlib
+    from adpart.plotting import new_figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(7, 4.2))
+    fig, ax = new_figure((7, 4.2))
     for label, b in blocks.items():
         x = np.arange(1, b.shape[1] + 1)
         ax.plot(x, b.mean(axis=0), label=f"{label} (mean of {b.shape[0]} runs)")
@@ -101,7 +98,6 @@ def _plot_blocks(blocks: dict[str, np.ndarray], path: Path, title: str) -> str:
     ax.legend()
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     return str(path)
 
 
