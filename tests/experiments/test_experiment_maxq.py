@@ -48,6 +48,7 @@ def test_evaluated_schedule() -> None:
     assert evaluated(9, 3).tolist() == [3, 6, 9]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["maxq-taxi", "maxq-parr"])
 def test_quick_experiment_writes_report(name: str, tmp_path) -> None:
     assert get_experiment(name).name == name

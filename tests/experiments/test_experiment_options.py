@@ -5,11 +5,13 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 
 from adpart.experiments.base import ExperimentConfig, run_experiment
 from adpart.experiments.options_three_floor import FLAT, options_three_floor  # noqa: F401
 
 
+@pytest.mark.slow
 def test_quick_options_three_floor(tmp_path):
     config = ExperimentConfig(out=tmp_path, runs=2, seed=0, quick=True)
     report, files = run_experiment("options-three-floor", config)

@@ -5,12 +5,14 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 
 from adpart.experiments.base import ExperimentConfig, run_experiment
 from adpart.experiments.partition_three_floor import partition_three_floor  # noqa: F401 (registers)
 from adpart.store import KnowledgeBase
 
 
+@pytest.mark.slow
 def test_quick_run_partitions_learns_and_reports(tmp_path):
     kb_dir = tmp_path / "kb"
     config = ExperimentConfig(out=tmp_path / "out", runs=2, seed=0, quick=True, kb=str(kb_dir))

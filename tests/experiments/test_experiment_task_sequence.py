@@ -6,12 +6,14 @@ import json
 from itertools import pairwise
 
 import numpy as np
+import pytest
 
 from adpart.experiments.base import ExperimentConfig, run_experiment
 from adpart.experiments.task_sequence import TASKS, task_sequence  # noqa: F401 (registers)
 from adpart.store import KnowledgeBase
 
 
+@pytest.mark.slow
 def test_quick_run_builds_a_layer_per_task_and_compares_task_five(tmp_path):
     kb_dir = tmp_path / "kb"
     config = ExperimentConfig(out=tmp_path / "out", runs=2, seed=0, quick=True, kb=str(kb_dir))

@@ -48,6 +48,7 @@ def _check_common(report, files, tmp_path, n_states):
     return rows
 
 
+@pytest.mark.slow
 def test_three_floor_quick(tmp_path):
     report, files = _run("three-floor", tmp_path)
     rows = _check_common(report, files, tmp_path, 2900)
@@ -66,6 +67,7 @@ def test_three_floor_quick(tmp_path):
     assert ("partition, refinement", "partition, reward variation") in labels
 
 
+@pytest.mark.slow
 def test_three_floor_arm_quick_and_resume(tmp_path):
     kb = str(tmp_path / "kb")
     report, files = _run("three-floor-arm", tmp_path, kb=kb)

@@ -37,6 +37,7 @@ def test_two_rooms_all_runs_reach_optimal_policy():
     assert np.all(np.abs(gaps) < 1e-6), gaps
 
 
+@pytest.mark.slow
 def test_four_rooms_all_runs_get_close_to_optimal():
     mdp = _mdp("four-rooms")
     res = q_learning(mdp, runs=4, episodes=20_000, seed=0, alpha="1/n^0.8", epsilon=1.0,

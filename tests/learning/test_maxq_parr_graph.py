@@ -52,6 +52,7 @@ def test_graph_compiles_with_call_time_instances(mini):
     assert not term[s] and np.all(term[y != y[s]])
 
 
+@pytest.mark.slow
 def test_every_subtask_terminates(mini):
     """From every state where an instance runs, every greedy-free way of running it - here:
     every child choice - can reach its termination set: no instance has a closed region of
@@ -111,6 +112,7 @@ def test_bad_call_time_parameters():
         g.compile(mdp)
 
 
+@pytest.mark.slow
 def test_learned_hierarchical_policy_reaches_the_goal_on_the_mini_maze(mini):
     mdp, g = mini
     res = maxq_q(mdp, g, runs=1, episodes=1000, seed=0, alpha="0.5", epsilon="0.1",

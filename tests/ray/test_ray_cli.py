@@ -40,6 +40,7 @@ def test_ray_cli_unreachable_address_is_one_clear_line(small_sweep, tmp_path):
     assert "Traceback" not in result.output
 
 
+@pytest.mark.slow
 def test_ray_cli_sweep_runs_on_the_cluster(ray_cluster, small_sweep, tmp_path):
     kb = str(tmp_path / "kb")
     args = ["sweep", str(small_sweep), "--kb", kb, "--executor", "ray", "--json"]
