@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -394,7 +394,7 @@ def _record_learning(kb: Any, outcome: LearnOutcome) -> dict[str, Any]:
         plugin_version=outcome.learner_version,
         parameters={
             **outcome.params,
-            "request": asdict(request),
+            "request": canonical_request(request),
             "policies": [p.id for p in policies],
         },
     )
@@ -407,14 +407,30 @@ def _record_learning(kb: Any, outcome: LearnOutcome) -> dict[str, Any]:
     }
 
 
+def canonical_request(request: LearnRequest) -> dict[str, Any]:
+    """``request`` as it is stored and looked up: equal work gives an equal dict.
+
+    The task is the environment's own name for it (``None`` -> the default task's name), and
+    the parameters are the learner's full declaration resolved (``max-steps`` and ``max_steps``,
+    ``"5000"`` and ``5000``, an omitted default and the default given are the same request).
+    Batching stays part of it: batches draw other seeds.
+    """
+    spec = get_registry().get("learner", request.learner)
+    task = resolve_domain(request.env).task(request.task).name
+    canonical = replace(request, task=task, params=spec.resolve_params(request.params))
+    return json.loads(json.dumps(asdict(canonical), allow_nan=False))
+
+
 def find_learning(kb: Any, request: LearnRequest) -> dict[str, Any] | None:
     """The ids of a run already recorded for exactly ``request``, or None.
 
     Runs are matched on the request as recorded by :func:`record_learning` (environment, task,
-    learner, parameters, runs, episodes, seed, batching, options, partition), so a pipeline that
-    is run again reuses what it learned before instead of learning it again.
+    learner, parameters, runs, episodes, seed, batching, options, partition), in the spelling of
+    :func:`canonical_request`, so a pipeline that is run again - or that starts with a task the
+    user already learned with ``adpart learn`` - reuses what was learned instead of learning it
+    again.
     """
-    wanted = json.loads(json.dumps(asdict(request)))
+    wanted = canonical_request(request)
     for env in kb.records("environment"):
         if env.name != request.env:
             continue
