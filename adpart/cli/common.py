@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import math
 import sys
 import warnings
@@ -10,7 +9,6 @@ from collections.abc import Callable
 from typing import Any
 
 import click
-import numpy as np
 
 from adpart.cli.group import CLIError
 from adpart.execution import Executor
@@ -65,16 +63,11 @@ def registry() -> Registry:
     return reg
 
 
-def _default(obj: Any) -> Any:
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
-
-
 def dumps(data: Any) -> str:
-    return json.dumps(data, indent=2, default=_default)
+    """Strict JSON (non-finite numbers as null), as every ``--json`` and summary.json writes."""
+    from adpart.workflows.reports import strict_json
+
+    return strict_json(data)
 
 
 def echo_json(data: Any) -> None:

@@ -9,6 +9,7 @@ import click
 
 from adpart.cli.common import echo_json
 from adpart.experiments import EXPERIMENTS, ExperimentConfig, load_all, run_experiment
+from adpart.workflows.reports import folder_name
 
 
 @click.command(name="experiment")
@@ -59,7 +60,7 @@ def experiment_cmd(
             for r in rows:
                 click.echo(f"{r['name']:<24} {r['title']} ({r['figures']})")
         return
-    out = out or Path("adpart-experiments") / name
+    out = out or Path("adpart-experiments") / folder_name(name)
     tty = sys.stderr.isatty()
     config = ExperimentConfig(
         out=out,

@@ -33,6 +33,7 @@ from adpart.workflows import (
     run_learning,
     write_learning_outputs,
 )
+from adpart.workflows.reports import folder_name
 
 
 @click.command(name="learn", cls=plugin_options_command("learner"))
@@ -144,9 +145,8 @@ def learn_cmd(
             )
         finally:
             close()
-        out = out or Path("adpart-learn") / (
-            f"{env.replace(':', '_')}_{outcome.task_name}_{learner}_seed{seed}"
-        )
+        out = out or Path("adpart-learn") / folder_name(env, outcome.task_name, learner,
+                                                         f"seed{seed}")
         summary = outcome.summary()
         summary["files"] = write_learning_outputs(out, outcome)
         if not no_store and kb is not None:

@@ -21,6 +21,7 @@ from adpart.errors import AdpartError
 from adpart.options.subgoal_options import INITIATION_CHOICES as INITIATIONS
 from adpart.options.subgoal_options import LOCAL_RADIUS
 from adpart.store.location import KBLocation
+from adpart.workflows.reports import folder_name
 
 
 def _check_plugin_params(kind: str, name: str, params: dict[str, Any], option: str) -> None:
@@ -258,7 +259,7 @@ def pipeline_cmd(
         fallback=not no_fallback,
     )
     check_pipeline_options(config)
-    out = out or Path("adpart-pipeline") / env.replace(":", "_")
+    out = out or Path("adpart-pipeline") / folder_name(env)
     kb = KnowledgeBase.open(KBLocation.resolve(kb_path, kb_artifacts))
     try:
         report = run_pipeline(kb, config, out=out, progress=_say(quiet))
@@ -339,7 +340,7 @@ def transfer_cmd(
 
     hier_params = _key_values(hier_opt, "--hier-opt")
     _check_plugin_params("learner", "hierarchical", hier_params, "--hier-opt")
-    out = out or Path("adpart-transfer") / f"{env.replace(':', '_')}_{task}"
+    out = out or Path("adpart-transfer") / folder_name(env, task)
     requests = {
         "hierarchical": LearnRequest(
             env=env,

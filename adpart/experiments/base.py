@@ -10,16 +10,14 @@ PNG figures the experiment drew.
 from __future__ import annotations
 
 import difflib
-import json
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from adpart.errors import UnknownNameError
+from adpart.workflows.reports import strict_json
 
 
 @dataclass(frozen=True)
@@ -66,7 +64,7 @@ class ExperimentReport:
             "findings": self.findings,
             "data": self.data,
         }
-        (out / "summary.json").write_text(json.dumps(summary, indent=2, default=_json_default))
+        (out / "summary.json").write_text(strict_json(summary))
         lines = [
             f"# {self.title}",
             "",
@@ -80,16 +78,6 @@ class ExperimentReport:
         lines += ["## Figures", ""] + [f"![{Path(f).stem}]({Path(f).name})" for f in self.figures]
         (out / "summary.md").write_text("\n".join(lines) + "\n")
         return {"json": str(out / "summary.json"), "markdown": str(out / "summary.md")}
-
-
-def _json_default(obj: Any) -> Any:
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, Path):
-        return str(obj)
-    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
 
 
 ExperimentFn = Callable[[ExperimentConfig], ExperimentReport]
