@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib
+import select
 import signal
 import subprocess
 import sys
@@ -66,3 +67,24 @@ def test_ctrl_c_exits_130():
     out = CliRunner().invoke(group, ["slow"])
     assert out.exit_code == INTERRUPTED == 128 + signal.SIGINT
     assert "Interrupted." in out.output
+
+
+def test_output_to_a_pipe_arrives_line_by_line():
+    """The first line is readable while the command still runs (not at exit, as with a block
+    buffer): the child prints a line, then waits for our reply on stdin before it goes on."""
+    code = ("import click, sys\nfrom adpart.cli.group import LazyGroup\n"
+            "@click.group(cls=LazyGroup)\ndef g():\n    pass\n"
+            "@g.command()\ndef talk():\n    click.echo('stage 1 done')\n    sys.stdin.readline()\n"
+            "    click.echo('stage 2 done')\n"
+            "g(['talk'])\n")
+    with subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE,
+                          stdout=subprocess.PIPE, text=True) as child:
+        try:
+            ready, _, _ = select.select([child.stdout], [], [], 30)
+            assert ready, "no line within 30 s: the child's stdout is block-buffered"
+            assert child.stdout.readline() == "stage 1 done\n"
+            child.stdin.write("go\n")
+            child.stdin.flush()
+            assert child.stdout.readline() == "stage 2 done\n"
+        finally:
+            child.kill()
