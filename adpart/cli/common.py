@@ -110,15 +110,17 @@ def plugin_options_command(kind: str) -> type[click.Command]:
     return PluginOptionsCommand
 
 
-_CLICK_TYPES = {"int": click.INT, "float": click.FLOAT, "bool": click.BOOL, "str": click.STRING}
+_METAVARS = {"int": "INTEGER", "float": "FLOAT", "bool": "BOOLEAN", "str": "TEXT"}
 
 
 def _plugin_options(reg: Registry, kind: str) -> list[click.Option]:
     """One ``--<name>`` per parameter name declared by some ``kind`` plugin.
 
-    The option is typed when every plugin declaring the name agrees on the type (else TEXT; the
-    chosen plugin converts it), and its help gives each plugin's own default, e.g.
-    ``[q-learning, smdp-q: 1/n^0.8; maxq-q: 0.5]``.
+    The option shows its type when every plugin declaring the name agrees on it (its choices,
+    else INTEGER, FLOAT, BOOLEAN or TEXT), and its help gives each plugin's own default, e.g.
+    ``[q-learning, smdp-q: 1/n^0.8; maxq-q: 0.5]``. The value reaches the chosen plugin as
+    given and is converted by that plugin's declaration, so a bad value is one line naming
+    the plugin and the option.
     """
     declared: dict[str, list[tuple[str, Any]]] = {}
     for spec in reg.all(kind):
@@ -129,16 +131,16 @@ def _plugin_options(reg: Registry, kind: str) -> list[click.Option]:
         types = {p.type for _, p in owners}
         choices = {p.choices for _, p in owners}
         if len(choices) == 1 and None not in choices:
-            ptype: click.ParamType = click.Choice(next(iter(choices)))
+            metavar = "[" + "|".join(next(iter(choices))) + "]"
         else:
-            ptype = _CLICK_TYPES[types.pop()] if len(types) == 1 else click.STRING
+            metavar = _METAVARS.get(types.pop(), "TEXT") if len(types) == 1 else "TEXT"
         by_default: dict[str, list[str]] = {}
         for plugin, p in owners:
             by_default.setdefault(str(p.default), []).append(plugin)
         defaults = "; ".join(f"{', '.join(plugins)}: {value}"
                              for value, plugins in by_default.items())
         options.append(click.Option(
-            [f"--{name}", f"plugin_{name.replace('-', '_')}"], type=ptype, default=None,
+            [f"--{name}", f"plugin_{name.replace('-', '_')}"], metavar=metavar, default=None,
             help=f"{owners[0][1].help} [{defaults}]"))
     return options
 
