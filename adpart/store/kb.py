@@ -39,7 +39,7 @@ from adpart import __version__
 from adpart.store import entities as E
 from adpart.store.artifacts import ArtifactStore, StoredArtifact
 from adpart.store.errors import StoreError
-from adpart.store.location import KBLocation
+from adpart.store.location import MAKE_ONE, KBLocation
 from adpart.store.maintenance import Maintenance
 from adpart.store.models import (
     PARTITION_KINDS,
@@ -99,7 +99,7 @@ def _read_only_sqlite(db_url: str, connect_args: dict[str, Any]) -> tuple[str, d
     path = url.database or ""
     if path in ("", ":memory:") or not os.path.isfile(path):
         raise StoreError(f"there is no knowledge base database {path or db_url}; check --kb / "
-                         "ADPART_KB (reading commands never create one)")
+                         f"ADPART_KB (reading commands never create one): {MAKE_ONE}")
     path = os.path.abspath(path)
     query = "mode=ro&uri=true"
     if not os.access(os.path.dirname(path), os.W_OK) and not os.path.exists(f"{path}-wal"):
@@ -316,8 +316,8 @@ class KnowledgeBase(Queries, Tables, Maintenance):
             raise StoreError(f"cannot read the knowledge base {self.label}: {orig}; check the "
                              "location (--kb / ADPART_KB)") from exc
         if found is None:
-            raise StoreError(f"{self.label} holds no knowledge base (an empty database); store "
-                             "something there first or point --kb / ADPART_KB elsewhere")
+            raise StoreError(f"{self.label} holds no knowledge base (an empty database; reading "
+                             f"commands never create one): {MAKE_ONE}")
         if verify:
             verify_schema(found[0], found[1], self.label)
         return found[0]
