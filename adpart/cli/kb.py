@@ -319,7 +319,9 @@ def _show_lines(base: KnowledgeBase, record: Any) -> list[str]:
     if env_id is not None:
         owner = {"environment": f"{base.get('environment', env_id).name} "
                                 f"(environment:{env_id})", **owner}
-    lines = [f"{record.ref}", *_nested({**owner, **fields}, 2)]
+    shown = {k: v for k, v in fields.items()
+             if k != "id" and not (owner and k in ("environment_id", "task_id"))}
+    lines = [f"{record.ref}", *_nested({**owner, **shown}, 2)]
     for key, value in data.items():
         if isinstance(value, dict) and key not in artifact_fields:
             lines += ["", f"{key}:", *_nested(value, 2)]
