@@ -279,7 +279,7 @@ def _short(value: Any) -> str:
         items = [_short(v) for v in value[:20]]
         more = f", ... ({len(value)} in all)" if len(value) > 20 else ""
         return "[" + ", ".join(items) + more + "]"
-    if value is None:
+    if value is None or value == "":
         return "-"
     if isinstance(value, float):
         return f"{value:g}"

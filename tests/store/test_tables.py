@@ -117,3 +117,36 @@ def test_strict_json_has_no_nan_or_infinity():
     text = strict_json({"a": float("inf"), "b": [float("nan"), 1.5], "c": np.float64("-inf")})
     assert json.loads(text) == {"a": None, "b": [None, 1.5], "c": None}
     assert "Infinity" not in text and "NaN" not in text
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--where", "alpha"], "--where 'alpha' is not KEY=VALUE"),
+    (["--where", "alpah=1"], "no listed record has a parameter 'alpah'"),
+    (["--limit", "0"], "--limit"),
+    (["--kind", "runz"], "unknown record kind 'runz'"),
+    (["run", "--kind", "policy"], "disagree"),
+    (["--env", "nope"], "no environment 'nope'"),
+    (["--task", "nope"], "no task 'nope'"),
+    (["artifact", "--env", "five"], "artifacts belong to no environment"),
+])
+def test_ls_bad_input_names_the_option(where, populated, args, message):
+    result = CliRunner().invoke(kb_group, ["ls", *args, *where.cli])
+    assert result.exit_code == 2, result.output
+    assert message in result.output and "Traceback" not in result.output
+
+
+def test_ls_and_show_text(where, populated):
+    _, rec = populated
+    lines = CliRunner().invoke(kb_group, ["ls", "--kind", "partition", *where.cli]).output
+    rows = lines.splitlines()
+    assert [r.split()[0] for r in rows] == ["ID", rec["p1"].ref, rec["partition"].ref]
+    assert rows[1].index("per-option") == rows[0].index("SUMMARY")  # aligned columns
+    none = CliRunner().invoke(kb_group, ["ls", "run", "--where", "alpha=9", *where.cli])
+    assert none.exit_code == 2 or none.output.strip() == "no records match"
+    shown = CliRunner().invoke(kb_group, ["show", rec["partition"].ref, *where.cli]).output
+    lines = shown.splitlines()
+    assert lines[0] == rec["partition"].ref
+    assert lines[1].startswith("  environment:") and lines[1].endswith(" five (environment:1)")
+    assert "artifacts:" in lines and "provenance:" in lines
+    assert any(ln.startswith("  labels:") and "<i8 5 " in ln for ln in lines)
+    assert any(ln.startswith("  parent_ids:") and "[" in ln for ln in lines)
