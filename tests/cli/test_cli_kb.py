@@ -41,6 +41,8 @@ def example(tmp_path_factory):
     outputs = []
     with pytest.MonkeyPatch.context() as mp:
         mp.chdir(folder)
+        mp.setenv("ADPART_HOME", str(folder / "adpart-home"))  # as the autouse fixture does
+        mp.delenv("ADPART_KB", raising=False)
         for args in _commands():
             result = CliRunner().invoke(cli, args)
             assert result.exit_code == 0, (args, result.output)
