@@ -123,3 +123,39 @@ def test_the_documented_duckdb_example_reads_what_the_api_returns(example, monke
                           "ON a.sha256 = p.pi_sha WHERE p.id = 1").fetchone()[0]
         pi = con.sql(f"SELECT values FROM read_parquet('kb/artifacts/{uri}')").fetchnumpy()
         np.testing.assert_array_equal(pi["values"], kb.load(policy, "pi"))
+
+
+def _refuse(name):
+    raise ValueError(f"non-strict JSON constant {name}")
+
+
+def test_kb_json_outputs_are_strict(example, tmp_path):
+    """A learned curve has NaN gaps on the episodes it did not evaluate: every JSON the kb
+    commands write must still parse with a strict parser (null, never NaN or Infinity)."""
+    folder, _ = example
+    opts = ["--kb", str(folder / "kb")]
+    out = tmp_path / "curve.json"
+    result = CliRunner().invoke(cli, ["kb", "export", "run:1", "--out", str(out), *opts])
+    assert result.exit_code == 0, result.output
+    curve = json.loads(out.read_text(), parse_constant=_refuse)
+    assert None in curve["value_gap"] and len(curve["value_gap"]) == 2 * 20
+    q = tmp_path / "q.json"
+    result = CliRunner().invoke(cli, ["kb", "export", "policy:1", "--field", "q", "--out", str(q),
+                                      *opts])
+    assert result.exit_code == 0, result.output
+    json.loads(q.read_text(), parse_constant=_refuse)
+    for args in (["info"], ["ls"], ["show", "run:1"], ["show", "policy:1"], ["check"]):
+        result = CliRunner().invoke(cli, ["kb", *args, "--json", *opts])
+        assert result.exit_code == 0, (args, result.output)
+        json.loads(result.output, parse_constant=_refuse)
+
+
+def test_reading_the_default_location_creates_nothing(tmp_path, monkeypatch):
+    home = tmp_path / "home"
+    monkeypatch.setenv("ADPART_HOME", str(home))
+    for args in (["info"], ["ls", "run"], ["show", "run:1"], ["check"]):
+        result = CliRunner().invoke(cli, ["kb", *args])
+        assert result.exit_code == 2, result.output
+        assert "never create" in result.output and "--kb" in result.output
+        assert "Traceback" not in result.output
+    assert not home.exists()
