@@ -198,7 +198,10 @@ def _summary(record: E.Record) -> str:
         parts = [record.learner, f"seed={record.seed}", f"episodes={record.episodes}"]
         return " ".join(parts)
     if isinstance(record, E.Run):
-        return f"{record.learner} {shown}".strip()
+        on = ""
+        if record.partition_id is not None and "partition" not in _key_params(record):
+            on = f" partition=partition:{record.partition_id}"
+        return " ".join(p for p in (record.learner, shown, on.strip()) if p)
     if isinstance(record, E.SubgoalSet):
         return f"{record.detector} states={len(record.states)}"
     if isinstance(record, E.Option):

@@ -37,6 +37,7 @@ def test_records_table_has_one_row_per_record(populated):
     assert policy["params.alpha"] == 0.1 and policy["task_id"] == rec["task"].id
     assert row[rec["option"].ref]["env"] == "five" and row[rec["option"].ref]["task"] is None
     assert "per-option blocks=3" in row[rec["p1"].ref]["summary"]
+    assert run["summary"] == f"smdp-q partition=partition:{rec['partition'].id}"
 
 
 def test_records_table_filters(populated):
