@@ -6,6 +6,7 @@ Record ids on the command line are ``KIND:N`` (``policy:12``, ``subgoal-set:3``)
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import json
 import re
@@ -24,6 +25,7 @@ from adpart.errors import AdpartError
 from adpart.store.entities import RECORD_TYPES
 from adpart.store.kb import KnowledgeBase
 from adpart.store.location import KBLocation
+from adpart.store.tables import json_rows, strict, strict_json
 
 _KIND_ALIASES = {
     "env": "environment",
@@ -105,8 +107,8 @@ def _guard(func: Callable[..., Any]) -> Callable[..., Any]:
 
 def _plain(value: Any) -> Any:
     """A record (dataclass) as JSON-ready data."""
-    if hasattr(value, "__dataclass_fields__"):
-        out = {name: _plain(getattr(value, name)) for name in value.__dataclass_fields__}
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        out = {f.name: _plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
         if hasattr(value, "ref"):
             out = {"ref": value.ref, **out}
         return out
@@ -132,16 +134,6 @@ def _resolve(kb: KnowledgeBase, ref: str) -> Any:
     return kb.get(_kind(match.group("kind")), int(match.group("id")))
 
 
-def _summary(record: Any) -> str:
-    fields = {k: v for k, v in _plain(record).items() if k not in ("ref", "id", "provenance")}
-    shown = ", ".join(
-        f"{k}={v if not isinstance(v, str) or len(v) < 20 else v[:12]}"
-        for k, v in fields.items()
-        if v not in (None, {}, [])
-    )
-    return f"{record.ref:<22} {shown}"
-
-
 @click.group(name="kb")
 def kb() -> None:
     """Inspect and maintain the knowledge base.
@@ -151,6 +143,7 @@ def kb() -> None:
     Examples:
       adpart kb info
       adpart kb ls option --env two-rooms
+      adpart kb ls run --where alpha=0.5 --json
       adpart kb show partition:3 --json
       adpart kb export policy:5 --field q --out q.csv
       adpart kb check
@@ -167,7 +160,7 @@ def info(kb_location: KBLocation, as_json: bool) -> None:
     with _open(kb_location, read_only=True) as base:
         data = base.info()
     if as_json:
-        click.echo(json.dumps(data, indent=2))
+        click.echo(strict_json(data))
         return
     click.echo(f"location:       {data['location']}")
     click.echo(f"database:       {data['database']}")
@@ -179,25 +172,178 @@ def info(kb_location: KBLocation, as_json: bool) -> None:
     click.echo(f"artifact bytes: {data['artifact_bytes']}")
 
 
+def _where_items(items: tuple[str, ...]) -> dict[str, Any]:
+    """``--where KEY=VALUE`` options as a mapping (VALUE read as JSON when it is, else text)."""
+    out: dict[str, Any] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise KBError(f"--where {item!r} is not KEY=VALUE; write e.g. --where alpha=0.5")
+        try:
+            out[key.strip()] = json.loads(value)
+        except ValueError:
+            out[key.strip()] = value
+    return out
+
+
+def _size(n: int | None) -> str:
+    if not n:
+        return "-"
+    for unit in ("B", "kB", "MB", "GB"):
+        if n < 1000 or unit == "GB":
+            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
+        n /= 1000
+    return str(n)  # pragma: no cover
+
+
+def _cell(value: Any, width: int) -> str:
+    text = "-" if value is None else str(value)
+    return text if len(text) <= width else text[: width - 3] + "..."
+
+
+#: the columns of `kb ls`: (header, records-table column, widest cell)
+_LS_COLUMNS = (("ID", "ref", 22), ("KIND", "kind", 11), ("ENV", "env", 20), ("TASK", "task", 20),
+               ("SUMMARY", "summary", 60), ("CREATED", "created", 16), ("SIZE", "size", 9))
+
+
+def _ls_rows(table: pa.Table) -> list[list[str]]:
+    rows = []
+    for rec in table.select([c for _, c, _ in _LS_COLUMNS]).to_pylist():
+        created = rec["created"].strftime("%Y-%m-%d %H:%M") if rec["created"] else None
+        rows.append([_cell(rec["ref"], 22), rec["kind"], _cell(rec["env"], 20),
+                     _cell(rec["task"], 20), _cell(rec["summary"], 60), _cell(created, 16),
+                     _size(rec["size"])])
+    return rows
+
+
+def _print_table(headers: list[str], rows: list[list[str]], right: set[int]) -> None:
+    widths = [max([len(h)] + [len(r[i]) for r in rows]) for i, h in enumerate(headers)]
+
+    def line(cells: list[str]) -> str:
+        return "  ".join(c.rjust(w) if i in right else c.ljust(w)
+                         for i, (c, w) in enumerate(zip(cells, widths, strict=True))).rstrip()
+
+    click.echo(line(headers))
+    for row in rows:
+        click.echo(line(row))
+
+
 @kb.command("ls")
-@click.argument("kind", required=False, default=None)
+@click.argument("kind_arg", metavar="[KIND]", required=False, default=None)
+@click.option("--kind", "kind_opt", metavar="KIND",
+              help="Only records of this kind (run, policy, partition, ...; also the argument)")
 @click.option("--env", "env", metavar="NAME|ID", help="Only records of this environment")
-@click.option("--json", "as_json", is_flag=True, help="Print JSON")
+@click.option("--task", "task", metavar="NAME|ID", help="Only records of this task")
+@click.option("--where", "where", metavar="KEY=VALUE", multiple=True,
+              help="Only records whose parameter KEY equals VALUE (repeatable; e.g. alpha=0.5, "
+                   "episodes=300)")
+@click.option("--limit", type=click.IntRange(min=1), default=None,
+              help="At most this many records")
+@click.option("--json", "as_json", is_flag=True,
+              help="Print the records as a JSON list of objects (the columns of records_table)")
 @kb_option(read_only=True)
 @_guard
-def ls(kb_location: KBLocation, kind: str | None, env: str | None, as_json: bool) -> None:
-    """List records of KIND (all kinds when omitted)."""
-    kinds = [_kind(kind)] if kind else [k for k in RECORD_TYPES if k != "artifact"]
+def ls(kb_location: KBLocation, kind_arg: str | None, kind_opt: str | None, env: str | None,
+       task: str | None, where: tuple[str, ...], limit: int | None, as_json: bool) -> None:
+    """List records as a table (every kind but artifacts when no KIND is given).
+
+    \b
+    Examples:
+      adpart kb ls run --env two-rooms --where alpha=0.5
+      adpart kb ls --kind partition --limit 5
+      adpart kb ls run --json > runs.json
+    """
+    if kind_arg and kind_opt and _kind(kind_arg) != _kind(kind_opt):
+        raise KBError(f"KIND {kind_arg!r} and --kind {kind_opt!r} disagree; give one of them")
+    name = kind_opt or kind_arg
     with _open(kb_location, read_only=True) as base:
-        env_id = None
-        if env is not None:
-            env_id = int(env) if env.isdigit() else base.find_environment(env).id
-        records = [r for k in kinds for r in base.records(k, environment=env_id)]
+        try:
+            table = base.records_table(_kind(name) if name else None, env=env, task=task,
+                                       where=_where_items(where), limit=limit)
+        except AdpartError as exc:
+            hint = ""
+            if where and "parameter" in str(exc):
+                hint = " (check --where)"
+            raise KBError(f"{exc}{hint}") from exc
     if as_json:
-        click.echo(json.dumps([_plain(r) for r in records], indent=2))
+        click.echo(strict_json(json_rows(table)))
         return
-    for record in records:
-        click.echo(_summary(record))
+    if table.num_rows == 0:
+        click.echo("no records match" if (env or task or where) else "no records")
+        return
+    _print_table([h for h, _, _ in _LS_COLUMNS], _ls_rows(table), right={6})
+
+
+def _short(value: Any) -> str:
+    if isinstance(value, list | tuple):
+        items = [_short(v) for v in value[:20]]
+        more = f", ... ({len(value)} in all)" if len(value) > 20 else ""
+        return "[" + ", ".join(items) + more + "]"
+    if value is None or value == "":
+        return "-"
+    if isinstance(value, float):
+        return f"{value:g}"
+    return str(value)
+
+
+def _nested(data: dict[str, Any], indent: int) -> list[str]:
+    """A mapping as indented ``key: value`` lines, nested mappings one level deeper."""
+    if not data:
+        return [" " * indent + "(none)"]
+    width = max(len(str(k)) for k in data) + 1
+    lines = []
+    for key, value in data.items():
+        if isinstance(value, dict) and value:
+            lines.append(" " * indent + f"{key}:")
+            lines.extend(_nested(value, indent + 2))
+        else:
+            lines.append(" " * indent + f"{str(key) + ':':<{width}} {_short(value)}")
+    return lines
+
+
+def _show_lines(base: KnowledgeBase, record: Any) -> list[str]:
+    """``kb show``: the record's fields, its nested specs/metrics, artifacts and provenance."""
+    data = _plain(record)
+    data.pop("ref", None)
+    prov = data.pop("provenance", None)
+    artifact_fields = list(getattr(type(record), "ARTIFACTS", {}))
+    fields = {k: v for k, v in data.items()
+              if k not in artifact_fields and not isinstance(v, dict)}
+    owner: dict[str, Any] = {}
+    task_id = getattr(record, "task_id", None)
+    env_id = getattr(record, "environment_id", None)
+    if task_id is not None:
+        task = base.get("task", task_id)
+        owner["task"] = f"{task.name} (task:{task.id})"
+        env_id = task.environment_id
+    if env_id is not None:
+        owner = {"environment": f"{base.get('environment', env_id).name} "
+                                f"(environment:{env_id})", **owner}
+    shown = {k: v for k, v in fields.items()
+             if k != "id" and not (owner and k in ("environment_id", "task_id"))}
+    lines = [f"{record.ref}", *_nested({**owner, **shown}, 2)]
+    for key, value in data.items():
+        if isinstance(value, dict) and key not in artifact_fields:
+            lines += ["", f"{key}:", *_nested(value, 2)]
+    if artifact_fields:
+        arts: dict[str, Any] = {}
+        for name in artifact_fields:
+            sha = getattr(record, name)
+            if sha is None:
+                arts[name] = None
+                continue
+            art = base.artifact(sha)
+            shape = "x".join(map(str, art.shape)) if art.shape is not None else ""
+            arts[name] = " ".join(p for p in (f"artifact:{sha[:16]}", art.format,
+                                              art.dtype or "", shape, _size(art.bytes)) if p)
+        lines += ["", "artifacts:", *_nested(arts, 2)]
+    if record.KIND == "artifact":
+        referrers = base.referrers().get(record.sha256, [])
+        lines += ["", "referenced by:", *([f"  {r}" for r in referrers] or ["  (nothing)"])]
+    if prov:
+        params = prov.pop("parameters", {})
+        lines += ["", "provenance:", *_nested(prov, 2), "", "parameters:", *_nested(params, 2)]
+    return lines
 
 
 @kb.command("show")
@@ -206,22 +352,17 @@ def ls(kb_location: KBLocation, kind: str | None, env: str | None, as_json: bool
 @kb_option(read_only=True)
 @_guard
 def show(kb_location: KBLocation, ref: str, as_json: bool) -> None:
-    """Show one record (KIND:N or artifact:HEX) with its provenance."""
+    """Show one record (KIND:N or artifact:HEX) with its artifacts and provenance."""
     with _open(kb_location, read_only=True) as base:
         record = _resolve(base, ref)
-        data = _plain(record)
-        if record.KIND == "artifact":
-            data["referenced_by"] = base.referrers().get(record.sha256, [])
-    if as_json:
-        click.echo(json.dumps(data, indent=2))
-        return
-    for key, value in data.items():
-        if isinstance(value, dict):
-            click.echo(f"{key}:")
-            for k, v in value.items():
-                click.echo(f"  {k}: {json.dumps(v) if isinstance(v, dict | list) else v}")
-        else:
-            click.echo(f"{key}: {value}")
+        if as_json:
+            data = _plain(record)
+            if record.KIND == "artifact":
+                data["referenced_by"] = base.referrers().get(record.sha256, [])
+            click.echo(strict_json(data))
+            return
+        lines = _show_lines(base, record)
+    click.echo("\n".join(lines))
 
 
 def _as_table(value: Any) -> pa.Table:
@@ -286,7 +427,7 @@ def export(kb_location: KBLocation, ref: str, out: Path, field_name: str | None)
             pacsv.write_csv(table, out)
         else:
             if isinstance(value, pa.Table):
-                payload: Any = table.to_pydict()
+                payload: Any = strict(table.to_pydict())  # NaN and infinities as null
             else:
                 array = np.asarray(value)
                 payload = {
@@ -294,7 +435,7 @@ def export(kb_location: KBLocation, ref: str, out: Path, field_name: str | None)
                     "shape": list(array.shape),
                     "values": array.tolist(),
                 }
-            out.write_text(json.dumps(payload))
+            out.write_text(strict_json(payload, indent=None))
     except OSError as exc:
         raise KBError(f"cannot write {out}: {exc.strerror or exc}; choose a writable path") from exc
     click.echo(f"wrote {out}")
@@ -310,7 +451,7 @@ def check(kb_location: KBLocation, as_json: bool) -> None:
         report = base.check()
     if as_json:
         click.echo(
-            json.dumps(
+            strict_json(
                 {
                     "ok": report.ok,
                     "artifacts_checked": report.artifacts_checked,
@@ -321,8 +462,7 @@ def check(kb_location: KBLocation, as_json: bool) -> None:
                     "stray_files": report.stray_files,
                     "skipped_symlinks": report.skipped,
                     "rows_checked": report.rows_checked,
-                },
-                indent=2,
+                }
             )
         )
     else:

@@ -2,6 +2,13 @@
 
 ``KnowledgeBase.open()`` opens the per-user default (``$ADPART_KB``, ``$ADPART_HOME/kb`` or
 ``~/.local/share/adpart/kb``); see docs/knowledge-base.md for the records and the CLI.
+
+For analysis, ``open_kb(path, read_only=True)`` and the table methods::
+
+    from adpart.store import open_kb
+    with open_kb("~/.local/share/adpart/kb", read_only=True) as kb:
+        runs = kb.records_table("run", env="two-rooms", where={"alpha": 1}).to_pandas()
+        curves = kb.curves_table(kb.records_table("run", env="two-rooms")).to_pandas()
 """
 
 from __future__ import annotations
@@ -19,7 +26,7 @@ from adpart.store.entities import (
     Task,
 )
 from adpart.store.errors import StoreError
-from adpart.store.kb import KnowledgeBase
+from adpart.store.kb import KnowledgeBase, open_kb
 from adpart.store.location import KBLocation, default_location
 from adpart.store.maintenance import CheckReport, GcReport
 from adpart.store.schema import SCHEMA_VERSION
@@ -42,4 +49,5 @@ __all__ = [
     "SubgoalSet",
     "Task",
     "default_location",
+    "open_kb",
 ]

@@ -13,7 +13,8 @@ check and its commit (docs/reliability.md). :meth:`KnowledgeBase.transaction` gr
 puts into one transaction: a run and its policies are stored whole or not at all.
 
 This module opens the database and writes records; reads and queries are the
-:class:`~adpart.store.queries.Queries` mixin, audits and garbage collection the
+:class:`~adpart.store.queries.Queries` mixin, the same reads as ``pyarrow`` tables the
+:class:`~adpart.store.tables.Tables` mixin, audits and garbage collection the
 :class:`~adpart.store.maintenance.Maintenance` mixin.
 """
 
@@ -38,7 +39,7 @@ from adpart import __version__
 from adpart.store import entities as E
 from adpart.store.artifacts import ArtifactStore, StoredArtifact
 from adpart.store.errors import StoreError
-from adpart.store.location import KBLocation
+from adpart.store.location import MAKE_ONE, KBLocation
 from adpart.store.maintenance import Maintenance
 from adpart.store.models import (
     PARTITION_KINDS,
@@ -56,6 +57,7 @@ from adpart.store.models import (
 )
 from adpart.store.queries import Queries, _id
 from adpart.store.schema import SCHEMA_VERSION, read_version, upgrade_schema, verify_schema
+from adpart.store.tables import Tables
 
 _BUSY_TIMEOUT_S = 60.0
 R = TypeVar("R", bound=E.Record)
@@ -97,7 +99,7 @@ def _read_only_sqlite(db_url: str, connect_args: dict[str, Any]) -> tuple[str, d
     path = url.database or ""
     if path in ("", ":memory:") or not os.path.isfile(path):
         raise StoreError(f"there is no knowledge base database {path or db_url}; check --kb / "
-                         "ADPART_KB (reading commands never create one)")
+                         f"ADPART_KB (reading commands never create one): {MAKE_ONE}")
     path = os.path.abspath(path)
     query = "mode=ro&uri=true"
     if not os.access(os.path.dirname(path), os.W_OK) and not os.path.exists(f"{path}-wal"):
@@ -121,7 +123,19 @@ class _Pending:
     rewrite: Callable[[], StoredArtifact]
 
 
-class KnowledgeBase(Queries, Maintenance):
+def open_kb(location: str | os.PathLike[str] | KBLocation | None = None, *,
+            read_only: bool = False, artifacts: str | None = None) -> KnowledgeBase:
+    """Open the knowledge base at ``location`` (see :meth:`KnowledgeBase.open`).
+
+    ``open_kb(path, read_only=True)`` is the way to read one from a script or notebook: nothing
+    is created, a missing knowledge base is a :class:`StoreError` naming the fix, and the tables
+    come from ``kb.records_table(...)``, ``kb.curves_table(...)`` and ``kb.partition_table(...)``.
+    Use it as a context manager (``with open_kb(...) as kb:``) to close it when done.
+    """
+    return KnowledgeBase.open(location, artifacts=artifacts, read_only=read_only)
+
+
+class KnowledgeBase(Queries, Tables, Maintenance):
     """Records of everything adpart learned: metadata in SQL, arrays and tables as Parquet.
 
     Open one with :meth:`open` (a directory, ``$ADPART_KB`` or the per-user default) or construct
@@ -133,6 +147,8 @@ class KnowledgeBase(Queries, Maintenance):
     - ``get(kind, id)``, ``get_ref("policy:3")``, ``records(kind, environment=...)``;
     - ``load(record, field)``: an artifact's payload, verified against its hash;
     - queries: ``options_for``, ``partitions_using``, ``runs_for``, ``learned_tasks``, ``lineage``;
+    - tables (``pyarrow.Table``, ``.to_pandas()``): ``records_table``, ``curves_table``,
+      ``partition_table``;
     - maintenance: ``info``, ``check``, ``gc``, ``upgrade``.
 
     Every database error surfaces as :class:`StoreError`.
@@ -300,8 +316,8 @@ class KnowledgeBase(Queries, Maintenance):
             raise StoreError(f"cannot read the knowledge base {self.label}: {orig}; check the "
                              "location (--kb / ADPART_KB)") from exc
         if found is None:
-            raise StoreError(f"{self.label} holds no knowledge base (an empty database); store "
-                             "something there first or point --kb / ADPART_KB elsewhere")
+            raise StoreError(f"{self.label} holds no knowledge base (an empty database; reading "
+                             f"commands never create one): {MAKE_ONE}")
         if verify:
             verify_schema(found[0], found[1], self.label)
         return found[0]

@@ -48,10 +48,15 @@ def _make_dir(path: Path, what: str) -> None:
                          "--kb or ADPART_KB")
 
 
+#: how to get a knowledge base, for the messages of the reading commands
+MAKE_ONE = ("make one with `adpart learn ENV --kb PATH`, or pass --kb / set ADPART_KB to an "
+            "existing one")
+
+
 def _must_exist(path: Path, what: str) -> None:
     if not path.is_dir():
         raise StoreError(f"there is no {what} {path}; check --kb / ADPART_KB (reading commands "
-                         "never create one)")
+                         f"never create one): {MAKE_ONE}")
 
 
 @dataclass(frozen=True)
@@ -94,8 +99,8 @@ class KBLocation:
         directory = Path(where.removeprefix("file://")).expanduser().resolve()
         make_dir(directory, "knowledge base directory")
         if not create and not (directory / DB_FILE).is_file():
-            raise StoreError(f"{directory} holds no knowledge base (no {DB_FILE}); check --kb / "
-                             "ADPART_KB, or store something there first")
+            raise StoreError(f"{directory} holds no knowledge base (no {DB_FILE}; reading "
+                             f"commands never create one): {MAKE_ONE}")
         if artifacts is None:
             artifacts = str(directory / ARTIFACT_DIR)
         return cls(f"sqlite:///{directory / DB_FILE}", artifacts, str(directory))

@@ -99,16 +99,25 @@ def test_gc_ages_must_be_finite(tmp_path):
 # ---------------------------------------------------------------------- reading commands
 def test_reading_commands_never_create_a_knowledge_base(tmp_path):
     new = tmp_path / "no-kb-here"
-    for args in (["info"], ["ls"], ["check"], ["show", "run:1"]):
+    out = tmp_path / "out.csv"
+    reads = (["info"], ["ls"], ["ls", "run", "--json"], ["check"], ["show", "run:1"],
+             ["export", "run:1", "--out", str(out)])
+    for args in reads:
         result = CliRunner().invoke(kb_group, [*args, "--kb", str(new)])
         assert result.exit_code == 2, result.output
         assert "there is no knowledge base directory" in result.output
-        assert "never create" in result.output
-    assert not new.exists()
+        assert "never create" in result.output and "adpart learn ENV --kb" in result.output
+        assert "Traceback" not in result.output
+    assert not new.exists() and not out.exists()
     new.mkdir()
-    result = CliRunner().invoke(kb_group, ["info", "--kb", str(new)])
-    assert result.exit_code == 2 and "holds no knowledge base" in result.output
-    assert list(new.iterdir()) == []
+    for args in reads:
+        result = CliRunner().invoke(kb_group, [*args, "--kb", str(new)])
+        assert result.exit_code == 2 and "holds no knowledge base" in result.output
+        assert "adpart learn ENV --kb" in result.output
+    for args in reads:  # a sqlite URL whose file is missing
+        result = CliRunner().invoke(kb_group, [*args, "--kb", f"sqlite:///{new}/kb.sqlite"])
+        assert result.exit_code == 2 and "no knowledge base database" in result.output
+    assert list(new.iterdir()) == [] and not out.exists()
 
 
 def test_a_read_only_knowledge_base_can_be_inspected(tmp_path, monkeypatch):

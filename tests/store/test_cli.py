@@ -42,7 +42,9 @@ def test_ls_and_show(cli_kb):
     result = _run("ls", "partitions", "--env", "five", "--json", *opts)
     assert result.exit_code == 0, result.output
     assert [r["ref"] for r in json.loads(result.output)] == [rec["p1"].ref, rec["partition"].ref]
-    assert _run("ls", *opts).output.count("\n") == 8
+    lines = _run("ls", *opts).output.splitlines()
+    assert lines[0].split() == ["ID", "KIND", "ENV", "TASK", "SUMMARY", "CREATED", "SIZE"]
+    assert len(lines) == 1 + 8  # a header, then one line per record (artifacts not listed)
     result = _run("show", rec["policy"].ref, "--json", *opts)
     data = json.loads(result.output)
     assert data["provenance"]["parameters"] == {"alpha": 0.1} and data["q"] == rec["policy"].q
