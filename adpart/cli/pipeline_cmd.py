@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -89,9 +90,13 @@ def _table(rows: list[dict[str, Any]]) -> list[str]:
 
 
 def _say(quiet: bool):  # type: ignore[no-untyped-def]
-    if quiet or not sys.stderr.isatty():
+    """One stderr line per stage as it starts, timestamped when stderr is a log, not a terminal
+    (so a long run written to a file shows where it is); nothing with ``--quiet``/``--json``."""
+    if quiet:
         return lambda message: None
-    return lambda message: click.echo(f"... {message}", err=True)
+    if sys.stderr.isatty():
+        return lambda message: click.echo(f"... {message}", err=True)
+    return lambda message: click.echo(f"{time.strftime('%H:%M:%S')} {message}", err=True)
 
 
 @click.command(name="pipeline")
@@ -262,7 +267,7 @@ def pipeline_cmd(
     out = out or Path("adpart-pipeline") / folder_name(env)
     kb = KnowledgeBase.open(KBLocation.resolve(kb_path, kb_artifacts))
     try:
-        report = run_pipeline(kb, config, out=out, progress=_say(quiet))
+        report = run_pipeline(kb, config, out=out, progress=_say(quiet or as_json))
     finally:
         kb.close()
     summary = report.to_json()

@@ -19,6 +19,7 @@ import math
 import re
 from collections.abc import Iterable, Mapping, Sequence
 from datetime import datetime
+from pathlib import PurePath
 from typing import Any
 
 import numpy as np
@@ -148,7 +149,7 @@ def _column(values: list[Any]) -> pa.Array:
 
 def strict(value: Any) -> Any:
     """``value`` made strict-JSON-ready: NaN and infinities become ``None``, datetimes ISO text,
-    numpy scalars and arrays plain numbers and lists, tuples lists."""
+    numpy scalars and arrays plain numbers and lists, tuples lists, paths text."""
     if isinstance(value, float):
         return value if math.isfinite(value) else None
     if isinstance(value, dict):
@@ -161,6 +162,8 @@ def strict(value: Any) -> Any:
         return strict(value.tolist())
     if isinstance(value, np.generic):
         return strict(value.item())
+    if isinstance(value, PurePath):
+        return str(value)
     return value
 
 

@@ -3,41 +3,17 @@
 Strict JSON (RFC 8259) has no ``NaN`` or ``Infinity``: a value that is not finite (an episode
 count that was never reached, a mean of no runs) is written as ``null``, so ``summary.json``
 files load in any strict parser (``jq``, JavaScript, ``json.loads(..., parse_constant=...)``).
-numpy scalars and arrays become numbers and lists, paths strings.
+The conversion is the knowledge base's own (:func:`adpart.store.tables.strict`), so ``kb``
+output and report files agree.
 """
 
 from __future__ import annotations
 
-import json
-import math
 import re
-from pathlib import Path
-from typing import Any
 
-import numpy as np
+from adpart.store.tables import strict_json
 
 __all__ = ["folder_name", "strict_json"]
-
-
-def _plain(value: Any) -> Any:
-    if isinstance(value, dict):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_plain(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _plain(value.tolist())
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, Path):
-        return str(value)
-    return value
-
-
-def strict_json(data: Any, *, indent: int | None = 2) -> str:
-    """``data`` as strict JSON: non-finite floats as null, numpy values as plain numbers."""
-    return json.dumps(_plain(data), indent=indent, allow_nan=False)
 
 
 def folder_name(*parts: str) -> str:

@@ -88,3 +88,13 @@ def test_output_to_a_pipe_arrives_line_by_line():
             assert child.stdout.readline() == "stage 2 done\n"
         finally:
             child.kill()
+
+
+def test_pipeline_stage_lines_reach_a_log(capsys):
+    from adpart.cli.pipeline_cmd import _say
+
+    _say(False)("discover subgoals")  # pytest's stderr is not a terminal: a log line
+    line = capsys.readouterr().err
+    assert line.endswith(" discover subgoals\n") and line[2] == ":" and line[5] == ":"
+    _say(True)("hidden")
+    assert capsys.readouterr().err == ""
