@@ -35,7 +35,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from adpart.errors import UnknownNameError
 from adpart.learning import _kernels
 from adpart.learning.curves import (
     LearningCurve,
@@ -56,9 +55,12 @@ __all__ = ["QLearningResult", "default_kernel", "q_learning"]
 BLOCK_ROWS = 8192
 
 
-def default_kernel() -> str:
-    """``"numba"`` when numba imports (measured ~20x faster at K = 50), else ``"numpy"``."""
-    return "numba" if _kernels.numba_available() else "numpy"
+#: Kernel names accepted for earlier ones: the numpy kernel was a third copy of the rule
+#: (strict lock-step, vectorised over agents) with the same results bit for bit; the compiled
+#: rule replaces it (and was ~25x faster).
+KERNEL_ALIASES = {"numpy": "numba"}
+
+default_kernel = _kernels.default_kernel
 
 
 @dataclass(frozen=True, eq=False)
@@ -190,14 +192,16 @@ def q_learning(
         reference_values: ``V*`` (S,) for the value gap; solved exactly when omitted.
         progress: called as ``progress(episodes_done_by_every_run, episodes)`` after each block.
         q_init: initial value of every admissible ``Q(s, a)``.
-        kernel: ``"numba"``, ``"numpy"`` or ``"python"`` (reference); default
-            :func:`default_kernel`. All give identical results.
+        kernel: ``"numba"`` (the default, :func:`default_kernel`) or ``"python"`` (the same
+            rule interpreted: the reference); identical results. ``"numpy"``, an earlier third
+            copy of the rule, runs ``"numba"`` with a ``FutureWarning``.
 
     Returns:
         A :class:`QLearningResult`.
 
     Raises:
         TaskError: a setting is out of range.
+        UnknownNameError: ``kernel`` is not a kernel's name (the message lists them).
         ModelError: ``mdp`` is not a FiniteMDP, or no episode can start, or bad reference values.
     """
     cfg = run_settings("q_learning", mdp, runs=runs, episodes=episodes, eval_every=eval_every,
@@ -205,11 +209,7 @@ def q_learning(
                        epsilon=epsilon, q_init=q_init)
     K, N, M, H, root_seed = cfg.runs, cfg.episodes, cfg.eval_every, cfg.horizon, cfg.seed
     alpha_s, eps_s = cfg.alpha, cfg.epsilon
-    name = default_kernel() if kernel is None else kernel
-    if name not in _kernels.KERNELS:
-        raise UnknownNameError(
-            f"unknown Q-learning kernel {name!r}; choose one of {list(_kernels.KERNELS)}"
-        )
+    name = _kernels.resolve_kernel(kernel, "Q-learning", KERNEL_ALIASES)
     step_kernel = _kernels.KERNELS[name]
 
     mu = start_distribution(mdp)

@@ -13,7 +13,7 @@ from adpart.mdp.solvers import policy_evaluation, solve
 
 from .conftest import corridor, slippery_grid
 
-KERNELS = ("numba", "numpy", "python")
+KERNELS = ("numba", "python")
 
 
 def reference_q_learning(mdp: FiniteMDP, *, runs, episodes, seed, alpha, epsilon, horizon):
@@ -138,6 +138,20 @@ def test_kernels_are_bit_identical(kernel):
         assert np.array_equal(res.curve[col], ref.curve[col], equal_nan=True), col
 
 
+def test_the_numpy_kernel_name_runs_the_compiled_rule_with_a_warning(corridor_mdp):
+    kw = {"runs": 2, "episodes": 6, "seed": 3, "eval_every": 3}
+    with pytest.warns(FutureWarning, match=r"'numpy' no longer exists.*\['numba', 'python'\]"):
+        old = q_learning(corridor_mdp, kernel="numpy", **kw)
+    ref = q_learning(corridor_mdp, kernel="python", **kw)
+    assert old.parameters["kernel"] == "numba"
+    assert np.array_equal(old.Q, ref.Q)
+
+
+def test_unknown_kernel_names_the_valid_ones(corridor_mdp):
+    with pytest.raises(UnknownNameError, match=r"'cuda'; choose one of \['numba', 'python'\]"):
+        q_learning(corridor_mdp, episodes=2, kernel="cuda")
+
+
 def test_numba_kernel_past_its_power_table_matches_python():
     # Visit counts beyond NUMBA_POW_TABLE switch the numba kernel from table look-ups to pow();
     # both must agree with the Python kernel bit for bit.
@@ -172,6 +186,33 @@ def test_numba_kernel_does_not_depend_on_threads_or_stride(threads, stride, monk
         numba.set_num_threads(before)
     assert np.array_equal(res.Q, ref.Q)
     assert np.array_equal(res.curve.matrix("steps"), ref.curve.matrix("steps"))
+
+
+def test_both_kernels_run_one_source_of_the_rule():
+    # one function is the rule: the python kernel interprets it, the numba kernel compiles it
+    from adpart.learning import _kernels, _smdp_kernels
+
+    assert _kernels._compiled_lockstep.__wrapped__ is _kernels.lockstep
+    assert _smdp_kernels._compiled_lockstep.__wrapped__ is _smdp_kernels.lockstep
+    assert set(_kernels.KERNELS) == set(_smdp_kernels.KERNELS) == set(_kernels.KERNEL_NAMES)
+
+
+def test_python_kernel_in_strict_lock_step_matches_numba(monkeypatch):
+    # the interpreted rule one step per agent per round against the compiled whole-buffer rounds
+    from adpart.learning import _kernels
+
+    mdp = random_mdp(12, 3, density=0.3, seed=5)
+    mdp = mdp.with_rewards(mdp.R, terminal=np.arange(12) == 11)
+    kw = {"runs": 3, "episodes": 12, "seed": 8, "alpha": "0.9/n^0.6,0.01", "epsilon": 0.3,
+          "max_steps_per_episode": 30, "eval_every": 4}
+    ref = q_learning(mdp, kernel="numba", **kw)
+    monkeypatch.setitem(_kernels.KERNELS, "python",
+                        lambda st: _kernels.python_kernel(st, stride=1))
+    res = q_learning(mdp, kernel="python", **kw)
+    assert np.array_equal(res.Q, ref.Q)
+    assert np.array_equal(res.visits, ref.visits)
+    for col in res.curve.columns:
+        assert np.array_equal(res.curve[col], ref.curve[col], equal_nan=True), col
 
 
 def test_run_does_not_depend_on_number_of_runs_or_eval_blocks(grid_mdp):
