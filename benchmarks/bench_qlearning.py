@@ -12,12 +12,14 @@ for like:
 * ``numba``   -- the same rule compiled with numba (the default kernel), once on one thread
   and once on all of numba's threads (one per core).
 
-End to end (issue 22): :func:`adpart.learning.q_learning` on the 10^5-state rooms grid
-(``benchmarks._models.rooms_grid_mdp``), K = 50 runs, 1 M agent-steps, one evaluation at the end.
-The call's time is split into the kernel, the exact scoring (one sparse LU per distinct greedy
-policy, the learning curve's value gap) and the rest, the learner's overhead, printed as a ratio
-of the kernel's time. The old deduplication, ``np.unique(policies, axis=0)``, is timed on the same
-policies beside :func:`adpart.learning.curves.distinct_rows`.
+End to end: :func:`adpart.learning.q_learning` on the 10^5-state rooms grid
+(``benchmarks._models.rooms_grid_mdp``, intended move 0.8, 0.1 to each side), K = 50 runs, 1 M
+agent-steps, one evaluation at the end. The call's time is split into the kernel, the exact
+scoring (one sparse LU per distinct greedy policy, the learning curve's value gap) and the rest,
+the learner's overhead, printed as a ratio of the kernel's time. The same call with the
+evaluation step of commit de831d6 swapped in (greedy policies from every visited row, all K
+policies re-scored; :class:`_BeforeStyle`) runs alternately beside it as the before-style
+reference, and both must give the same curve.
 
 For scale, Gymnasium's Taxi-v4 is stepped through ``gymnasium.Env.step`` with random actions.
 Figures are agent-steps per second of wall time, including the refills of the uniform buffers;
@@ -93,16 +95,60 @@ def _taxi_steps_per_second(n_steps: int = 100_000) -> float:
     return n_steps / seconds
 
 
+class _BeforeStyle:
+    """The evaluation step of commit de831d6, swapped into :func:`q_learning` for a reference in
+    the same run: the greedy policies recomputed from every visited row of Q into a fresh
+    ``(K, S)`` int64 matrix, and :func:`adpart.learning.curves.start_values` of all K rows at
+    every evaluation (row hashes, one solve per distinct policy). The kernel still keeps its
+    greedy policies current (today's kernel), so only the evaluation step is the old one."""
+
+    def __init__(self, qlearning) -> None:
+        self.q = qlearning
+
+    def __enter__(self):
+        from adpart.learning import curves
+        from adpart.mdp.solvers import greedy_policy
+
+        q = self.q
+        self.saved = q._initial_state, q.StartValues
+        make_state, held = q._initial_state, {}
+
+        def initial_state(*args, **kwargs):
+            st = make_state(*args, **kwargs)
+            held["st"], held["unvisited"] = st, st.policy[0].astype(np.int64)
+            return st
+
+        class Score:
+            def __init__(self, mdp, mu, runs):
+                self.mdp, self.mu = mdp, mu
+
+            def __call__(self, policies, changed):
+                st = held["st"]
+                K, S = st.n_s.shape
+                pol = np.broadcast_to(held["unvisited"], (K, S)).copy()
+                runs, states = np.nonzero(st.n_s)
+                pol[runs, states] = greedy_policy(st.Q[runs, states])
+                return curves.start_values(self.mdp, pol, self.mu)
+
+        q._initial_state, q.StartValues = initial_state, Score
+        return self
+
+    def __exit__(self, *exc):
+        self.q._initial_state, self.q.StartValues = self.saved
+
+
 def end_to_end(n_states: int = 100_000, runs: int = 50, agent_steps: int = 1_000_000,
-               horizon: int = 200, repeats: int = 3) -> dict:
-    """Kernel, scoring and overhead of one ``q_learning()`` call (best of ``repeats``)."""
+               horizon: int = 200, repeats: int = 3, evaluations: int = 1) -> dict:
+    """Kernel, scoring and overhead of one ``q_learning()`` call (best of ``repeats``), today's
+    evaluation step and the before-style one (:class:`_BeforeStyle`) alternating."""
     from adpart.learning import curves, qlearning
-    from adpart.mdp.solvers import greedy_policy, policy_evaluation, solve
+    from adpart.mdp.solvers import policy_evaluation, solve
     from benchmarks._models import rooms_grid_mdp
 
-    mdp = rooms_grid_mdp(n_states)
+    mdp = rooms_grid_mdp(n_states, slip=0.2)  # 0.8 intended move, 0.1 to each side
     V = policy_evaluation(mdp, solve(mdp, 1e-10).policy)
     episodes = max(1, agent_steps // (runs * horizon))
+    eval_every = max(1, episodes // evaluations)
     timers = {"kernel": 0.0, "scoring": 0.0}
 
     def timed(f, key):
@@ -113,49 +159,58 @@ def end_to_end(n_states: int = 100_000, runs: int = 50, agent_steps: int = 1_000
             return out
         return g
 
+    def call():
+        timers.update(kernel=0.0, scoring=0.0)
+        t0 = time.perf_counter()
+        result = qlearning.q_learning(mdp, runs=runs, episodes=episodes,
+                                      max_steps_per_episode=horizon, eval_every=eval_every,
+                                      reference_values=V, seed=0)
+        total = time.perf_counter() - t0
+        row = {"total_s": total, **{f"{k}_s": v for k, v in timers.items()}}
+        row["overhead_s"] = total - timers["kernel"] - timers["scoring"]
+        row["overhead_per_kernel"] = row["overhead_s"] / row["kernel_s"]
+        row["outside_kernel_per_kernel"] = (total - row["kernel_s"]) / row["kernel_s"]
+        return row, result
+
     name = qlearning.default_kernel()
     kernel, evaluate = _kernels.KERNELS[name], curves.policy_evaluation
     _kernels.KERNELS[name] = timed(kernel, "kernel")
     curves.policy_evaluation = timed(evaluate, "scoring")
-    best = None
+    best: dict[str, dict] = {}
     try:
         qlearning.q_learning(mdp, runs=2, episodes=1, max_steps_per_episode=5,
                              reference_values=V, seed=0)  # warm-up (compiled code, caches)
-        for _ in range(repeats):
-            timers.update(kernel=0.0, scoring=0.0)
-            t0 = time.perf_counter()
-            result = qlearning.q_learning(mdp, runs=runs, episodes=episodes,
-                                          max_steps_per_episode=horizon, eval_every=episodes,
-                                          reference_values=V, seed=0)
-            total = time.perf_counter() - t0
-            row = {"total_s": total, **{f"{k}_s": v for k, v in timers.items()}}
-            row["overhead_s"] = total - timers["kernel"] - timers["scoring"]
-            if best is None or row["overhead_s"] < best["overhead_s"]:
-                best = row
+        for _ in range(repeats):  # alternate, so both see the same machine load
+            for style in ("today", "before"):
+                if style == "before":
+                    with _BeforeStyle(qlearning):
+                        row, res = call()
+                else:
+                    row, res = call()
+                    result = res
+                if style not in best or row["overhead_per_kernel"] < \
+                        best[style]["overhead_per_kernel"]:
+                    best[style] = {**row, "eval_value": res.curve["eval_value"]}
     finally:
         _kernels.KERNELS[name], curves.policy_evaluation = kernel, evaluate
-    policies = greedy_policy(result.Q.reshape(-1, mdp.n_actions)).reshape(runs, -1)
-    t0 = time.perf_counter()
-    first, _ = curves.distinct_rows(policies)
-    t_hash = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    n_unique = np.unique(policies, axis=0).shape[0]
-    t_unique = time.perf_counter() - t0
-    assert n_unique == first.size
+    same = np.array_equal(best["today"].pop("eval_value"), best["before"].pop("eval_value"),
+                          equal_nan=True)
     steps = int(result.curve["steps"].sum())
+    n_distinct = curves.distinct_rows(result.greedy_policies())[0].size
     print(f"bench_qlearning end to end: q_learning() on rooms_grid_mdp({n_states:_}) "
-          f"({mdp.n_states:,} states), K={runs}, {steps:,} agent-steps, one evaluation")
-    print(f"  call {best['total_s']:.3f} s = kernel {best['kernel_s']:.3f} s + exact scoring of "
-          f"{first.size} distinct policies {best['scoring_s']:.3f} s + overhead "
-          f"{best['overhead_s']:.3f} s")
-    print(f"  overhead / kernel = {best['overhead_s'] / best['kernel_s']:.2f}  (target <= 0.20); "
-          f"(overhead + scoring) / kernel = "
-          f"{(best['overhead_s'] + best['scoring_s']) / best['kernel_s']:.1f}")
-    print(f"  distinct policies: hashed rows {t_hash * 1e3:.1f} ms vs np.unique(axis=0) "
-          f"{t_unique * 1e3:.1f} ms  (x{t_hash / t_unique:.3f})")
-    return {**best, "agent_steps": steps, "distinct_policies": int(first.size),
-            "overhead_per_kernel": best["overhead_s"] / best["kernel_s"],
-            "hash_vs_unique": t_hash / t_unique}
+          f"({mdp.n_states:,} states, slip 0.8/0.1/0.1), K={runs}, {steps:,} agent-steps, "
+          f"{len(res.curve.evaluated_episodes())} evaluation(s), best of {repeats}")
+    for style in ("today", "before"):
+        b = best[style]
+        label = "today " if style == "today" else "before-style (de831d6 evaluation step)"
+        print(f"  {label}: end to end {b['total_s']:.3f} s = kernel {b['kernel_s']:.3f} s + "
+              f"exact scoring {b['scoring_s']:.3f} s + overhead {b['overhead_s']:.3f} s")
+        print(f"    overhead ratio (end to end - kernel - scoring) / kernel = "
+              f"{b['overhead_per_kernel']:.3f}  (target <= 0.20);  (end to end - kernel) / "
+              f"kernel = {b['outside_kernel_per_kernel']:.2f}")
+    print(f"  {n_distinct} distinct final policies; eval_value identical today and before: {same}")
+    return {"today": best["today"], "before": best["before"], "agent_steps": steps,
+            "identical": same, "overhead_per_kernel": best["today"]["overhead_per_kernel"]}
 
 
 def main(runs: int = 50, episodes: int = 100, horizon: int = 200, repeats: int = 3) -> dict:

@@ -36,6 +36,15 @@ One agent-step (Watkins' Q-learning, dissertation eq. 2.4) consumes exactly four
    step and used only at an episode's end, so the stream position depends only on the number
    of steps taken.
 
+Beside the rule, the kernel keeps the *evaluated* greedy policy current: ``policy[k, s]`` is the
+lowest-index ``argmax_a Q(s, a)`` of every row (:func:`adpart.mdp.solvers.greedy_policy`; the
+driver fills it from the initial Q), and ``changed[k]`` is set whenever an update moves one of
+run ``k``'s greedy actions. Only the updated entry can move it: if ``a`` was the greedy action and
+its value fell, the row's maximiser is searched again (``A`` reads of a row in cache); otherwise
+``a`` takes over when its new value beats the greedy one's (or ties it from a lower index). The
+scoring between evaluation blocks therefore reads no Q and re-scores only runs whose policy moved
+(:class:`adpart.learning.curves.StartValues`); no random number and no value depends on it.
+
 Because each agent reads only its own uniforms and writes only its own rows, a run's trajectory
 is independent of the order in which agents are advanced, of the stride, of numba's thread count
 and of how many other agents run beside it; the two kernels differ only in speed
@@ -173,7 +182,10 @@ class LockStepState(ScheduledAgents):
     ``alpha_ep`` / ``eps_ep`` (``scale * rate**episode`` of each schedule); ``U`` (K, B, 4)
     uniforms and ``cursor`` (K,) the next unused row.
 
-    Outputs (K, N): ``out_steps``, ``out_ret``, ``out_dret`` per completed episode.
+    Outputs (K, N): ``out_steps``, ``out_ret``, ``out_dret`` per completed episode. Evaluated
+    greedy policies: ``policy`` (K, S), any signed integer dtype, lowest-index argmax of each row
+    of Q (kept current by the kernel), and ``changed`` (K,) bool, set by the kernel when one of
+    the run's greedy actions moves (cleared by the scorer).
     """
 
     keys: np.ndarray
@@ -206,6 +218,8 @@ class LockStepState(ScheduledAgents):
     out_steps: np.ndarray
     out_ret: np.ndarray
     out_dret: np.ndarray
+    policy: np.ndarray
+    changed: np.ndarray
 
     def args(self, stride: int) -> tuple:
         """:func:`lockstep`'s positional arguments, in order."""
@@ -216,13 +230,15 @@ class LockStepState(ScheduledAgents):
             visit_power_table(self.eps[2], POW_TABLE), self.Q, self.n_sa, self.n_s, self.state,
             self.episode, self.target, self.t_ep, self.ret, self.dret, self.gpow, self.alpha_ep,
             self.eps_ep, self.U, self.cursor, self.out_steps, self.out_ret, self.out_dret,
+            self.policy, self.changed,
         )
 
 
 def lockstep(keys, indptr, indices, R, terminal, adm_ptr, adm_idx, start_cdf, last_start,
              gamma, horizon, a_scale, a_rate, a_omega, a_floor, e_scale, e_rate, e_omega,
              e_floor, stride, a_pow, e_pow, Q, n_sa, n_s, state, episode, target, t_ep, ret,
-             dret, gpow, alpha_ep, eps_ep, U, cursor, out_steps, out_ret, out_dret):
+             dret, gpow, alpha_ep, eps_ep, U, cursor, out_steps, out_ret, out_dret, policy,
+             changed):
     """The rule of the module docstring; returns 0 (all done) or 1 (some agent needs uniforms)."""
     K = Q.shape[0]
     S = R.shape[0]
@@ -297,7 +313,23 @@ def lockstep(keys, indptr, indices, R, terminal, adm_ptr, adm_idx, start_cdf, la
                         best_next = max(best_next, Q[k, s2, b])
                     td_target = r + gamma * best_next
                 old = Q[k, s, a]
-                Q[k, s, a] = old + alpha * (td_target - old)
+                new = old + alpha * (td_target - old)
+                Q[k, s, a] = new
+                g = policy[k, s]  # the evaluated greedy action (lowest index on ties)
+                if a == g:
+                    if new < old:  # the greedy value fell: search the row's maximiser again
+                        best = Q[k, s, 0]
+                        g2 = 0
+                        for b in range(1, A):
+                            if Q[k, s, b] > best:
+                                best = Q[k, s, b]
+                                g2 = b
+                        if g2 != g:
+                            policy[k, s] = g2
+                            changed[k] = True
+                elif new > Q[k, s, g] or (new == Q[k, s, g] and a < g):
+                    policy[k, s] = a
+                    changed[k] = True
                 ret[k] += r
                 dret[k] += gpow[k] * r
                 gpow[k] *= gamma
@@ -351,3 +383,4 @@ KERNELS: dict[str, Callable[[LockStepState], int]] = {
     "numba": numba_kernel,
     "python": python_kernel,
 }
+

@@ -38,9 +38,9 @@ import numpy as np
 from adpart.learning import _kernels
 from adpart.learning.curves import (
     LearningCurve,
+    StartValues,
     optimal_start_value,
     start_distribution,
-    start_values,
 )
 from adpart.learning.schedules import Schedule, constant, visit_count
 from adpart.learning.settings import run_settings
@@ -93,6 +93,14 @@ class QLearningResult:
         return greedy_policy(self.Q.reshape(K * S, A)).reshape(K, S)
 
 
+def _policy_dtype(n_actions: int) -> np.dtype:
+    """The smallest signed integer type that holds every action index (int8 for A <= 127)."""
+    for dtype in (np.int8, np.int16, np.int32):
+        if n_actions <= np.iinfo(dtype).max:
+            return np.dtype(dtype)
+    return np.dtype(np.int64)
+
+
 def _initial_state(
     mdp: FiniteMDP, runs: int, episodes: int, horizon: int, alpha: Schedule, epsilon: Schedule,
     q_init: float, mu: np.ndarray,
@@ -142,23 +150,13 @@ def _initial_state(
         out_steps=np.zeros((runs, episodes), dtype=np.int64),
         out_ret=np.zeros((runs, episodes)),
         out_dret=np.zeros((runs, episodes)),
+        # the kernel keeps these current from the greedy action of the initial row on
+        policy=np.empty((runs, S), dtype=_policy_dtype(A)),
+        changed=np.ones(runs, dtype=bool),
     )
+    st.policy[:] = greedy_policy(np.where(adm, float(q_init), -np.inf))
     st.episode_factors(np.arange(runs))
     return st
-
-
-def _greedy_policies(st: _kernels.LockStepState, unvisited: np.ndarray) -> np.ndarray:
-    """``(K, S)`` greedy policies (lowest index on ties), reading only the visited rows of Q.
-
-    ``Q[k, s]`` changes only when run ``k`` updates from ``s``, which counts ``n_s[k, s]``; an
-    unvisited row still holds its initial values, whose greedy action is ``unvisited[s]``.
-    The result equals ``greedy_policy`` of all of Q, without a pass over the (K, S, A) table.
-    """
-    K, S = st.n_s.shape
-    policies = np.broadcast_to(unvisited, (K, S)).copy()
-    runs, states = np.nonzero(st.n_s)
-    policies[runs, states] = greedy_policy(st.Q[runs, states])
-    return policies
 
 
 def q_learning(
@@ -215,9 +213,9 @@ def q_learning(
     mu = start_distribution(mdp)
     v_star = optimal_start_value(mdp, mu, reference_values)
     st = _initial_state(mdp, K, N, H, alpha_s, eps_s, q_init, mu)
-    unvisited_policy = greedy_policy(np.where(mdp.admissible, float(q_init), -np.inf))
     rngs = np.random.default_rng(root_seed).spawn(K)
     st.state[:] = [st.start_state(rng.random()) for rng in rngs]
+    score = StartValues(mdp, mu, K)  # re-scores the runs whose greedy policy moved, once each
 
     boundaries = sorted({*range(M, N + 1, M), N})
     eval_value = np.full((K, N), np.nan)
@@ -227,8 +225,7 @@ def q_learning(
             for k in np.flatnonzero((st.cursor == BLOCK_ROWS) & (st.episode < st.target)):
                 rngs[k].random(out=st.U[k])
                 st.cursor[k] = 0
-        policies = _greedy_policies(st, unvisited_policy)
-        eval_value[:, boundary - 1] = start_values(mdp, policies, mu)
+        eval_value[:, boundary - 1] = score(st.policy, st.changed)
         if progress is not None:
             progress(boundary, N)
 

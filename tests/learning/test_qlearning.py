@@ -215,6 +215,41 @@ def test_python_kernel_in_strict_lock_step_matches_numba(monkeypatch):
         assert np.array_equal(res.curve[col], ref.curve[col], equal_nan=True), col
 
 
+@pytest.mark.parametrize("kernel", KERNELS)
+@pytest.mark.parametrize("q_init", [0.0, 1.0, -30.0])
+def test_kernel_keeps_the_greedy_policy_of_all_of_q(kernel, q_init):
+    # the kernel's policy must be greedy_policy (lowest index on ties) of the whole table after
+    # every block: costs -1 with q_init 1 make greedy values fall (search again), q_init -30 makes
+    # them rise, alpha 1 on a deterministic grid makes exact ties
+    from adpart.learning import _kernels
+    from adpart.learning.curves import start_distribution
+    from adpart.learning.qlearning import BLOCK_ROWS, _initial_state
+    from adpart.mdp.solvers import greedy_policy
+
+    for mdp, alpha in ((slippery_grid(side=3, slip=0.3, gamma=0.9), constant(0.5)),
+                       (slippery_grid(side=3, slip=0.0, gamma=1.0), constant(1.0))):
+        K, S, A = 3, mdp.n_states, mdp.n_actions
+        st = _initial_state(mdp, K, 24, 30, alpha, constant(0.4), q_init,
+                            start_distribution(mdp))
+        rngs = np.random.default_rng(2).spawn(K)
+        st.state[:] = [st.start_state(r.random()) for r in rngs]
+        moved = 0
+        for boundary in (1, 2, 5, 12, 24):
+            st.changed[:] = False
+            before = st.policy.copy()
+            st.target[:] = boundary
+            while _kernels.KERNELS[kernel](st):
+                for k in np.flatnonzero((st.cursor == BLOCK_ROWS) & (st.episode < st.target)):
+                    rngs[k].random(out=st.U[k])
+                    st.cursor[k] = 0
+            full = greedy_policy(st.Q.reshape(K * S, A)).reshape(K, S)
+            assert np.array_equal(st.policy, full)
+            # changed: set for every run whose policy moved (it may also be set if it moved back)
+            assert np.all(st.changed[np.any(before != full, axis=1)])
+            moved += int(st.changed.sum())
+        assert moved > 0
+
+
 def test_run_does_not_depend_on_number_of_runs_or_eval_blocks(grid_mdp):
     kw = {"episodes": 30, "seed": 4, "alpha": 0.3, "epsilon": 0.2}
     many = q_learning(grid_mdp, runs=5, eval_every=3, **kw)
