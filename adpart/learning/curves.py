@@ -45,6 +45,7 @@ __all__ = [
     "LearningCurve",
     "StartValues",
     "distinct_rows",
+    "episodes_within",
     "optimal_start_value",
     "plot_curves",
     "start_distribution",
@@ -150,13 +151,7 @@ class LearningCurve:
 
         The answer to the knowledge base's "how fast did each task learn" in episodes.
         """
-        eps = self.evaluated_episodes()
-        gaps = self.matrix("value_gap")[:, eps - 1]
-        ok = gaps <= threshold  # NaN compares False
-        # suffix-all: ok from this evaluation on
-        stays = np.flip(np.logical_and.accumulate(np.flip(ok, axis=1), axis=1), axis=1)
-        first = np.argmax(stays, axis=1)
-        return np.where(stays.any(axis=1), eps[first], -1).astype(np.int64)
+        return episodes_within(self.matrix("value_gap"), self.evaluated_episodes(), threshold)
 
     def to_dict(self) -> dict[str, np.ndarray]:
         """The columns as a dict of (read-only) numpy arrays."""
@@ -182,6 +177,21 @@ class LearningCurve:
         raw = (table.schema.metadata or {}).get(_METADATA_KEY)
         meta = json.loads(raw) if raw else {}
         return cls({c: table.column(c).to_numpy() for c in COLUMNS}, meta)
+
+
+def episodes_within(value_gap: np.ndarray, evaluated: np.ndarray, threshold: float
+                    ) -> np.ndarray:
+    """Per run, the first of the ``evaluated`` episodes (1-based columns of the ``(K, N)``
+    ``value_gap``) from which the gap stays ``<= threshold`` at every later evaluation; ``-1``
+    where the last evaluation is still above it (NaN counts as above). The one rule behind
+    :meth:`LearningCurve.episodes_to_gap` and :func:`adpart.experiments.stats.
+    episodes_to_threshold`."""
+    evaluated = np.asarray(evaluated, dtype=np.int64)
+    ok = np.asarray(value_gap)[:, evaluated - 1] <= threshold  # NaN compares False
+    # suffix-all: ok from this evaluation on
+    stays = np.flip(np.logical_and.accumulate(np.flip(ok, axis=1), axis=1), axis=1)
+    first = np.argmax(stays, axis=1)
+    return np.where(stays.any(axis=1), evaluated[first], -1).astype(np.int64)
 
 
 def _json_default(value: object) -> object:
