@@ -355,7 +355,6 @@ def lockstep(keys, indptr, indices, R, terminal, adm_ptr, adm_idx, start_cdf, la
 #: Visit counts below this read ``n**-omega`` from :func:`visit_power_table` (32 KiB, stays in
 #: L1/L2 cache) instead of calling ``pow``.
 POW_TABLE = 4096
-NUMBA_POW_TABLE = POW_TABLE  # the name the tests and earlier notes use
 
 #: Steps each agent takes per round. A whole buffer (the default) keeps one agent's tables in
 #: cache for its whole stretch and needs one thread synchronisation per buffer; measured at

@@ -3,7 +3,8 @@
 One rule, two executions of the *same source*: :func:`lockstep` is plain Python over numpy arrays
 (the ``python`` kernel, the reference) and the identical function compiled by numba (the ``numba``
 kernel, the default). Both use only scalar IEEE operations and ``math.pow``, so they agree bit for
-bit.
+bit. The helpers it shares with the flat kernel (kernel names, start-state draw, per-episode
+schedule factors, lazy compilation) are :mod:`adpart.learning._kernels`'.
 
 What one call does: it advances K independent agents until every agent has completed
 ``target[k]`` episodes (returns 0), or some still-active agent has used up its pre-drawn uniforms
@@ -81,7 +82,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -196,7 +197,6 @@ class SMDPLockStepState(ScheduledAgents):
     out_ret: np.ndarray
     out_dret: np.ndarray
     out_blocks: np.ndarray
-    cache: dict = field(default_factory=dict)
 
     def args(self) -> tuple:
         """The kernel's positional arguments, in order."""

@@ -15,7 +15,9 @@ Design choices (documented in ``docs/learning.md``):
   every agent that has not yet finished the block by one primitive step; an agent whose episode
   ends resets from ``mdp.initial`` and continues while the others do; an agent that has finished
   the block waits. At the block's end all K runs have completed the same number of episodes, so
-  their greedy policies are scored together by one batched exact policy evaluation.
+  their greedy policies (kept current by the kernel as it updates Q) are scored together: one
+  exact policy evaluation per distinct policy not scored before
+  (:class:`adpart.learning.curves.StartValues`).
 * **Randomness.** ``np.random.default_rng(seed).spawn(runs)`` gives each run its own stream; a run
   draws one uniform for its first start state and then exactly four per step. A run's trajectory
   therefore depends only on ``seed``, its index and the settings -- not on ``runs``, not on

@@ -153,16 +153,16 @@ def test_unknown_kernel_names_the_valid_ones(corridor_mdp):
 
 
 def test_numba_kernel_past_its_power_table_matches_python():
-    # Visit counts beyond NUMBA_POW_TABLE switch the numba kernel from table look-ups to pow();
+    # Visit counts beyond POW_TABLE switch the rule from table look-ups to math.pow();
     # both must agree with the Python kernel bit for bit.
-    from adpart.learning._kernels import NUMBA_POW_TABLE
+    from adpart.learning._kernels import POW_TABLE
 
     mdp = random_mdp(3, 2, density=0.6, seed=1)
     kw = {"runs": 2, "episodes": 3, "seed": 5, "alpha": "1/n^0.8", "epsilon": "0.5/n^0.3",
-          "max_steps_per_episode": 6 * NUMBA_POW_TABLE, "eval_every": 3}
+          "max_steps_per_episode": 6 * POW_TABLE, "eval_every": 3}
     ref = q_learning(mdp, kernel="python", **kw)
     res = q_learning(mdp, kernel="numba", **kw)
-    assert ref.visits.max() > NUMBA_POW_TABLE
+    assert ref.visits.max() > POW_TABLE
     assert np.array_equal(res.Q, ref.Q)
 
 
