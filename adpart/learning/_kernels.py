@@ -74,7 +74,8 @@ KERNEL_NAMES = ("numba", "python")
 
 
 def default_kernel() -> str:
-    """``"numba"``: the compiled rule (numba is a dependency; ~50x the interpreted rule)."""
+    """``"numba"``: the compiled rule (numba is a dependency; 50-90x the interpreted rule in
+    benchmarks/bench_qlearning.py)."""
     return "numba"
 
 
