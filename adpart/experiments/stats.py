@@ -18,6 +18,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy import stats
 
+from adpart.learning.curves import episodes_within
+
 
 @dataclass(frozen=True)
 class Comparison:
@@ -120,16 +122,12 @@ def episodes_to_threshold(
     Returns:
         ``(K,)`` float episodes; ``inf`` for runs that never stay below the threshold.
 
-    The same rule as :meth:`adpart.learning.curves.LearningCurve.episodes_to_gap` (which
-    returns ``-1`` instead of ``inf`` and reads the evaluated episodes from the curve); this
-    version takes a bare matrix because MAXQ-Q on Parr's maze is scored outside a curve. A test
-    pins the two together.
+    The rule of :meth:`adpart.learning.curves.LearningCurve.episodes_to_gap`, computed by the
+    same function (:func:`adpart.learning.curves.episodes_within`, ``-1`` mapped to ``inf``); it
+    takes a bare matrix because MAXQ-Q on Parr's maze is scored outside a curve.
     """
-    gaps = value_gap[:, evaluated - 1]
-    ok = gaps <= threshold
-    stays = np.flip(np.cumprod(np.flip(ok, axis=1), axis=1), axis=1).astype(bool)
-    first = np.argmax(stays, axis=1)
-    return np.where(stays.any(axis=1), evaluated[first].astype(np.float64), np.inf)
+    first = episodes_within(value_gap, evaluated, threshold)
+    return np.where(first >= 0, first.astype(np.float64), np.inf)
 
 
 def bootstrap_ci(x: np.ndarray, *, statistic: str = "median", level: float = 0.95,

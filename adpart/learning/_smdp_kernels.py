@@ -3,7 +3,8 @@
 One rule, two executions of the *same source*: :func:`lockstep` is plain Python over numpy arrays
 (the ``python`` kernel, the reference) and the identical function compiled by numba (the ``numba``
 kernel, the default). Both use only scalar IEEE operations and ``math.pow``, so they agree bit for
-bit.
+bit. The helpers it shares with the flat kernel (kernel names, start-state draw, per-episode
+schedule factors, lazy compilation) are :mod:`adpart.learning._kernels`'.
 
 What one call does: it advances K independent agents until every agent has completed
 ``target[k]`` episodes (returns 0), or some still-active agent has used up its pre-drawn uniforms
@@ -81,10 +82,11 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
+from adpart.learning._kernels import ScheduledAgents, njit_lazily
 from adpart.mdp._sampling import compiled, first_above, successor
 
 #: Uniforms per agent-step in the main stream (explore?, which option, successor, next start).
@@ -94,7 +96,7 @@ AUX_PER_STEP = 2
 
 
 @dataclass
-class SMDPLockStepState:
+class SMDPLockStepState(ScheduledAgents):
     """All arrays the kernel reads and writes (the driver owns them; the kernel mutates in place).
 
     Model: ``keys``/``indptr``/``indices`` (the transition CSR and its sampler keys), ``R`` (S, A),
@@ -195,18 +197,6 @@ class SMDPLockStepState:
     out_ret: np.ndarray
     out_dret: np.ndarray
     out_blocks: np.ndarray
-    cache: dict = field(default_factory=dict)
-
-    def start_state(self, u: float) -> int:
-        """The start state drawn by uniform ``u`` (as the flat learner draws it)."""
-        return min(int(np.searchsorted(self.start_cdf, u, side="right")), self.last_start)
-
-    def episode_factors(self, k: int | np.ndarray) -> None:
-        """Cache ``scale * rate**episode`` of both schedules for agent(s) ``k``."""
-        e = np.atleast_1d(self.episode[k]).astype(np.float64)
-        ks = np.atleast_1d(k)
-        self.alpha_ep[ks] = [self.alpha[0] * math.pow(self.alpha[1], x) for x in e]
-        self.eps_ep[ks] = [self.eps[0] * math.pow(self.eps[1], x) for x in e]
 
     def args(self) -> tuple:
         """The kernel's positional arguments, in order."""
@@ -507,26 +497,12 @@ def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, h
                 state[k] = s2
 
 
-_NUMBA_KERNEL: Callable[..., int] | None = None
-
-
-def numba_available() -> bool:
-    """Whether numba can be imported (the ``numba`` kernel is then the default)."""
-    try:
-        import numba  # noqa: F401
-    except ImportError:
-        return False
-    return True
+_compiled_lockstep = njit_lazily(lockstep)
 
 
 def numba_kernel(st: SMDPLockStepState) -> int:
     """:func:`lockstep` compiled with numba (compiled once per process, cached on disk)."""
-    global _NUMBA_KERNEL
-    if _NUMBA_KERNEL is None:
-        import numba
-
-        _NUMBA_KERNEL = numba.njit(cache=True, nogil=True)(lockstep)
-    return int(_NUMBA_KERNEL(*st.args()))
+    return int(_compiled_lockstep(*st.args()))
 
 
 def python_kernel(st: SMDPLockStepState) -> int:
@@ -538,8 +514,3 @@ KERNELS: dict[str, Callable[[SMDPLockStepState], int]] = {
     "numba": numba_kernel,
     "python": python_kernel,
 }
-
-
-def default_kernel() -> str:
-    """``"numba"`` when numba imports, else the ``"python"`` reference."""
-    return "numba" if numba_available() else "python"

@@ -43,7 +43,9 @@ from adpart.mdp.solvers import policy_evaluation, solve
 __all__ = [
     "COLUMNS",
     "LearningCurve",
+    "StartValues",
     "distinct_rows",
+    "episodes_within",
     "optimal_start_value",
     "plot_curves",
     "start_distribution",
@@ -149,13 +151,7 @@ class LearningCurve:
 
         The answer to the knowledge base's "how fast did each task learn" in episodes.
         """
-        eps = self.evaluated_episodes()
-        gaps = self.matrix("value_gap")[:, eps - 1]
-        ok = gaps <= threshold  # NaN compares False
-        # suffix-all: ok from this evaluation on
-        stays = np.flip(np.logical_and.accumulate(np.flip(ok, axis=1), axis=1), axis=1)
-        first = np.argmax(stays, axis=1)
-        return np.where(stays.any(axis=1), eps[first], -1).astype(np.int64)
+        return episodes_within(self.matrix("value_gap"), self.evaluated_episodes(), threshold)
 
     def to_dict(self) -> dict[str, np.ndarray]:
         """The columns as a dict of (read-only) numpy arrays."""
@@ -181,6 +177,21 @@ class LearningCurve:
         raw = (table.schema.metadata or {}).get(_METADATA_KEY)
         meta = json.loads(raw) if raw else {}
         return cls({c: table.column(c).to_numpy() for c in COLUMNS}, meta)
+
+
+def episodes_within(value_gap: np.ndarray, evaluated: np.ndarray, threshold: float
+                    ) -> np.ndarray:
+    """Per run, the first of the ``evaluated`` episodes (1-based columns of the ``(K, N)``
+    ``value_gap``) from which the gap stays ``<= threshold`` at every later evaluation; ``-1``
+    where the last evaluation is still above it (NaN counts as above). The one rule behind
+    :meth:`LearningCurve.episodes_to_gap` and :func:`adpart.experiments.stats.
+    episodes_to_threshold`."""
+    evaluated = np.asarray(evaluated, dtype=np.int64)
+    ok = np.asarray(value_gap)[:, evaluated - 1] <= threshold  # NaN compares False
+    # suffix-all: ok from this evaluation on
+    stays = np.flip(np.logical_and.accumulate(np.flip(ok, axis=1), axis=1), axis=1)
+    first = np.argmax(stays, axis=1)
+    return np.where(stays.any(axis=1), evaluated[first], -1).astype(np.int64)
 
 
 def _json_default(value: object) -> object:
@@ -326,13 +337,14 @@ def optimal_start_value(mdp, mu: np.ndarray, reference_values: np.ndarray | None
 
 
 def _row_hashes(a: np.ndarray) -> np.ndarray:
-    """One int64 per row of the int64 matrix ``a``: its dot product with fixed random odd
+    """One int64 per row of the integer matrix ``a``: its dot product with fixed random odd
     weights, wrapping modulo 2^64 (numpy integer matmul wraps silently)."""
     weights = np.random.default_rng(0x5EED).integers(1, 2**62, size=a.shape[1]) | 1
-    return a @ weights
+    return np.ascontiguousarray(a, dtype=np.int64) @ weights
 
 
-def distinct_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def distinct_rows(rows: np.ndarray, hashes: np.ndarray | None = None
+                  ) -> tuple[np.ndarray, np.ndarray]:
     """``(first, inverse)``: one row index per distinct row of ``rows`` and each row's group.
 
     ``rows[first][inverse]`` equals ``rows``. Rows are hashed to one int64 each (a dot product
@@ -344,13 +356,16 @@ def distinct_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
     Args:
         rows: ``(K, S)`` integer array.
+        hashes: their :func:`_row_hashes`, when the caller has them already.
 
     Returns:
         ``first`` (n_distinct,) int64 indices in order of first appearance and ``inverse``
         (K,) int64 group of each row.
     """
-    a = np.ascontiguousarray(rows, dtype=np.int64)
-    _, first, inverse = np.unique(_row_hashes(a), return_index=True, return_inverse=True)
+    a = np.asarray(rows)
+    if hashes is None:
+        hashes = _row_hashes(a)
+    _, first, inverse = np.unique(hashes, return_index=True, return_inverse=True)
     inverse = np.asarray(inverse, dtype=np.int64).reshape(-1)
     order = np.argsort(first, kind="stable")  # groups numbered by first appearance
     rank = np.empty_like(order)
@@ -393,12 +408,82 @@ def start_values(mdp, policies: np.ndarray, mu: np.ndarray) -> np.ndarray:
         raise ModelError("a policy to score chooses an inadmissible action")
     values = np.empty(first.size)
     for u in range(first.size):  # one sparse solve per distinct policy (not per state)
-        try:
-            # einsum, not BLAS ddot: a threaded ddot spin-waits on a loaded machine (solvers._dot)
-            values[u] = np.einsum("i,i->", policy_evaluation(smdp, unique[u]), mu)
-        except ModelError:
-            values[u] = _reachable_start_value(smdp, unique[u], mu)
+        values[u] = _start_value(smdp, unique[u], mu)
     return values[inverse]
+
+
+def _start_value(smdp, policy: np.ndarray, mu: np.ndarray) -> float:
+    """``sum_s mu(s) V^pi(s)`` of one deterministic policy (int64), as :func:`start_values`
+    documents it: one sparse LU, or the reachable states only where ``gamma = 1`` loops."""
+    try:
+        # einsum, not BLAS ddot: a threaded ddot spin-waits on a loaded machine (solvers._dot)
+        return np.einsum("i,i->", policy_evaluation(smdp, policy), mu)
+    except ModelError:
+        return _reachable_start_value(smdp, policy, mu)
+
+
+class StartValues:
+    """:func:`start_values` of K runs' policies over successive evaluations, each distinct policy
+    solved once.
+
+    A learner keeps its ``(K, S)`` greedy policies in one array that it updates in place and
+    flags the runs whose policy changed since the last call (:func:`adpart.learning._kernels.
+    refresh_greedy`); :meth:`__call__` then re-scores only those. A changed run's policy is
+    looked up, by its bytes, among the policies scored before -- of any run, at any earlier
+    evaluation (late in learning most runs' policies repeat, and different runs converge to the
+    same one). The look-up is a dict keyed by the policy's bytes, so a hit is an exact match
+    (hash, then full comparison), never a collision; the policies not found are grouped the same
+    way and solved once each by :func:`_start_value`, the function :func:`start_values` uses, so
+    every value is the one :func:`start_values` returns for the same policies, bit for bit. This
+    replaces the int64 row hashes of :func:`distinct_rows` here: policies are stored in the
+    learner's smallest action dtype (int8: ``S`` bytes), and no ``(K, S)`` int64 copy is made.
+    The store keeps the most recently used policies up to ``store_bytes``.
+    """
+
+    def __init__(self, mdp, mu: np.ndarray, runs: int, *, store_bytes: int = 64 << 20) -> None:
+        self._smdp = mdp.as_smdp()
+        self._mu = mu
+        self._all_admissible = bool(np.all(self._smdp.admissible))
+        self._values = np.full(runs, np.nan)
+        self._scored = np.zeros(runs, dtype=bool)
+        self._store: dict[bytes, float] = {}  # policy bytes -> start value, oldest use first
+        self._stored_bytes = 0
+        self._store_bytes = store_bytes
+        self.solves = 0  #: policies solved so far (the others came from the store)
+
+    def __call__(self, policies: np.ndarray, changed: np.ndarray) -> np.ndarray:
+        """``(K,)`` start values of ``policies`` (K, S); ``changed[k]`` says run ``k``'s policy
+        may differ from the last call's (ignored on a run's first call). Clears ``changed``."""
+        redo = np.flatnonzero(changed | ~self._scored)
+        changed[:] = False
+        todo: dict[bytes, list[int]] = {}  # policies not in the store -> their runs
+        for k in redo.tolist():
+            key = policies[k].tobytes()
+            value = self._store.pop(key, None)
+            if value is None:
+                todo.setdefault(key, []).append(k)
+            else:
+                self._store[key] = value  # most recently used last
+                self._values[k] = value
+        for key, runs in todo.items():
+            policy = policies[runs[0]].astype(np.int64)
+            if not self._all_admissible and not np.all(
+                    self._smdp.admissible[np.arange(policy.size), policy]):
+                raise ModelError("a policy to score chooses an inadmissible action")
+            value = _start_value(self._smdp, policy, self._mu)
+            self.solves += 1
+            self._values[runs] = value
+            self._keep(key, value)
+        self._scored[redo] = True
+        return self._values.copy()
+
+    def _keep(self, key: bytes, value: float) -> None:
+        self._store[key] = value
+        self._stored_bytes += len(key)
+        while self._stored_bytes > self._store_bytes and len(self._store) > 1:
+            oldest = next(iter(self._store))
+            del self._store[oldest]
+            self._stored_bytes -= len(oldest)
 
 
 def _reachable_start_value(smdp, policy: np.ndarray, mu: np.ndarray) -> float:

@@ -15,7 +15,9 @@ Design choices (documented in ``docs/learning.md``):
   every agent that has not yet finished the block by one primitive step; an agent whose episode
   ends resets from ``mdp.initial`` and continues while the others do; an agent that has finished
   the block waits. At the block's end all K runs have completed the same number of episodes, so
-  their greedy policies are scored together by one batched exact policy evaluation.
+  their greedy policies (kept current by the kernel as it updates Q) are scored together: one
+  exact policy evaluation per distinct policy not scored before
+  (:class:`adpart.learning.curves.StartValues`).
 * **Randomness.** ``np.random.default_rng(seed).spawn(runs)`` gives each run its own stream; a run
   draws one uniform for its first start state and then exactly four per step. A run's trajectory
   therefore depends only on ``seed``, its index and the settings -- not on ``runs``, not on
@@ -35,13 +37,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from adpart.errors import UnknownNameError
 from adpart.learning import _kernels
 from adpart.learning.curves import (
     LearningCurve,
+    StartValues,
     optimal_start_value,
     start_distribution,
-    start_values,
 )
 from adpart.learning.result import LearnResult
 from adpart.learning.schedules import Schedule, constant, visit_count
@@ -57,9 +58,12 @@ __all__ = ["QLearningResult", "default_kernel", "q_learning"]
 BLOCK_ROWS = 8192
 
 
-def default_kernel() -> str:
-    """``"numba"`` when numba imports (measured ~20x faster at K = 50), else ``"numpy"``."""
-    return "numba" if _kernels.numba_available() else "numpy"
+#: Kernel names accepted for earlier ones: the numpy kernel was a third copy of the rule
+#: (strict lock-step, vectorised over agents) with the same results bit for bit; the compiled
+#: rule replaces it (and was ~25x faster).
+KERNEL_ALIASES = {"numpy": "numba"}
+
+default_kernel = _kernels.default_kernel
 
 
 @dataclass(frozen=True, eq=False)
@@ -74,6 +78,14 @@ class QLearningResult(LearnResult):
     """
 
     visits: np.ndarray
+
+
+def _policy_dtype(n_actions: int) -> np.dtype:
+    """The smallest signed integer type that holds every action index (int8 for A <= 127)."""
+    for dtype in (np.int8, np.int16, np.int32):
+        if n_actions <= np.iinfo(dtype).max:
+            return np.dtype(dtype)
+    return np.dtype(np.int64)
 
 
 def _initial_state(
@@ -125,23 +137,13 @@ def _initial_state(
         out_steps=np.zeros((runs, episodes), dtype=np.int64),
         out_ret=np.zeros((runs, episodes)),
         out_dret=np.zeros((runs, episodes)),
+        # the kernel keeps these current from the greedy action of the initial row on
+        policy=np.empty((runs, S), dtype=_policy_dtype(A)),
+        changed=np.ones(runs, dtype=bool),
     )
+    st.policy[:] = greedy_policy(np.where(adm, float(q_init), -np.inf))
     st.episode_factors(np.arange(runs))
     return st
-
-
-def _greedy_policies(st: _kernels.LockStepState, unvisited: np.ndarray) -> np.ndarray:
-    """``(K, S)`` greedy policies (lowest index on ties), reading only the visited rows of Q.
-
-    ``Q[k, s]`` changes only when run ``k`` updates from ``s``, which counts ``n_s[k, s]``; an
-    unvisited row still holds its initial values, whose greedy action is ``unvisited[s]``.
-    The result equals ``greedy_policy`` of all of Q, without a pass over the (K, S, A) table.
-    """
-    K, S = st.n_s.shape
-    policies = np.broadcast_to(unvisited, (K, S)).copy()
-    runs, states = np.nonzero(st.n_s)
-    policies[runs, states] = greedy_policy(st.Q[runs, states])
-    return policies
 
 
 def q_learning(
@@ -175,14 +177,16 @@ def q_learning(
         reference_values: ``V*`` (S,) for the value gap; solved exactly when omitted.
         progress: called as ``progress(episodes_done_by_every_run, episodes)`` after each block.
         q_init: initial value of every admissible ``Q(s, a)``.
-        kernel: ``"numba"``, ``"numpy"`` or ``"python"`` (reference); default
-            :func:`default_kernel`. All give identical results.
+        kernel: ``"numba"`` (the default, :func:`default_kernel`) or ``"python"`` (the same
+            rule interpreted: the reference); identical results. ``"numpy"``, an earlier third
+            copy of the rule, runs ``"numba"`` with a ``FutureWarning``.
 
     Returns:
         A :class:`QLearningResult`.
 
     Raises:
         TaskError: a setting is out of range.
+        UnknownNameError: ``kernel`` is not a kernel's name (the message lists them).
         ModelError: ``mdp`` is not a FiniteMDP, or no episode can start, or bad reference values.
     """
     cfg = run_settings("q_learning", mdp, runs=runs, episodes=episodes, eval_every=eval_every,
@@ -190,19 +194,15 @@ def q_learning(
                        epsilon=epsilon, q_init=q_init)
     K, N, M, H, root_seed = cfg.runs, cfg.episodes, cfg.eval_every, cfg.horizon, cfg.seed
     alpha_s, eps_s = cfg.alpha, cfg.epsilon
-    name = default_kernel() if kernel is None else kernel
-    if name not in _kernels.KERNELS:
-        raise UnknownNameError(
-            f"unknown Q-learning kernel {name!r}; choose one of {list(_kernels.KERNELS)}"
-        )
+    name = _kernels.resolve_kernel(kernel, "Q-learning", KERNEL_ALIASES)
     step_kernel = _kernels.KERNELS[name]
 
     mu = start_distribution(mdp)
     v_star = optimal_start_value(mdp, mu, reference_values)
     st = _initial_state(mdp, K, N, H, alpha_s, eps_s, q_init, mu)
-    unvisited_policy = greedy_policy(np.where(mdp.admissible, float(q_init), -np.inf))
     rngs = np.random.default_rng(root_seed).spawn(K)
     st.state[:] = [st.start_state(rng.random()) for rng in rngs]
+    score = StartValues(mdp, mu, K)  # re-scores the runs whose greedy policy moved, once each
 
     boundaries = sorted({*range(M, N + 1, M), N})
     eval_value = np.full((K, N), np.nan)
@@ -212,8 +212,7 @@ def q_learning(
             for k in np.flatnonzero((st.cursor == BLOCK_ROWS) & (st.episode < st.target)):
                 rngs[k].random(out=st.U[k])
                 st.cursor[k] = 0
-        policies = _greedy_policies(st, unvisited_policy)
-        eval_value[:, boundary - 1] = start_values(mdp, policies, mu)
+        eval_value[:, boundary - 1] = score(st.policy, st.changed)
         if progress is not None:
             progress(boundary, N)
 

@@ -41,8 +41,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from adpart.errors import ModelError, UnknownNameError
+from adpart.errors import ModelError
 from adpart.learning import _smdp_kernels as kernels
+from adpart.learning._kernels import resolve_kernel
 from adpart.learning.curves import (
     LearningCurve,
     optimal_start_value,
@@ -147,12 +148,8 @@ def compile_options(options: Sequence[Option], n_actions: int) -> tuple[
 
 
 def kernel_function(kernel: str | None) -> tuple[str, Callable[[kernels.SMDPLockStepState], int]]:
-    """The kernel by name (``numba`` / ``python``; default :func:`_smdp_kernels.default_kernel`)."""
-    name = kernels.default_kernel() if kernel is None else kernel
-    if name not in kernels.KERNELS:
-        raise UnknownNameError(
-            f"unknown SMDP Q-learning kernel {name!r}; choose one of {list(kernels.KERNELS)}"
-        )
+    """The kernel by name (``numba`` / ``python``; default :func:`_kernels.default_kernel`)."""
+    name = resolve_kernel(kernel, "SMDP Q-learning")
     return name, kernels.KERNELS[name]
 
 

@@ -6,24 +6,17 @@ learners draw start states with it. ``successor(row, u, keys, indptr, indices)``
 position search of
 :meth:`adpart.mdp.model.FiniteMDP.sample_next` for one ``(row = a*S + s, u)``: the first entry of
 the row whose row-offset cumulative probability (``FiniteMDP.sampler_keys``) exceeds ``row + u``,
-clipped to the row's last entry; it returns that entry's successor state. With numba it is
-compiled (and callable from compiled kernels); without, it is the same plain function.
+clipped to the row's last entry; it returns that entry's successor state. Both are compiled
+with numba (a dependency), callable from compiled kernels and from the interpreted reference
+kernels alike (integer and comparison logic only, so the two agree exactly).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import numba
 
-try:
-    import numba
-except ImportError:  # pragma: no cover - numba is a dependency; kept for a bare interpreter
-
-    def compiled(fn: Callable) -> Callable:
-        return fn
-
-else:
-    #: ``numba.njit`` for helpers the compiled kernels call (plain functions without numba).
-    compiled = numba.njit(cache=True, nogil=True)
+#: ``numba.njit`` for helpers the compiled kernels call.
+compiled = numba.njit(cache=True, nogil=True)
 
 
 @compiled

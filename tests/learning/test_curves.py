@@ -133,3 +133,40 @@ def test_undiscounted_score_ignores_a_loop_no_episode_can_enter():
     assert start_values(mdp, forward, mu)[0] == pytest.approx(-2.0)
     stuck = np.array([[0, 1, 0, 0, 0]])  # stays in 1 forever
     assert np.isnan(start_values(mdp, stuck, mu)[0])
+
+
+def test_start_values_over_evaluations_equal_start_values_bit_for_bit(rng):
+    # StartValues re-scores only flagged runs, reuses any policy scored before (other runs,
+    # earlier calls) and solves each new distinct policy once; values equal start_values exactly
+    from adpart.learning.curves import StartValues
+
+    mdp = slippery_grid(3, slip=0.3, gamma=0.9)
+    mu = rng.dirichlet(np.ones(mdp.n_states))
+    pool = rng.integers(0, 4, size=(4, mdp.n_states)).astype(np.int8)  # 4 distinct policies
+    K = 6
+    pols = pool[rng.integers(0, 4, size=K)]
+    score = StartValues(mdp, mu, K)
+    changed = np.zeros(K, dtype=bool)  # ignored on the first call: every run is scored
+    seen = set()
+    for _ in range(8):
+        got = score(pols, changed)
+        assert np.array_equal(got, start_values(mdp, pols, mu))
+        assert not changed.any()  # cleared
+        seen |= {p.tobytes() for p in pols}
+        assert score.solves == len(seen)  # each distinct policy solved once, ever
+        moved = rng.random(K) < 0.5
+        pols[moved] = pool[rng.integers(0, 4, size=int(moved.sum()))]
+        changed[moved] = True
+
+
+def test_start_values_store_is_bounded_and_still_exact(rng):
+    from adpart.learning.curves import StartValues
+
+    mdp = slippery_grid(3, slip=0.3, gamma=0.9)
+    mu = np.full(mdp.n_states, 1.0 / mdp.n_states)
+    score = StartValues(mdp, mu, 2, store_bytes=2 * mdp.n_states)  # room for two policies
+    a, b, c = (rng.integers(0, 4, size=(2, mdp.n_states)).astype(np.int8) for _ in range(3))
+    for pols in (a, b, c, a):
+        assert np.array_equal(score(pols, np.ones(2, dtype=bool)), start_values(mdp, pols, mu))
+    assert score.solves == 8  # a was evicted by b and c, so it is solved again
+    assert len(score._store) == 2

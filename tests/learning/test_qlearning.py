@@ -13,7 +13,7 @@ from adpart.mdp.solvers import policy_evaluation, solve
 
 from .conftest import corridor, slippery_grid
 
-KERNELS = ("numba", "numpy", "python")
+KERNELS = ("numba", "python")
 
 
 def reference_q_learning(mdp: FiniteMDP, *, runs, episodes, seed, alpha, epsilon, horizon):
@@ -138,17 +138,31 @@ def test_kernels_are_bit_identical(kernel):
         assert np.array_equal(res.curve[col], ref.curve[col], equal_nan=True), col
 
 
+def test_the_numpy_kernel_name_runs_the_compiled_rule_with_a_warning(corridor_mdp):
+    kw = {"runs": 2, "episodes": 6, "seed": 3, "eval_every": 3}
+    with pytest.warns(FutureWarning, match=r"'numpy' no longer exists.*\['numba', 'python'\]"):
+        old = q_learning(corridor_mdp, kernel="numpy", **kw)
+    ref = q_learning(corridor_mdp, kernel="python", **kw)
+    assert old.parameters["kernel"] == "numba"
+    assert np.array_equal(old.Q, ref.Q)
+
+
+def test_unknown_kernel_names_the_valid_ones(corridor_mdp):
+    with pytest.raises(UnknownNameError, match=r"'cuda'; choose one of \['numba', 'python'\]"):
+        q_learning(corridor_mdp, episodes=2, kernel="cuda")
+
+
 def test_numba_kernel_past_its_power_table_matches_python():
-    # Visit counts beyond NUMBA_POW_TABLE switch the numba kernel from table look-ups to pow();
+    # Visit counts beyond POW_TABLE switch the rule from table look-ups to math.pow();
     # both must agree with the Python kernel bit for bit.
-    from adpart.learning._kernels import NUMBA_POW_TABLE
+    from adpart.learning._kernels import POW_TABLE
 
     mdp = random_mdp(3, 2, density=0.6, seed=1)
     kw = {"runs": 2, "episodes": 3, "seed": 5, "alpha": "1/n^0.8", "epsilon": "0.5/n^0.3",
-          "max_steps_per_episode": 6 * NUMBA_POW_TABLE, "eval_every": 3}
+          "max_steps_per_episode": 6 * POW_TABLE, "eval_every": 3}
     ref = q_learning(mdp, kernel="python", **kw)
     res = q_learning(mdp, kernel="numba", **kw)
-    assert ref.visits.max() > NUMBA_POW_TABLE
+    assert ref.visits.max() > POW_TABLE
     assert np.array_equal(res.Q, ref.Q)
 
 
@@ -172,6 +186,68 @@ def test_numba_kernel_does_not_depend_on_threads_or_stride(threads, stride, monk
         numba.set_num_threads(before)
     assert np.array_equal(res.Q, ref.Q)
     assert np.array_equal(res.curve.matrix("steps"), ref.curve.matrix("steps"))
+
+
+def test_both_kernels_run_one_source_of_the_rule():
+    # one function is the rule: the python kernel interprets it, the numba kernel compiles it
+    from adpart.learning import _kernels, _smdp_kernels
+
+    assert _kernels._compiled_lockstep.__wrapped__ is _kernels.lockstep
+    assert _smdp_kernels._compiled_lockstep.__wrapped__ is _smdp_kernels.lockstep
+    assert set(_kernels.KERNELS) == set(_smdp_kernels.KERNELS) == set(_kernels.KERNEL_NAMES)
+
+
+def test_python_kernel_in_strict_lock_step_matches_numba(monkeypatch):
+    # the interpreted rule one step per agent per round against the compiled whole-buffer rounds
+    from adpart.learning import _kernels
+
+    mdp = random_mdp(12, 3, density=0.3, seed=5)
+    mdp = mdp.with_rewards(mdp.R, terminal=np.arange(12) == 11)
+    kw = {"runs": 3, "episodes": 12, "seed": 8, "alpha": "0.9/n^0.6,0.01", "epsilon": 0.3,
+          "max_steps_per_episode": 30, "eval_every": 4}
+    ref = q_learning(mdp, kernel="numba", **kw)
+    monkeypatch.setitem(_kernels.KERNELS, "python",
+                        lambda st: _kernels.python_kernel(st, stride=1))
+    res = q_learning(mdp, kernel="python", **kw)
+    assert np.array_equal(res.Q, ref.Q)
+    assert np.array_equal(res.visits, ref.visits)
+    for col in res.curve.columns:
+        assert np.array_equal(res.curve[col], ref.curve[col], equal_nan=True), col
+
+
+@pytest.mark.parametrize("kernel", KERNELS)
+@pytest.mark.parametrize("q_init", [0.0, 1.0, -30.0])
+def test_kernel_keeps_the_greedy_policy_of_all_of_q(kernel, q_init):
+    # the kernel's policy must be greedy_policy (lowest index on ties) of the whole table after
+    # every block: costs -1 with q_init 1 make greedy values fall (search again), q_init -30 makes
+    # them rise, alpha 1 on a deterministic grid makes exact ties
+    from adpart.learning import _kernels
+    from adpart.learning.curves import start_distribution
+    from adpart.learning.qlearning import BLOCK_ROWS, _initial_state
+    from adpart.mdp.solvers import greedy_policy
+
+    for mdp, alpha in ((slippery_grid(side=3, slip=0.3, gamma=0.9), constant(0.5)),
+                       (slippery_grid(side=3, slip=0.0, gamma=1.0), constant(1.0))):
+        K, S, A = 3, mdp.n_states, mdp.n_actions
+        st = _initial_state(mdp, K, 24, 30, alpha, constant(0.4), q_init,
+                            start_distribution(mdp))
+        rngs = np.random.default_rng(2).spawn(K)
+        st.state[:] = [st.start_state(r.random()) for r in rngs]
+        moved = 0
+        for boundary in (1, 2, 5, 12, 24):
+            st.changed[:] = False
+            before = st.policy.copy()
+            st.target[:] = boundary
+            while _kernels.KERNELS[kernel](st):
+                for k in np.flatnonzero((st.cursor == BLOCK_ROWS) & (st.episode < st.target)):
+                    rngs[k].random(out=st.U[k])
+                    st.cursor[k] = 0
+            full = greedy_policy(st.Q.reshape(K * S, A)).reshape(K, S)
+            assert np.array_equal(st.policy, full)
+            # changed: set for every run whose policy moved (it may also be set if it moved back)
+            assert np.all(st.changed[np.any(before != full, axis=1)])
+            moved += int(st.changed.sum())
+        assert moved > 0
 
 
 def test_run_does_not_depend_on_number_of_runs_or_eval_blocks(grid_mdp):
