@@ -17,7 +17,7 @@ import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "adpart"
 
-FOUNDATION = {"errors", "params"}
+FOUNDATION = {"errors", "params", "plotting"}
 #: the numeric cores by rank: a core may import cores of a lower rank only
 CORE_RANK = {"mdp": 1, "envs": 2, "subgoals": 3, "partition": 3, "options": 4, "learning": 5,
              "hierarchy": 6}

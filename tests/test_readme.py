@@ -29,7 +29,7 @@ ID = re.compile(r"\b[a-z-]+:\d+\b")
 def session_lines() -> list[tuple[str, str]]:
     """``(command, comment)`` of the first-session block, in order."""
     text = README.read_text()
-    block = re.search(r"## A first session.*?```sh\n(.*?)```", text, re.S).group(1)
+    block = re.search(r"## A first session.*?```sh\n(.*?)```", text, re.DOTALL).group(1)
     out = []
     for line in block.splitlines():
         command, _, comment = line.partition(" # ")

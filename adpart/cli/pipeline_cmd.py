@@ -383,7 +383,8 @@ def transfer_cmd(
     finally:
         kb.close()
     figure = plot_curves(
-        curves, out / "transfer.png", metric="value_gap", title=f"{env}/{task} on {partition_ref}"
+        curves, out / "transfer.png", metric="value_gap", title=f"{env}/{task} on {partition_ref}",
+        bound=rows[0]["bound"], bound_label="success bound (5% of |V*|)",
     )
     summary = {
         "env": env,

@@ -34,6 +34,7 @@ import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -44,6 +45,7 @@ __all__ = [
     "COLUMNS",
     "LearningCurve",
     "StartValues",
+    "curve_figure",
     "distinct_rows",
     "episodes_within",
     "optimal_start_value",
@@ -203,42 +205,46 @@ def _json_default(value: object) -> object:
 
 
 _X_AXES = ("episode", "steps", "decisions")
-_BANDS = ("minmax", "sd")
+_BANDS = ("quartiles", "minmax", "sd")
+#: Runs up to which every run is also drawn as a thin line under the band.
+PER_RUN_LINES = 12
 
 
-def plot_curves(
+def curve_figure(
     curve: LearningCurve | Mapping[str, LearningCurve],
-    path: str | Path,
     metric: str = "value_gap",
     *,
     x: str = "episode",
-    band: str = "minmax",
+    band: str = "quartiles",
     logy: bool | None = None,
     title: str | None = None,
-) -> Path:
-    """Plot the mean over runs of ``metric`` with a band, to a PNG (matplotlib, Agg backend).
+    bound: float | None = None,
+    bound_label: str = "bound",
+) -> Any:
+    """The figure :func:`plot_curves` saves: the median over runs of ``metric`` with a band.
 
     Args:
         curve: one curve, or ``{label: curve}`` to compare learners on one axes.
-        path: the PNG to write (parent directories are created).
         metric: a column: ``value_gap`` (default), ``eval_value``, ``steps``, ``decisions``,
             ``return`` or ``discounted_return``. Evaluation metrics are drawn at the evaluated
             episodes only.
         x: ``episode``, or ``steps`` / ``decisions``: the mean over runs of the cumulative count
             at the end of each episode.
-        band: ``minmax`` (default) shades the range over runs; ``sd`` shades mean +- one
-            standard deviation over runs.
-        logy: logarithmic y axis; by default only for ``value_gap``, whose values are then
-            clipped below at ``1e-12`` (a gap of 0 is an optimal policy).
-        title: the axes title (default: the metric and the number of runs).
+        band: ``quartiles`` (default: the median and the 25-75% band, so a two-way split of the
+            runs shows instead of hiding in a mean), ``minmax`` (median, range over runs) or
+            ``sd`` (mean +- one standard deviation). With at most :data:`PER_RUN_LINES` runs
+            every run is also drawn, thin.
+        logy: logarithmic y axis; by default only for ``value_gap``. A gap of 0 (an optimal
+            policy) cannot be drawn on a log axis: it is drawn at a floor a decade below the
+            smallest positive gap, and the legend says so.
+        title: the axes title (default: the metric and the band).
+        bound: draw this value as a dashed horizontal line labelled ``bound_label`` (e.g. the
+            success bound 5% of ``|V*|`` on a value-gap figure).
 
     Returns:
-        The path written.
+        A :class:`matplotlib.figure.Figure` (no pyplot state; save it or read its artists).
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from adpart.plotting import new_figure
 
     curves = {"": curve} if isinstance(curve, LearningCurve) else dict(curve)
     if not curves:
@@ -251,49 +257,79 @@ def plot_curves(
     if x not in _X_AXES:
         raise TaskError(f"x axis {x!r} is not one of {list(_X_AXES)}")
     if band not in _BANDS:
-        raise TaskError(f"band {band!r} is not one of {list(_BANDS)} (min-max or +-sd)")
+        raise TaskError(f"band {band!r} is not one of {list(_BANDS)}")
     logy = metric == "value_gap" if logy is None else logy
+    series = []
+    for label, c in curves.items():
+        values = c.matrix(metric).astype(np.float64)
+        xs = (np.arange(1, c.n_episodes + 1, dtype=np.float64) if x == "episode"
+              else np.cumsum(c.matrix(x), axis=1).mean(axis=0))
+        if metric in ("eval_value", "value_gap"):
+            keep = c.evaluated_episodes() - 1
+            xs, values = xs[keep], values[:, keep]
+        series.append((label or f"{c.n_runs} runs", xs, values))
+    floor = None
+    if logy:
+        positive = np.concatenate([v[v > 0] for _, _, v in series] + [np.array([np.inf])])
+        if np.isfinite(positive.min()) and any((v <= 0).any() for _, _, v in series):
+            floor = 10.0 ** np.floor(np.log10(positive.min()) - 1)
+        if not np.isfinite(positive.min()):
+            logy = False  # nothing positive to draw on a log axis
+    fig, ax = new_figure((7.0, 4.2))
+    for label, xs, values in series:
+        if floor is not None:
+            values = np.maximum(values, floor)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns stay NaN
+            if band == "sd":
+                centre = np.nanmean(values, axis=0)
+                sd = np.nanstd(values, axis=0)
+                lo, hi = centre - sd, centre + sd
+            else:
+                centre = np.nanmedian(values, axis=0)
+                q = (25, 75) if band == "quartiles" else (0, 100)
+                lo, hi = np.nanpercentile(values, q, axis=0)
+        what = "mean" if band == "sd" else "median"
+        (line,) = ax.plot(xs, centre, label=f"{label} ({what} of {values.shape[0]})", lw=1.8)
+        if values.shape[0] <= PER_RUN_LINES:
+            for row in values:
+                ax.plot(xs, row, color=line.get_color(), lw=0.6, alpha=0.3, gid="run")
+        ax.fill_between(xs, lo, hi, color=line.get_color(), alpha=0.15, lw=0)
+    if bound is not None:
+        ax.axhline(bound, color="0.2", ls="--", lw=1.0, label=bound_label, gid="bound")
+    if logy:
+        ax.set_yscale("log")
+        from matplotlib.ticker import LogFormatterSciNotation
+
+        ax.yaxis.set_minor_formatter(LogFormatterSciNotation(labelOnlyBase=False,
+                                                             minor_thresholds=(2, 0.4)))
+    if floor is not None:
+        ax.plot([], [], " ", label=f"a gap of 0 is drawn at {floor:.0e}")
+    ax.set_xlabel({"episode": "episode", "steps": "primitive steps (mean over runs)",
+                   "decisions": "decisions (mean over runs)"}[x])
+    ax.set_ylabel(metric.replace("_", " "))
+    band_text = {"quartiles": "25-75% of runs", "minmax": "min-max over runs",
+                 "sd": "mean +- 1 sd over runs"}[band]
+    ax.set_title(title or f"{metric.replace('_', ' ')} (band: {band_text})", fontsize="medium")
+    ax.legend(loc="best", fontsize="small")
+    fig.tight_layout()
+    return fig
+
+
+def plot_curves(
+    curve: LearningCurve | Mapping[str, LearningCurve],
+    path: str | Path,
+    metric: str = "value_gap",
+    **options: Any,
+) -> Path:
+    """Save :func:`curve_figure` ``(curve, metric, **options)`` as a PNG at ``path``.
+
+    Parent directories are created; returns the path written.
+    """
+    fig = curve_figure(curve, metric, **options)
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
-    fig, ax = plt.subplots(figsize=(7, 4.2))
-    try:
-        for label, c in curves.items():
-            values = c.matrix(metric).astype(np.float64)
-            if x == "episode":
-                xs = np.arange(1, c.n_episodes + 1, dtype=np.float64)
-            else:
-                xs = np.cumsum(c.matrix(x), axis=1).mean(axis=0)
-            if metric in ("eval_value", "value_gap"):
-                keep = c.evaluated_episodes() - 1
-                xs, values = xs[keep], values[:, keep]
-            if logy:
-                values = np.maximum(values, 1e-12)
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns stay NaN
-                mean = np.nanmean(values, axis=0)
-                if band == "minmax":
-                    lo, hi = np.nanmin(values, axis=0), np.nanmax(values, axis=0)
-                else:
-                    sd = np.nanstd(values, axis=0)
-                    lo, hi = mean - sd, mean + sd
-            if logy:
-                lo = np.maximum(lo, 1e-12)
-            name = label or f"mean of {c.n_runs} runs"
-            (line,) = ax.plot(xs, mean, label=name, lw=1.5)
-            ax.fill_between(xs, lo, hi, color=line.get_color(), alpha=0.2, lw=0)
-        if logy:
-            ax.set_yscale("log")
-        ax.set_xlabel({"episode": "episode", "steps": "primitive steps (mean over runs)",
-                       "decisions": "decisions (mean over runs)"}[x])
-        ax.set_ylabel(metric.replace("_", " "))
-        band_text = "min-max over runs" if band == "minmax" else "mean +- 1 sd over runs"
-        ax.set_title(title or f"{metric.replace('_', ' ')} (band: {band_text})")
-        ax.grid(True, alpha=0.3)
-        ax.legend(loc="best", fontsize="small")
-        fig.tight_layout()
-        fig.savefig(out, dpi=110)
-    finally:
-        plt.close(fig)
+    fig.savefig(out, dpi=110)
     return out
 
 

@@ -33,8 +33,7 @@ from typing import Any
 import numpy as np
 
 from adpart.errors import TaskError
-from adpart.experiments.stats import episodes_to_threshold
-from adpart.learning.curves import LearningCurve, plot_curves
+from adpart.learning.curves import LearningCurve, episodes_within, plot_curves
 from adpart.options.subgoal_options import LOCAL_RADIUS
 from adpart.workflows.discovery import discover_subgoals
 from adpart.workflows.learning import (
@@ -47,6 +46,7 @@ from adpart.workflows.learning import (
 from adpart.workflows.options import options_for_subgoals
 from adpart.workflows.partitioning import partition_environment
 from adpart.workflows.refs import parse_ref
+from adpart.workflows.reports import folder_name
 
 
 @dataclass(frozen=True)
@@ -159,7 +159,8 @@ def task_row(
 ) -> dict[str, Any]:
     v_star = float(curve.metadata.get("v_star_start", np.nan))
     bound = max(1e-9, fraction * abs(v_star)) if np.isfinite(v_star) else np.inf
-    to_bound = episodes_to_threshold(curve.matrix("value_gap"), curve.evaluated_episodes(), bound)
+    within = episodes_within(curve.matrix("value_gap"), curve.evaluated_episodes(), bound)
+    to_bound = np.where(within < 0, np.inf, within)  # never within: inf (null in JSON)
     final = curve.matrix("value_gap")[:, -1]
     return {
         "task": task,
@@ -544,11 +545,14 @@ def _figures(report: PipelineReport, config: PipelineConfig, out: Path | None) -
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
         for task, curves in report.curves.items():
-            path = out / f"{task}.png"
+            path = out / f"{folder_name(task)}.png"
+            rows = [r for r in report.rows if r["task"] == task and np.isfinite(r["bound"])]
             plot_curves(
                 curves,
                 path,
                 metric="value_gap",
                 title=f"{config.env}/{task}: value gap of the greedy policy",
+                bound=rows[0]["bound"] if rows else None,
+                bound_label=f"success bound ({config.gap_fraction:.0%} of |V*|)",
             )
             report.figures.append(str(path))

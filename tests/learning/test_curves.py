@@ -170,3 +170,28 @@ def test_start_values_store_is_bounded_and_still_exact(rng):
         assert np.array_equal(score(pols, np.ones(2, dtype=bool)), start_values(mdp, pols, mu))
     assert score.solves == 8  # a was evicted by b and c, so it is solved again
     assert len(score._store) == 2
+
+
+def test_the_figure_shows_medians_quartiles_runs_and_the_bound():
+    """Read back what was drawn: the centre line is the median over runs (not the mean, which
+    hides a two-way split), each run is a thin line, the bound is a dashed line at its value,
+    and a gap of 0 sits at the floor the legend names."""
+    from adpart.learning.curves import curve_figure
+
+    gap = np.array([[5.0, 2.0, 0.0, 0.0], [5.0, 4.0, 3.0, 3.0], [5.0, 2.0, 0.5, 0.0]])
+    z = np.zeros_like(gap)
+    c = LearningCurve.from_matrices(steps=z, decisions=z, returns=z, discounted_returns=z,
+                                    eval_value=-gap, value_gap=gap)
+    fig = curve_figure({"layer": c}, bound=1.0, bound_label="success bound")
+    ax = fig.axes[0]
+    by_label = {line.get_label(): line for line in ax.get_lines()}
+    floor = 10.0 ** np.floor(np.log10(0.5) - 1)  # a decade below the smallest positive gap
+    median = by_label["layer (median of 3)"]
+    np.testing.assert_allclose(median.get_ydata(), np.median(np.maximum(gap, floor), axis=0))
+    runs = [line for line in ax.get_lines() if line.get_gid() == "run"]
+    assert len(runs) == 3
+    bound = by_label["success bound"]
+    assert bound.get_gid() == "bound" and set(bound.get_ydata()) == {1.0}
+    assert bound.get_linestyle() == "--"
+    assert f"a gap of 0 is drawn at {floor:.0e}" in by_label
+    assert ax.get_yscale() == "log"

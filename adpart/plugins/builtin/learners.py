@@ -46,7 +46,7 @@ class QLearner:
         EPSILON,
         MAX_STEPS,
         q_init("Q(s, a)"),
-        kernel("numba", "numpy", "python"),
+        kernel("numba", "python"),
     )
 
     def __init__(
