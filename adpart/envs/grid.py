@@ -464,7 +464,8 @@ class GridDomain(Domain):
         return int(self.grid.cell_index[floor, y, x])
 
     def draw_extras(self, ax: Axes, floor: int) -> None:
-        """Letter the start (S), goal (G), stair (up/down arrows) and object-site cells."""
+        """Mark the stairs (up/down arrows) and letter the object-site cells; the start and goal
+        letters come from the task drawn (:func:`adpart.envs.render.render_domain`)."""
         chars = self.grid.chars[floor]
         F = self.grid.shape[0]
         small = max(chars.shape) <= 40
@@ -476,7 +477,7 @@ class GridDomain(Domain):
                     fontsize=8 if small else 5, fontweight="bold")
         if not small:
             return
-        for char in START + GOAL + SITES:
+        for char in SITES:
             for y, x in np.argwhere(chars == char):
                 ax.text(x, y, char, ha="center", va="center", color="tab:blue", fontsize=8,
                         fontweight="bold")

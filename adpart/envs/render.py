@@ -19,10 +19,12 @@ import colorsys
 from typing import TYPE_CHECKING
 
 import numpy as np
+from matplotlib import patheffects
 from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 
-from adpart.errors import ModelError
+from adpart.envs.base import Task
+from adpart.errors import AdpartError, ModelError
 
 if TYPE_CHECKING:
     from adpart.envs.base import Domain
@@ -66,6 +68,28 @@ def _boundaries(lab: np.ndarray) -> np.ndarray:
     return np.concatenate([vertical, horizontal]).astype(np.float64)
 
 
+#: Most cells a task's goal or start may cover and still be lettered.
+MAX_LETTERED = 20
+
+
+def _task_letters(domain: Domain, task: Task | str | None, cell: np.ndarray,
+                  shape: tuple[int, int, int]) -> dict[str, np.ndarray]:
+    """``{"G": cells, "S": cells}`` (bool ``shape``) of the task's goal and start."""
+    try:
+        chosen = task if isinstance(task, Task) else domain.task(task)
+    except AdpartError:
+        if task is not None:
+            raise
+        return {}  # a domain without a default task: nothing to letter
+    out = {}
+    for letter, states in (("G", chosen.terminal), ("S", np.asarray(chosen.initial) > 0)):
+        mask = np.zeros(int(np.prod(shape)), dtype=bool)
+        mask[cell[np.asarray(states, dtype=bool)]] = True
+        if 0 < mask.sum() <= MAX_LETTERED:
+            out[letter] = mask.reshape(shape)
+    return out
+
+
 def render_domain(
     domain: Domain,
     path: str | None = None,
@@ -74,6 +98,7 @@ def render_domain(
     marked: np.ndarray | None = None,
     labels: np.ndarray | None = None,
     title: str | None = None,
+    task: Task | str | None = None,
 ) -> Figure:
     """Draw ``domain`` with optional overlays; save a PNG at ``path`` if given.
 
@@ -84,6 +109,10 @@ def render_domain(
         marked: ``(S,)`` bool, cells with any marked state get a marker (e.g. subgoals).
         labels: ``(S,)`` int, one colour per label (e.g. partition blocks), with block borders.
         title: the figure's title (default: the domain's name).
+        task: the task whose goal (``G``: its terminal cells) and start (``S``: the cells it
+            starts from) are lettered, white on a black outline so they read on any colour;
+            default the domain's default task. Letters are left out when a task has more than
+            :data:`MAX_LETTERED` such cells (a factored task ends or starts almost anywhere).
 
     Returns:
         The matplotlib Figure.
@@ -142,6 +171,7 @@ def render_domain(
         np.logical_or.at(cell_mark, cell, mark.astype(bool))
         cell_mark = cell_mark.reshape(F, H, W)
 
+    letters = _task_letters(domain, task, cell, (F, H, W))
     image = None
     small = max(W, H) <= 40
     for f, ax in enumerate(axes):
@@ -164,6 +194,11 @@ def render_domain(
         extras = getattr(domain, "draw_extras", None)
         if callable(extras):
             extras(ax, f)
+        for letter, cells in letters.items():
+            for y_, x_ in np.argwhere(cells[f]):
+                ax.text(x_, y_, letter, ha="center", va="center", color="white", gid=letter,
+                        fontsize=9 if small else 6, fontweight="bold", zorder=4,
+                        path_effects=[patheffects.withStroke(linewidth=2.2, foreground="black")])
         if F > 1:
             ax.set_title(f"floor {f}", fontsize=9)
         ax.set_xlim(-0.5, W - 0.5)

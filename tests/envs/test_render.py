@@ -121,3 +121,27 @@ def test_domain_without_coordinates_is_refused() -> None:
 
     with pytest.raises(ModelError, match="no x and y state features"):
         render_domain(NoXY())
+
+
+def test_the_goal_and_start_letters_are_the_drawn_tasks():
+    """Read back the letters: a custom goal is lettered where it is, not at the map's G."""
+    from adpart.envs.registry import get_domain
+
+    domain = get_domain("two-rooms")
+
+    def letters(fig, letter):
+        return sorted(tuple(int(v) for v in t.get_position())
+                      for t in fig.axes[0].texts if t.get_gid() == letter)
+
+    custom = domain.render(task="goal:x=9,y=5")
+    assert letters(custom, "G") == [(9, 5)]
+    task = domain.task(None)
+    default = domain.render()
+    feats = domain.dynamics().features
+    goal = np.flatnonzero(task.terminal)
+    assert letters(default, "G") == sorted(zip(feats["x"][goal].tolist(),
+                                               feats["y"][goal].tolist()))
+    start = np.flatnonzero(task.initial > 0)
+    assert letters(default, "S") == sorted(zip(feats["x"][start].tolist(),
+                                               feats["y"][start].tolist()))
+    assert letters(default, "G") != letters(custom, "G")
