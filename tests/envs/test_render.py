@@ -140,8 +140,8 @@ def test_the_goal_and_start_letters_are_the_drawn_tasks():
     feats = domain.dynamics().features
     goal = np.flatnonzero(task.terminal)
     assert letters(default, "G") == sorted(zip(feats["x"][goal].tolist(),
-                                               feats["y"][goal].tolist()))
+                                               feats["y"][goal].tolist(), strict=True))
     start = np.flatnonzero(task.initial > 0)
     assert letters(default, "S") == sorted(zip(feats["x"][start].tolist(),
-                                               feats["y"][start].tolist()))
+                                               feats["y"][start].tolist(), strict=True))
     assert letters(default, "G") != letters(custom, "G")
