@@ -2,6 +2,7 @@
 PYTHON ?= python3
 VENV   ?= .venv
 PY     := $(VENV)/bin/python
+BASE   := $(VENV)/.installed
 STAMP  := $(VENV)/.installed-dev
 
 .PHONY: demo test test-all bench lint clean
@@ -10,7 +11,13 @@ $(PY):
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 
-$(STAMP): $(PY) pyproject.toml
+# The demo needs only adpart itself; the tests add the dev extra (pytest, Ray, PostgreSQL driver,
+# duckdb, ruff) on top.
+$(BASE): $(PY) pyproject.toml
+	$(PY) -m pip install -q -e .
+	touch $@
+
+$(STAMP): $(BASE)
 	$(PY) -m pip install -q -e ".[dev]"
 	touch $@
 
@@ -26,7 +33,7 @@ DEMO   := demo-output
 # the transfer pipeline on three-floor - learn reach-goal flat, discover subgoals, learn options,
 # partition, learn reach-top-west on the decision layer vs flat - with figures in demo-output/.
 # A second `make demo` reuses everything the knowledge base already holds.
-demo: $(STAMP)
+demo: $(BASE)
 	$(ADPART) learn two-rooms --runs 10 --episodes 300 --alpha 1 --epsilon 0.5 --eval-every 25 \
 		-q --out $(DEMO)/learn-two-rooms
 	$(ADPART) learn three-floor --runs 10 --episodes 500 --alpha 1 --max-steps 5000 \

@@ -569,7 +569,8 @@ def hierarchical_learning(
         steps=st.out_steps, decisions=st.out_dec, returns=st.out_ret,
         discounted_returns=st.out_dret, eval_value=eval_value, value_gap=v_star - eval_value,
         metadata={"learner": "hierarchical", "mdp": mdp.name, "mdp_hash": mdp.content_hash,
-                  "gamma": mdp.gamma, "v_star_start": v_star, **parameters},
+                  "gamma": mdp.gamma, "v_star_start": v_star, **parameters,
+                  "final_blocks": st.out_blocks[:, -1].tolist()},
     )
     return HierarchicalResult(
         Q=lifted(), block_Q=[st.Q[k, :parts[k].n_blocks].copy() for k in range(K)],

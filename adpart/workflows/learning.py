@@ -231,7 +231,7 @@ def run_learning(
         learner_package=spec.package,
         learner_version=spec.version,
         Q=np.concatenate([r["Q"] for r in results]),
-        curve=_merge_curves([r["curve"] for r in results], results[0]["metadata"]),
+        curve=_merge_curves([r["curve"] for r in results], [r["metadata"] for r in results]),
         batches=batches,
         v_star_start=float(results[0]["v_star_start"]),
         n_states=mdp.n_states,
@@ -274,7 +274,10 @@ def _decision_layer(kb: Any, request: LearnRequest) -> dict[str, Any]:
     return layer
 
 
-def _merge_curves(parts: list[dict[str, np.ndarray]], metadata: dict[str, Any]) -> LearningCurve:
+def _merge_curves(parts: list[dict[str, np.ndarray]], metadatas: list[dict[str, Any]]
+                  ) -> LearningCurve:
+    """One curve of all batches' runs; per-run metadata lists (``final_blocks``) concatenated."""
+    metadata = metadatas[0]
     offset = 0
     columns: dict[str, list[np.ndarray]] = {}
     for part in parts:
@@ -283,6 +286,9 @@ def _merge_curves(parts: list[dict[str, np.ndarray]], metadata: dict[str, Any]) 
         offset = int(shifted["run"].max()) + 1
         for key, col in shifted.items():
             columns.setdefault(key, []).append(np.asarray(col))
+    if all("final_blocks" in part_meta for part_meta in metadatas):
+        metadata = {**metadata,
+                    "final_blocks": [b for m in metadatas for b in m["final_blocks"]]}
     return LearningCurve({k: np.concatenate(v) for k, v in columns.items()}, metadata)
 
 

@@ -434,7 +434,7 @@ def run_pipeline(
                                         {"fallback": reason}))
             if config.baseline:
                 report.rows.append(task_row(task, "flat", curve, config.gap_fraction, {}))
-        _figures(report, config, out)
+        _figures(kb, report, config, out)
         return report
 
     say(f"learning options to {found.result.subgoals.size} subgoals")
@@ -517,6 +517,10 @@ def run_pipeline(
             partition=layer.ref,
         )
         hier_ids, hier_curve = _learn(kb, hier_req, report, "learn-hierarchical")
+        after = hier_curve.metadata.get("final_blocks")
+        if after:
+            label = label.replace(" blocks)", f" blocks before refinement, median "
+                                              f"{int(np.median(after))} after)")
         report.curves[task] = {label: hier_curve}
         report.rows.append(
             task_row(
@@ -537,11 +541,39 @@ def run_pipeline(
                 evidence.append(task_id)
         if task_id not in learned:
             learned.append(task_id)
-    _figures(report, config, out)
+    _figures(kb, report, config, out)
     return report
 
 
-def _figures(report: PipelineReport, config: PipelineConfig, out: Path | None) -> None:
+def _maps(kb: Any, report: PipelineReport, config: PipelineConfig, out: Path) -> None:
+    """The subgoals found and every decision layer used, drawn on the map (Figs. 4.2, 4.5)."""
+    from adpart.errors import ModelError
+    from adpart.workflows.resolve import resolve_domain
+
+    domain = resolve_domain(config.env)
+    for stage in report.stages:
+        try:
+            if stage.stage == "discover" and stage.detail.get("subgoals"):
+                mask = np.zeros(domain.n_states, dtype=bool)
+                mask[stage.detail["subgoals"]] = True
+                path = out / f"subgoals_{folder_name(stage.task or config.env)}.png"
+                domain.render(str(path), marked=mask, task=stage.task, title=(
+                    f"{config.env}: {int(mask.sum())} subgoals in the policy of {stage.task}"))
+            elif stage.stage in ("partition", "hierarchy"):
+                record = kb.get("partition", parse_ref(stage.result, "partition"))
+                labels = kb.load(record, "labels")
+                path = out / f"layer_{folder_name(stage.task or config.env)}.png"
+                domain.render(str(path), labels=labels, task=stage.task, title=(
+                    f"{config.env}/{stage.task}: decision layer {record.ref}, "
+                    f"{record.n_blocks} blocks before refinement"))
+            else:
+                continue
+        except ModelError:
+            return  # a domain without a map (x, y features): nothing to draw
+        report.figures.append(str(path))
+
+
+def _figures(kb: Any, report: PipelineReport, config: PipelineConfig, out: Path | None) -> None:
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
         for task, curves in report.curves.items():
