@@ -5,7 +5,7 @@ PY     := $(VENV)/bin/python
 BASE   := $(VENV)/.installed
 STAMP  := $(VENV)/.installed-dev
 
-.PHONY: demo test test-all bench lint clean
+.PHONY: demo test test-all bench lint docs clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -58,8 +58,12 @@ test-all: $(STAMP)
 bench: $(VENV)/.installed-bench
 	$(PY) -m benchmarks
 
+# The guides and the API reference (from the docstrings) as a site in build/site; warnings fail.
+docs: $(STAMP)
+	$(VENV)/bin/mkdocs build --strict -q
+
 lint: $(STAMP)
 	$(PY) -m ruff check adpart tests benchmarks
 
 clean:
-	rm -rf $(VENV) demo-output .pytest_cache .hypothesis
+	rm -rf $(VENV) demo-output build .pytest_cache .hypothesis

@@ -412,8 +412,9 @@ def hierarchical_learning(
             the block's best value (exploration for goals that are no subgoal; ``inconsistency``
             mode only - the other modes make the goal reachable on the layer).
         models: exact models of ``options`` (computed when omitted).
-        runs, episodes, seed, alpha, max_steps_per_episode, eval_every, reference_values,
-        progress, q_init, kernel: as :func:`adpart.learning.smdp_q.smdp_q_learning`;
+        runs: as :func:`adpart.learning.smdp_q.smdp_q_learning`, and so are ``episodes``,
+            ``seed``, ``alpha``, ``max_steps_per_episode``, ``eval_every``,
+            ``reference_values``, ``progress``, ``q_init`` and ``kernel``.
         epsilon_greedy: the exploration schedule (``epsilon`` is the partition's).
         intra_option: every option offered where the agent's steps follow its policy gets
             the SMDP update it would have had had it been chosen there (virtual executions,

@@ -320,9 +320,10 @@ def smdp_q_learning(
         options: the options (section 3.1); see ``include_primitives``.
         include_primitives: put the primitive actions' one-step options first.
         models: exact models of ``options`` (same order), for scoring; computed when omitted.
-        runs, episodes, seed, alpha, epsilon, max_steps_per_episode, eval_every,
-        reference_values, progress, q_init: as :func:`adpart.learning.q_learning` (``alpha``
-            counts updates of ``(s, o)``, ``epsilon`` decisions in ``s``).
+        runs: as :func:`adpart.learning.q_learning`, and so are ``episodes``, ``seed``,
+            ``alpha`` (it counts updates of ``(s, o)``), ``epsilon`` (decisions in ``s``),
+            ``max_steps_per_episode``, ``eval_every``, ``reference_values``, ``progress`` and
+            ``q_init``.
         kernel: ``"numba"`` or ``"python"`` (identical results).
         intra_option: also update every option consistent with each primitive step
             (intra-option Q-learning, Sutton, Precup & Singh 1999; :mod:`._smdp_kernels`).

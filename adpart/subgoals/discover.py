@@ -178,7 +178,8 @@ def discover_monte_carlo(
             at, in standard count units (section 5.1.4 uses 5 for the a-priori bound and 2 for
             the raised threshold).
         confidence: the probability ``p`` of eq. 4.3 (section 5.1.4 uses 0.9).
-        Other arguments as in :func:`discover_exhaustive`.
+
+    The other arguments are as in :func:`discover_exhaustive`.
     """
     t0 = time.perf_counter()
     mdp = check_mdp(mdp)

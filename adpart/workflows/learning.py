@@ -385,6 +385,8 @@ def _record_learning(kb: Any, outcome: LearnOutcome) -> dict[str, Any]:
             "episodes",
         )
     }
+    if "final_blocks" in outcome.curve.metadata:  # a decision layer's blocks after refinement
+        metrics["final_blocks"] = list(outcome.curve.metadata["final_blocks"])
     partition_id = None
     if request.partition is not None:
         from adpart.workflows.refs import parse_ref
@@ -467,4 +469,6 @@ def load_curve(kb: Any, run: Any) -> LearningCurve:
         "learner": run.learner,
         "v_star_start": run.metrics.get("v_star_start", curve.metadata.get("v_star_start")),
     }
+    if "final_blocks" in run.metrics:
+        metadata["final_blocks"] = run.metrics["final_blocks"]
     return LearningCurve(dict(curve.columns), metadata)

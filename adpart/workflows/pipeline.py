@@ -588,3 +588,4 @@ def _figures(kb: Any, report: PipelineReport, config: PipelineConfig, out: Path 
                 bound_label=f"success bound ({config.gap_fraction:.0%} of |V*|)",
             )
             report.figures.append(str(path))
+        _maps(kb, report, config, out)

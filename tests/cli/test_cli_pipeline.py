@@ -8,6 +8,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
@@ -66,7 +67,12 @@ def test_pipeline_runs_stores_everything_and_a_second_run_recomputes_nothing(tmp
     assert not any(s["reused"] for s in summary["stages"])
     rows = {(r["task"], r["learner"]): r for r in summary["tasks"]}
     assert rows[("goal:x=9,y=5", "hierarchical")]["initial_blocks"] < 55
-    assert (out / "summary.json").exists() and (out / "goal:x=9,y=5.png").exists()
+    assert (out / "summary.json").exists() and (out / "goal-x-9-y-5.png").exists()
+    # the subgoal map of the first task and the layer of the second, beside the curves
+    drawn = {Path(f).name for f in summary["figures"]}
+    assert {"subgoals_reach-goal.png", "layer_goal-x-9-y-5.png", "goal-x-9-y-5.png"} <= drawn
+    for name in drawn:
+        assert (out / name).read_bytes()[:4] == b"\x89PNG"
     before = counts(kb_dir)
 
     again = CliRunner().invoke(cli, [*PIPELINE, "--kb", str(kb_dir), "--out", str(out)])
