@@ -31,6 +31,7 @@ the point model over the layer's states is reported next to theorem 4.5's bound
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -370,6 +371,29 @@ def _store(
     )
 
 
+def _later_phase(
+    kb: Any, env: Any, base: _Base, mp: MultiPhasePartitioner, kind: str,
+    compute: Callable[[], Partition], columns: np.ndarray, *, parents: list[int], delta: float,
+    epsilon: float, task: Any = None, key: dict[str, Any],
+    parameters: Callable[[Partition], dict[str, Any]],
+) -> tuple[Partition, PhaseRecord, float]:
+    """Phase 2 or 3: the stored partition of these parents and settings, else computed and
+    stored with ``parameters(partition)`` as provenance; returns the partition, its row
+    (``reused`` says which) and the seconds computing took (0 when reused)."""
+    found = _find_later_phase(kb, env, base, kind, parents=parents, delta=delta,
+                              epsilon=epsilon if task is not None else None,
+                              task_id=None if task is None else task.id, key=key)
+    if found is not None:
+        part = Partition.from_labels(kb.load(found, "labels"), mp.layer_model.admissible)
+        return part, PhaseRecord(kind, found.id, part.n_blocks, reused=True), 0.0
+    t0 = time.perf_counter()
+    part = compute()
+    seconds = time.perf_counter() - t0
+    record = _store(kb, env, base, kind, part, columns, delta=delta, epsilon=epsilon,
+                    parents=parents, task=task, parameters={**parameters(part), **key})
+    return part, PhaseRecord(kind, record.id, part.n_blocks, reused=False), seconds
+
+
 def _phase1_all(
     kb: Any, env: Any, base: _Base, mp: MultiPhasePartitioner, key: dict[str, Any]
 ) -> tuple[dict[int, Partition], list[PhaseRecord], float]:
@@ -533,74 +557,25 @@ def partition_environment(
     seconds["reach"] = time.perf_counter() - t0
     key2 = {**key, "start": _mask_key(start)}
     parent_ids = [r.id for r in p1_rows]
-    rec2 = _find_later_phase(kb, env, base, "intersected", parents=parent_ids, delta=d, key=key2)
-    if rec2 is not None:  # the same phase-1 partitions, delta and start: phase 2 is stored
-        p2 = Partition.from_labels(kb.load(rec2, "labels"), mp.layer_model.admissible)
-        seconds["phase2"] = 0.0
-    else:
-        t0 = time.perf_counter()
-        p2 = mp.phase2(all_cols, unreachable=unreachable)
-        seconds["phase2"] = time.perf_counter() - t0
-        rec2 = _store(
-            kb,
-            env,
-            base,
-            "intersected",
-            p2,
-            all_cols,
-            delta=d,
-            epsilon=0.0,
-            parents=parent_ids,
-            parameters={"phase": 2, "options": options, **key2,
-                        "layer_counts": layer_counts(p2, terminal, unreachable)},
-        )
-    phase2_row = PhaseRecord("intersected", rec2.id, p2.n_blocks, reused=seconds["phase2"] == 0.0)
+    p2, phase2_row, seconds["phase2"] = _later_phase(
+        kb, env, base, mp, "intersected", lambda: mp.phase2(all_cols, unreachable=unreachable),
+        all_cols, parents=parent_ids, delta=d, epsilon=0.0, key=key2,
+        parameters=lambda part: {"phase": 2, "options": options,
+                                 "layer_counts": layer_counts(part, terminal, unreachable)},
+    )
 
     final, phase3_row, gap, rewards = p2, None, None, None
     if task_rec is not None:
         rewards = mp.decision_rewards(unreachable=unreachable, reward_baseline=baseline,
                                       gamma=task_mdp.gamma)
         key3 = {**key2, "reward_baseline": baseline}
-        rec3 = _find_later_phase(
-            kb,
-            env,
-            base,
-            "reward-refined",
-            parents=[rec2.id],
-            delta=d,
-            epsilon=e,
-            task_id=task_rec.id,
-            key=key3,
-        )
-        if rec3 is not None:
-            final = Partition.from_labels(kb.load(rec3, "labels"), mp.layer_model.admissible)
-            seconds["phase3"] = 0.0
-        else:
-            t0 = time.perf_counter()
-            final = mp.phase3(p2, all_cols, epsilon=e, rewards=rewards, unreachable=unreachable)
-            seconds["phase3"] = time.perf_counter() - t0
-        rec3 = rec3 or _store(
-            kb,
-            env,
-            base,
-            "reward-refined",
-            final,
-            all_cols,
-            delta=d,
-            epsilon=e,
-            parents=[rec2.id],
-            task=task_rec,
-            parameters={
-                "phase": 3,
-                "options": options,
-                "task": task_obj.name,
-                "recomputed_option_models": recomputed,
-                **key3,
-                "layer_counts": layer_counts(final, terminal, unreachable),
-            },
-        )
-        phase3_row = PhaseRecord(
-            "reward-refined", rec3.id, final.n_blocks, reused=seconds["phase3"] == 0.0
+        final, phase3_row, seconds["phase3"] = _later_phase(
+            kb, env, base, mp, "reward-refined",
+            lambda: mp.phase3(p2, all_cols, epsilon=e, rewards=rewards, unreachable=unreachable),
+            all_cols, parents=[phase2_row.id], delta=d, epsilon=e, task=task_rec, key=key3,
+            parameters=lambda part: {"phase": 3, "options": options, "task": task_obj.name,
+                                     "recomputed_option_models": recomputed,
+                                     "layer_counts": layer_counts(part, terminal, unreachable)},
         )
         t0 = time.perf_counter()
         gap = value_gap(final, model, epsilon=e, delta=d, options=all_cols,
