@@ -10,8 +10,13 @@ $(PY):
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 
-$(STAMP): $(PY) pyproject.toml
+# The dev install also installs the example plugin package (docs/plugin-authoring.md), which the
+# test suite discovers through its entry points like any third-party plugin.
+EXAMPLE_PLUGIN := examples/adpart-plugin-example
+
+$(STAMP): $(PY) pyproject.toml $(EXAMPLE_PLUGIN)/pyproject.toml
 	$(PY) -m pip install -q -e ".[dev]"
+	$(PY) -m pip install -q --no-deps -e $(EXAMPLE_PLUGIN)
 	touch $@
 
 $(VENV)/.installed-bench: $(STAMP)
