@@ -18,7 +18,8 @@ model and its value gap ``V*(mu) - V^pi(mu)`` recorded; the other episodes hold 
 
 Runs advance block by block (a block ends at each evaluated episode), so all runs are scored
 together and ``progress`` can report episodes done by every run. Inside a run the episode is a
-plain Python loop over steps - clear rather than fast (about 10^5-10^6 steps a second).
+plain Python loop over steps - clear rather than fast (about 5 x 10^4 steps a second on one core,
+a few hundred times slower than adpart's compiled Q-learning kernels).
 Run ``k`` draws from ``np.random.default_rng(seed).spawn(runs)[k]``: the same seed gives the
 same curve and Q.
 """
