@@ -12,13 +12,17 @@ $(PY):
 	$(PY) -m pip install -q --upgrade pip
 
 # The demo needs only adpart itself; the tests add the dev extra (pytest, Ray, PostgreSQL driver,
-# duckdb, ruff) on top.
+# duckdb, ruff, mkdocs) and the example plugin package (docs/plugin-authoring.md), which the
+# suite discovers through its entry points like any third-party plugin.
+EXAMPLE_PLUGIN := examples/adpart-plugin-example
+
 $(BASE): $(PY) pyproject.toml
 	$(PY) -m pip install -q -e .
 	touch $@
 
-$(STAMP): $(BASE)
+$(STAMP): $(BASE) $(EXAMPLE_PLUGIN)/pyproject.toml
 	$(PY) -m pip install -q -e ".[dev]"
+	$(PY) -m pip install -q --no-deps -e $(EXAMPLE_PLUGIN)
 	touch $@
 
 $(VENV)/.installed-bench: $(STAMP)
@@ -63,7 +67,7 @@ docs: $(STAMP)
 	$(VENV)/bin/mkdocs build --strict -q
 
 lint: $(STAMP)
-	$(PY) -m ruff check adpart tests benchmarks
+	$(PY) -m ruff check adpart tests benchmarks examples
 
 clean:
 	rm -rf $(VENV) demo-output build .pytest_cache .hypothesis

@@ -152,3 +152,24 @@ def test_local_executor_workers_use_one_numba_thread():
 
     with LocalExecutor(workers=2) as ex:
         assert ex.map(numba_threads_here, range(4)) == [1, 1, 1, 1]
+
+
+
+def test_documented_entry_points_and_builtins_are_the_installed_ones():
+    # the entry-point table of docs/plugins.md is adpart's own (pyproject.toml), line for line
+    text = DOCS.read_text()
+    table = re.search(r"```toml\n\[project.entry-points.adpart\]\n(.*?)```", text, re.DOTALL)
+    pyproject = (DOCS.parents[1] / "pyproject.toml").read_text()
+    ours = re.search(r"^\[project.entry-points.adpart\]\n(.*?)(?:^\[|\Z)", pyproject,
+                     re.MULTILINE | re.DOTALL)
+    assert table.group(1).strip().split("\n") == ours.group(1).strip().split("\n")
+    # every hook's "Built-ins:" list names exactly adpart's registered plugins of that kind
+    reg = get_registry()
+    for kind, hook in KINDS.items():
+        section = re.search(rf"^### {hook}\(register\)$(.*?)(?=^### |\Z)", text,
+                            re.MULTILINE | re.DOTALL).group(1)
+        listed = re.search(r"Built-ins: (.*?)(?:\(see|;|\.\s)", " ".join(section.split()))
+        assert listed, f"{hook}: no 'Built-ins:' list"
+        names = re.findall(r"`([^`]+)`", listed.group(1))
+        builtin = [s.name for s in reg.all(kind) if s.package == "adpart"]
+        assert sorted(names) == sorted(builtin), hook
