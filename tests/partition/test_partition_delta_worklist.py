@@ -168,3 +168,16 @@ def test_two_coarsest_delta_stable_refinements_exist():
     for part in (greedy, other):
         assert part.n_blocks == 3
         assert check_stability(part, model, delta=0.3)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(1, 40), st.integers(1, 8), st.integers(0, 5), st.integers(0, 2**31 - 1))
+def test_block_admissibility_is_the_and_over_each_blocks_states(S, B, n_opt, seed):
+    from adpart.partition.partition import block_all
+
+    rng = np.random.default_rng(seed)
+    labels = rng.integers(0, B, size=S)
+    mask = rng.random((S, n_opt)) < 0.8
+    expect = np.array([[mask[labels == b, o].all() for o in range(n_opt)] for b in range(B)],
+                      dtype=bool).reshape(B, n_opt)  # empty blocks: vacuously True
+    assert np.array_equal(block_all(labels, B, mask), expect)
