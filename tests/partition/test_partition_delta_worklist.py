@@ -143,6 +143,10 @@ def test_predecessor_lists_are_the_transpose_grouped_by_option(case):
     F = sp.csr_array(model.F)
     S, k = model.n_states, model.n_actions
     ptr, src, val = predecessors_by_option(S, k, F.indptr, F.indices, F.data)
+    wide = predecessors_by_option(S, k, F.indptr.astype(np.int64), F.indices.astype(np.int64),
+                                  F.data)  # large models come with int64 indices
+    for x, y in zip((ptr, src, val), wide, strict=True):
+        assert np.array_equal(x, y)
     Fd = F.toarray()
     for t in range(S):
         for a in range(k):
