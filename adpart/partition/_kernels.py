@@ -1,8 +1,9 @@
-"""numba kernels of the partition refiners: greedy interval cuts and the exact-lumping worklist.
+"""numba kernels of the partition refiners: greedy interval cuts, the exact-lumping worklist, the
+delta worklist and the predecessor lists it reads.
 
-Both are sequential by nature (a greedy cut depends on where the previous group started; a worklist
-pops one splitter at a time), so they are compiled rather than vectorised. They receive validated
-arrays only; the public functions in :mod:`adpart.partition.refine` and
+They are sequential by nature (a greedy cut depends on where the previous group started; a worklist
+pops one splitter at a time; a transpose scatters), so they are compiled rather than vectorised.
+They receive validated arrays only; the public functions in :mod:`adpart.partition.refine` and
 :mod:`adpart.partition.lumping` check every input first.
 """
 
