@@ -20,21 +20,29 @@ Compared, on the same model in the same run:
   reference the issue measured; run up to ``naive_max`` states because its rounds grow with the
   diameter).
 
-Second part: :func:`adpart.partition.refine` with ``delta = 0.3`` (eq. 4.6, reward independent)
-over 20 options - for each of the four moves, the open-loop macro "repeat the move k times",
-``k = 1..5``, with the discounted model ``F = (gamma P_a)^k`` - on ``lumpable_grid_mdp`` grids of
-increasing size, starting from the reward-strip partition; reported with its scaling exponent,
-against exact lumping of the same 20-option model (the reference: the worklist's cost per split
-should stay within a small factor of it), and against the earlier round-based refiner
-(:func:`adpart.partition.refine.delta_refine_rounds`, up to ``rounds_max`` states), with block
-counts of both and the independent delta-stability checker run on the result (up to
-``check_max`` states). Last, ``refine(delta=0, epsilon=0)`` (routed to exact lumping) against
+Second part (:func:`delta_table`): :func:`adpart.partition.refine` with ``delta = 0.3`` (eq. 4.6,
+reward independent) over 20 options - for each of the four moves, the open-loop macro "repeat the
+move k times", ``k = 1..5``, with the discounted model ``F = (gamma P_a)^k`` - on two grids of
+10^4-10^6 states, both with the 0.8/0.1/0.1 slip: the rooms grid of
+:func:`benchmarks._models.rooms_grid_mdp`, starting from the goal cell against the rest (phase 1's
+termination partition), and ``lumpable_grid_mdp``, starting from its reward strip. Each size
+reports the delta refinement against exact lumping of the same 20-option model from the same start
+(one after the other in the same run), their ratio, both block counts, the peak resident memory,
+and, over all sizes, the fitted scaling exponents; the earlier round-based refiner
+(:func:`adpart.partition.refine.delta_refine_rounds`) and the independent delta-stability checker
+are run on the small sizes. Last, ``refine(delta=0, epsilon=0)`` (routed to exact lumping) against
 Storm on the same grid.
+
+``python -m benchmarks.bench_partition delta [rooms|lumpable [SIZE ...]]`` runs the delta tables
+alone.
 """
 
 from __future__ import annotations
 
+import gc
 import math
+import resource
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -50,6 +58,7 @@ from adpart.partition.refine import delta_refine_rounds
 
 SIZES = (10_000, 100_000, 1_000_000)
 DELTA_SIZES = (10_000, 100_000, 1_000_000)
+WORKLOADS = ("rooms", "lumpable")
 
 
 def lumpable_grid_mdp(n_states: int, *, slip: float = 0.2, gamma: float = 0.95) -> FiniteMDP:
@@ -187,7 +196,8 @@ def _stacked(model: SMDPModel, start: Partition) -> tuple[np.ndarray, sp.csr_arr
 
 def main(sizes: tuple[int, ...] = SIZES, delta_sizes: tuple[int, ...] = DELTA_SIZES,
          naive_max: int = 100_000, repeats: int = 2, storm: bool = True,
-         rounds_max: int = 100_000, check_max: int = 100_000) -> dict[str, object]:
+         rounds_max: int = 10_000, check_max: int = 100_000,
+         workloads: tuple[str, ...] = WORKLOADS) -> dict[str, object]:
     """Print and return the exact-lumping table and the delta = 0.3 scaling table."""
     exact_lumping(lumpable_grid_mdp(400))  # compile the numba kernels outside the timings
     try:
@@ -226,48 +236,10 @@ def main(sizes: tuple[int, ...] = SIZES, delta_sizes: tuple[int, ...] = DELTA_SI
               f"{fmt('storm_load_s', 7)} {ratio_s} {fmt('naive_s', 8)} {ratio_n} {agree}",
               flush=True)
 
-    print("\ndelta = 0.3 refinement over 20 macro options (reward independent), lumpable_grid_mdp;")
-    print("reference: exact lumping of the same 20-option model; 'rounds' = the earlier "
-          f"round-based refiner (up to {rounds_max:,} states)")
-    print(f"{'states':>9} {'blocks':>7} {'worklist s':>10} {'exact s':>8} {'wl/exact':>8} "
-          f"{'rounds s':>9} {'r blocks':>8} {'rounds/wl':>9} {'delta-stable':>12}")
     drows = []
-    for n in delta_sizes:
-        mdp = lumpable_grid_mdp(n)
-        model = macro_options(mdp)
-        start = Partition.from_labels(mdp.R[:, 0].astype(np.int64), model.admissible)
-        t, part = _best(lambda model=model, start=start: refine(start, model, delta=0.3), 1)
-        t_ex, ex = _best(lambda model=model, start=start: exact_lumping(
-            model, initial=start, use_rewards=False), 1)
-        row = {"states": mdp.n_states, "blocks": part.n_blocks, "seconds": t,
-               "exact_s": t_ex, "exact_blocks": ex.n_blocks, "ratio_exact": t / t_ex}
-        if mdp.n_states <= rounds_max:
-            labels, F, k = _stacked(model, start)
-            t_r, (old, _) = _best(
-                lambda labels=labels, F=F, k=k: delta_refine_rounds(labels, F, k, 0.3, 1e-9), 1)
-            row.update(rounds_s=t_r, rounds_blocks=int(old.max()) + 1)
-        stable = "-"
-        if mdp.n_states <= check_max:
-            stable = str(bool(check_stability(part, model, delta=0.3)))
-        row["stable"] = stable
-        drows.append(row)
-        r_s = f"{row['rounds_s']:>9.2f}" if "rounds_s" in row else f"{'-':>9}"
-        r_b = f"{row['rounds_blocks']:>8}" if "rounds_blocks" in row else f"{'-':>8}"
-        r_r = f"{row['rounds_s'] / t:>9.1f}" if "rounds_s" in row else f"{'-':>9}"
-        print(f"{mdp.n_states:>9} {part.n_blocks:>7} {t:>10.2f} {t_ex:>8.2f} {t / t_ex:>8.2f} "
-              f"{r_s} {r_b} {r_r} {stable:>12}", flush=True)
-        del model
-    if len(drows) >= 2:
-        a, b = drows[0], drows[-1]
-        expo = math.log(b["seconds"] / a["seconds"]) / math.log(b["states"] / a["states"])
-        ex_expo = math.log(b["exact_s"] / a["exact_s"]) / math.log(b["states"] / a["states"])
-        print(f"scaling exponent (time ~ states^x) {a['states']:,} to {b['states']:,}: "
-              f"worklist x = {expo:.2f}, exact lumping x = {ex_expo:.2f}")
-        olds = [r for r in drows if "rounds_s" in r]
-        if len(olds) >= 2:
-            a, b = olds[0], olds[-1]
-            expo_r = math.log(b["rounds_s"] / a["rounds_s"]) / math.log(b["states"] / a["states"])
-            print(f"  round-based refiner {a['states']:,} to {b['states']:,}: x = {expo_r:.2f}")
+    for workload in workloads:
+        drows += delta_table(workload, delta_sizes, rounds_max=rounds_max, check_max=check_max,
+                             repeats=repeats)
     if storm:
         mdp = lumpable_grid_mdp(delta_sizes[0])
         t0, part0 = _best(lambda: refine(Partition.from_labels(
@@ -279,5 +251,154 @@ def main(sizes: tuple[int, ...] = SIZES, delta_sizes: tuple[int, ...] = DELTA_SI
     return {"lumping": rows, "delta": drows}
 
 
+def delta_workload(workload: str, n: int) -> tuple[FiniteMDP, np.ndarray]:
+    """The grid of a delta workload and its initial labels.
+
+    ``rooms``: :func:`benchmarks._models.rooms_grid_mdp` (the peers' rooms grid, slip 0.8/0.1/0.1),
+    starting from the goal cell against the rest (phase 1's termination partition);
+    ``lumpable``: :func:`lumpable_grid_mdp`, starting from its reward strip.
+    """
+    if workload == "rooms":
+        from benchmarks._models import rooms_grid_mdp
+
+        mdp = rooms_grid_mdp(n)
+        return mdp, mdp.terminal.astype(np.int64)
+    if workload == "lumpable":
+        mdp = lumpable_grid_mdp(n)
+        return mdp, mdp.R[:, 0].astype(np.int64)
+    raise ValueError(f"unknown delta workload {workload!r}; choose rooms or lumpable")
+
+
+def _peak_rss_gb() -> float:
+    """The process's peak resident set so far (``getrusage`` ``ru_maxrss``, KiB on Linux)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
+
+
+def _reset_peak() -> bool:
+    """Reset the kernel's resident high-water mark (Linux ``/proc/self/clear_refs`` value 5)."""
+    try:
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")
+        return True
+    except OSError:
+        return False
+
+
+def _peak_since_reset_gb() -> float:
+    """``VmHWM`` of ``/proc/self/status``: the peak resident set since the last reset (GiB)."""
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 2**20
+    return math.nan
+
+
+def _timed(fn, repeats: int) -> tuple[float, float, float, object]:
+    """Best wall and best CPU seconds over ``repeats`` calls, the peak memory, the last result.
+
+    The peak (GiB) is the process's resident high-water mark during the first call: the model,
+    already resident, plus the call's working memory. Where the mark cannot be reset it is the
+    process's peak so far (``ru_maxrss``).
+    """
+    wall, cpu, out = math.inf, math.inf, None
+    reset = _reset_peak()
+    peak = math.nan
+    for i in range(repeats):
+        t0, c0 = time.perf_counter(), time.process_time()
+        out = fn()
+        wall = min(wall, time.perf_counter() - t0)
+        cpu = min(cpu, time.process_time() - c0)
+        if i == 0:
+            peak = _peak_since_reset_gb() if reset else _peak_rss_gb()
+    return wall, cpu, peak, out
+
+
+def fitted_exponent(states: list[int], seconds: list[float]) -> float:
+    """Least-squares slope of log(seconds) on log(states): ``time ~ states^x``."""
+    return float(np.polyfit(np.log(states), np.log(seconds), 1)[0])
+
+
+def delta_table(workload: str, sizes: tuple[int, ...], *, rounds_max: int = 10_000,
+                check_max: int = 100_000, repeats: int = 2) -> list[dict[str, object]]:
+    """delta = 0.3 over 20 macro options against exact lumping of the same model, same run.
+
+    Per size: the best wall (and CPU) seconds of ``refine(start, model, delta=0.3)`` and of
+    ``exact_lumping(model, initial=start, use_rewards=False)`` over ``repeats`` calls each, one
+    after the other on the same model; their ratio; both block counts; the model's transition
+    entries (and the GiB of its arrays) and the peak resident memory of the process during one
+    call of each (the model included); the independent delta-stability
+    checker up to ``check_max`` states and the earlier round-based refiner up to ``rounds_max``.
+    Last, the exponents fitted over all sizes.
+    """
+    # compile the kernels outside the timings
+    mdp, lab = delta_workload(workload, 400)
+    model = macro_options(mdp)
+    start = Partition.from_labels(lab, model.admissible)
+    refine(start, model, delta=0.3)
+    exact_lumping(model, initial=start, use_rewards=False)
+    print(f"\ndelta = 0.3 refinement over 20 macro options (reward independent), "
+          f"{workload} grid; reference: exact lumping of the same 20-option model, same run")
+    print(f"{'states':>9} {'entries':>11} {'model GB':>8} {'blocks':>7} {'delta s':>8} "
+          f"{'cpu s':>7} {'peak GB':>7} {'exact s':>8} {'cpu s':>7} {'peak GB':>7} "
+          f"{'ex blocks':>9} {'ratio':>6} {'cpu ratio':>9} {'rounds s':>8} {'stable':>6}",
+          flush=True)
+    rows = []
+    for n in sizes:
+        mdp, lab = delta_workload(workload, n)
+        model = macro_options(mdp)
+        start = Partition.from_labels(lab, model.admissible)
+        del mdp
+        gc.collect()
+        F = model.F
+        model_gb = (F.data.nbytes + F.indices.nbytes + F.indptr.nbytes) / 2**30
+
+        def run_delta(model=model, start=start):
+            return refine(start, model, delta=0.3)
+
+        def run_exact(model=model, start=start):
+            return exact_lumping(model, initial=start, use_rewards=False)
+
+        t, c, peak, part = _timed(run_delta, repeats)
+        t_ex, c_ex, peak_ex, ex = _timed(run_exact, repeats)
+        row = {"workload": workload, "states": model.n_states, "entries": F.nnz,
+               "model_gb": model_gb, "blocks": part.n_blocks, "seconds": t, "cpu_s": c,
+               "exact_s": t_ex, "exact_cpu_s": c_ex, "exact_blocks": ex.n_blocks,
+               "ratio_exact": t / t_ex, "cpu_ratio": c / c_ex, "peak_gb": peak,
+               "exact_peak_gb": peak_ex}
+        if model.n_states <= rounds_max:
+            labels, F, k = _stacked(model, start)
+            t_r, (old, _) = _best(
+                lambda labels=labels, F=F, k=k: delta_refine_rounds(labels, F, k, 0.3, 1e-9), 1)
+            row.update(rounds_s=t_r, rounds_blocks=int(old.max()) + 1)
+        row["stable"] = "-"
+        # the checker builds a dense (members x blocks) table per block and option
+        if model.n_states <= check_max and part.n_blocks * model.n_states <= 2 * 10**8:
+            row["stable"] = str(bool(check_stability(part, model, delta=0.3)))
+        rows.append(row)
+        r_s = f"{row['rounds_s']:>8.2f}" if "rounds_s" in row else f"{'-':>8}"
+        print(f"{row['states']:>9} {row['entries']:>11} {model_gb:>8.2f} {part.n_blocks:>7} "
+              f"{t:>8.3f} {c:>7.3f} {peak:>7.2f} {t_ex:>8.3f} {c_ex:>7.3f} {peak_ex:>7.2f} "
+              f"{ex.n_blocks:>9} {t / t_ex:>6.2f} {c / c_ex:>9.2f} {r_s} {row['stable']:>6}",
+              flush=True)
+        del model, part, ex
+    if len(rows) >= 2:
+        st = [r["states"] for r in rows]
+        x = fitted_exponent(st, [r["seconds"] for r in rows])
+        xc = fitted_exponent(st, [r["cpu_s"] for r in rows])
+        xe = fitted_exponent(st, [r["exact_s"] for r in rows])
+        print(f"fitted exponent (time ~ states^x, {st[0]:,} to {st[-1]:,} states): delta x = "
+              f"{x:.2f} (cpu {xc:.2f}), exact lumping x = {xe:.2f}", flush=True)
+        for r in rows:
+            r.update(exponent=x, cpu_exponent=xc, exact_exponent=xe)
+    return rows
+
+
 if __name__ == "__main__":
-    main()
+    # python -m benchmarks.bench_partition [delta [WORKLOAD [SIZE ...]]]: the delta table alone
+    if sys.argv[1:2] == ["delta"]:
+        chosen = tuple(sys.argv[2:3]) or WORKLOADS
+        given = tuple(int(a) for a in sys.argv[3:]) or DELTA_SIZES
+        for w in chosen:
+            delta_table(w, given)
+    else:
+        main()

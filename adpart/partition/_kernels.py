@@ -1,8 +1,9 @@
-"""numba kernels of the partition refiners: greedy interval cuts and the exact-lumping worklist.
+"""numba kernels of the partition refiners: greedy interval cuts, the exact-lumping worklist, the
+delta worklist and the predecessor lists it reads.
 
-Both are sequential by nature (a greedy cut depends on where the previous group started; a worklist
-pops one splitter at a time), so they are compiled rather than vectorised. They receive validated
-arrays only; the public functions in :mod:`adpart.partition.refine` and
+They are sequential by nature (a greedy cut depends on where the previous group started; a worklist
+pops one splitter at a time; a transpose scatters), so they are compiled rather than vectorised.
+They receive validated arrays only; the public functions in :mod:`adpart.partition.refine` and
 :mod:`adpart.partition.lumping` check every input first.
 """
 
@@ -252,17 +253,85 @@ def _heap_pop(hkey, hval, size):
 
 
 @njit(cache=True)
-def delta_worklist(n, n_act, pred_ptr, pred_row, pred_val, init_labels, n_init, width,
-                   max_pops):
+def predecessors_by_option(n, n_act, indptr, indices, data):  # pragma: no cover - compiled
+    """Predecessor lists of the stacked rows ``F`` (``(n_act*n, n)`` CSR), one per (target, option).
+
+    Entries ``ptr[t*n_act + a]:ptr[t*n_act + a + 1]`` of ``src`` / ``val`` are the states ``s``
+    with ``F(t | s, a) > 0`` in increasing ``s``, and those masses (exact zeros are dropped, as
+    ``eliminate_zeros`` would). This is the transpose of ``F`` (column ``t``'s entries in row
+    order, which groups them by option), built by one counting pass and one scatter pass over
+    ``F``; the option boundaries are recorded while the rows of each option are scattered.
+    ``src`` holds states (not rows), in the dtype of ``indices``.
+    """
+    nk = n * n_act
+    count = np.zeros(n + 1, dtype=np.int64)
+    for q in range(indptr[nk]):
+        if data[q] != 0.0:
+            count[indices[q] + 1] += 1
+    for t in range(n):
+        count[t + 1] += count[t]
+    m = count[n]
+    fill = count[:n].copy()
+    ptr = np.empty(nk + 1, dtype=np.int64)
+    src = np.empty(m, dtype=indices.dtype)
+    val = np.empty(m, dtype=np.float64)
+    for a in range(n_act):
+        for t in range(n):
+            ptr[t * n_act + a] = fill[t]
+        for s in range(n):
+            r = a * n + s
+            for q in range(indptr[r], indptr[r + 1]):
+                x = data[q]
+                if x != 0.0:
+                    t = indices[q]
+                    f = fill[t]
+                    src[f] = s
+                    val[f] = x
+                    fill[t] = f + 1
+    ptr[nk] = m
+    return ptr, src, val
+
+
+@njit(cache=True)
+def _stable_sort_by_key(keys, items, lo, hi):  # pragma: no cover - compiled
+    """Sort ``keys[lo:hi]`` ascending and permute ``items[lo:hi]`` alike; stable.
+
+    Insertion sort below 32 entries (no allocation), else a stable argsort of the slice; either
+    way the permutation is that of ``np.argsort(keys[lo:hi], kind="mergesort")``.
+    """
+    m = hi - lo
+    if m <= 32:
+        for i in range(lo + 1, hi):
+            k = keys[i]
+            x = items[i]
+            j = i - 1
+            while j >= lo and keys[j] > k:
+                keys[j + 1] = keys[j]
+                items[j + 1] = items[j]
+                j -= 1
+            keys[j + 1] = k
+            items[j + 1] = x
+        return
+    order = np.argsort(keys[lo:hi], kind="mergesort")
+    k_sorted = keys[lo:hi][order]
+    i_sorted = items[lo:hi][order]
+    keys[lo:hi] = k_sorted
+    items[lo:hi] = i_sorted
+
+
+@njit(cache=True)
+def delta_worklist(n, n_act, pred_ptr, pred_src, pred_val, init_labels, n_init, width,
+                   max_pops):  # pragma: no cover - compiled
     """delta-refinement to a fixpoint with a splitter worklist (eq. 4.6, DESIGN.md's split rule).
 
     The shape of :func:`lump`, with the greedy delta cut instead of exact equality: popping a
-    splitter block ``C``, the masses ``w(s, a) = sum_{t in C} F(t | s, a)`` are accumulated over
-    the predecessors of ``C`` only; then, option after option, every block ``B`` holding a
-    predecessor is checked on the one criterion ``(a, C)``: its states' masses (0 for the
-    untouched ones) are sorted and, if their span exceeds ``width``, cut greedily - a new group
-    whenever a mass exceeds the group's first by more than ``width`` (the fewest sub-blocks for
-    that criterion). Blocks without a predecessor in ``C`` have span 0 and are never looked at.
+    splitter block ``C``, then option after option, the masses ``w(s) = sum_{t in C} F(t | s, a)``
+    are accumulated over the predecessors of ``C`` under ``a`` only, and every block ``B`` holding
+    one is checked on the one criterion ``(a, C)``: its states' masses (0 for the untouched ones)
+    are sorted and, if their span exceeds ``width``, cut greedily - a new group whenever a mass
+    exceeds the group's first by more than ``width`` (the fewest sub-blocks for that criterion).
+    Blocks without a predecessor in ``C`` have span 0 and are never looked at, nor are blocks of
+    one state (they cannot be split).
 
     Why this reaches a delta-stable fixpoint: a sub-block of a block that was stable for a
     criterion stays stable for it (a subset's span is at most the set's), so stability can be lost
@@ -275,9 +344,14 @@ def delta_worklist(n, n_act, pred_ptr, pred_row, pred_val, init_labels, n_init, 
     block's slice: the untouched states (mass 0) and the touched ones whose mass is within
     ``width`` of 0 then form the first group, which keeps the block's id.
 
+    ``C``'s members are copied when it is popped (it may itself be split by an earlier option's
+    cut), so every option sees the ``C`` that was popped. The work per pop is proportional to the
+    predecessor entries of ``C`` plus the sorts of the touched blocks; the mass array has one slot
+    per state (not per state and option), so it stays in cache far longer on large models.
+
     Args:
         n, n_act: states and stacked options.
-        pred_ptr, pred_row, pred_val: CSR of the transposed model (rows ``a*n + s``).
+        pred_ptr, pred_src, pred_val: predecessor lists from :func:`predecessors_by_option`.
         init_labels: ``(n,)`` int64 initial blocks ``0..n_init-1``.
         width: ``delta + atol``.
         max_pops: give up after this many splitters (returns ``pops = -1``); ``<= 0``: no cap.
@@ -297,14 +371,14 @@ def delta_worklist(n, n_act, pred_ptr, pred_row, pred_val, init_labels, n_init, 
         hsize = _heap_push(hkey, hval, hsize, bend[b] - bstart[b], b)
         inwl[b] = True
 
-    w = np.zeros(n_act * n, dtype=np.float64)
-    marked = np.zeros(n_act * n, dtype=np.bool_)
-    touched = np.empty(n_act * n, dtype=np.int64)
+    w = np.zeros(n, dtype=np.float64)
+    marked = np.zeros(n, dtype=np.bool_)
+    touched = np.empty(n, dtype=np.int64)
+    splitter = np.empty(n, dtype=np.int64)
+    keys = np.empty(n, dtype=np.float64)
     bmark = np.zeros(n + 1, dtype=np.int64)
     tblocks = np.empty(n + 1, dtype=np.int64)
     gstart = np.empty(n + 2, dtype=np.int64)
-    bya = np.empty(n_act * n, dtype=np.int64)  # touched rows bucketed by option
-    aptr = np.zeros(n_act + 1, dtype=np.int64)
     pops = 0
 
     while hsize > 0:
@@ -313,36 +387,29 @@ def delta_worklist(n, n_act, pred_ptr, pred_row, pred_val, init_labels, n_init, 
         c, hsize = _heap_pop(hkey, hval, hsize)  # the smallest waiting splitter first
         inwl[c] = False
         pops += 1
-        nt = 0
-        for i in range(bstart[c], bend[c]):
-            t = elems[i]
-            for k in range(pred_ptr[t], pred_ptr[t + 1]):
-                r = pred_row[k]
-                if not marked[r]:
-                    marked[r] = True
-                    touched[nt] = r
-                    nt += 1
-                w[r] += pred_val[k]
-        # counting sort of the touched rows by option: each option's pass reads only its rows
-        aptr[:] = 0
-        for i in range(nt):
-            aptr[touched[i] // n + 1] += 1
+        nc = bend[c] - bstart[c]
+        for i in range(nc):
+            splitter[i] = elems[bstart[c] + i]
         for a in range(n_act):
-            aptr[a + 1] += aptr[a]
-        fill = aptr[:n_act].copy()
-        for i in range(nt):
-            a = touched[i] // n
-            bya[fill[a]] = touched[i]
-            fill[a] += 1
-        for a in range(n_act):
-            base = a * n
+            # masses into C under option a, first-touch order
+            nt = 0
+            for i in range(nc):
+                j = splitter[i] * n_act + a
+                for q in range(pred_ptr[j], pred_ptr[j + 1]):
+                    s = pred_src[q]
+                    if not marked[s]:
+                        marked[s] = True
+                        touched[nt] = s
+                        nt += 1
+                    w[s] += pred_val[q]
             ntb = 0
-            for i in range(aptr[a], aptr[a + 1]):
-                r = bya[i]
-                if w[r] <= 0.0:
+            for i in range(nt):
+                s = touched[i]
+                if w[s] <= 0.0:
                     continue
-                s = r - base
                 b = blk[s]
+                if bend[b] - bstart[b] == 1:
+                    continue  # a single state is stable for every criterion
                 if bmark[b] == 0:
                     tblocks[ntb] = b
                     ntb += 1
@@ -357,26 +424,27 @@ def delta_worklist(n, n_act, pred_ptr, pred_row, pred_val, init_labels, n_init, 
                 hi = bend[b]
                 size = hi - lo
                 t0 = hi - m  # touched states occupy [t0, hi)
-                keys = np.empty(m, dtype=np.float64)
-                for i in range(m):
-                    keys[i] = w[base + elems[t0 + i]]
-                kmin = keys.min() if m == size else 0.0
-                if keys.max() - kmin <= width:
+                kmax = -np.inf
+                kmin = np.inf
+                for i in range(t0, hi):
+                    x = w[elems[i]]
+                    keys[i] = x
+                    kmax = max(kmax, x)
+                    kmin = min(kmin, x)
+                if m < size:
+                    kmin = 0.0
+                if kmax - kmin <= width:
                     continue  # span within delta: stable for this criterion
-                order = np.argsort(keys, kind="mergesort")
-                moved = elems[t0:hi].copy()
-                for i in range(m):
-                    s = moved[order[i]]
-                    elems[t0 + i] = s
-                    pos[s] = t0 + i
-                    keys[i] = w[base + s]
+                _stable_sort_by_key(keys, elems, t0, hi)
+                for i in range(t0, hi):
+                    pos[elems[i]] = i
                 # greedy groups over [lo, hi): untouched states (mass 0) come first
                 ng = 1
                 gstart[0] = lo
                 first = kmin
-                for i in range(m):
+                for i in range(t0, hi):
                     if keys[i] - first > width:
-                        gstart[ng] = t0 + i
+                        gstart[ng] = i
                         ng += 1
                         first = keys[i]
                 gstart[ng] = hi
@@ -394,8 +462,8 @@ def delta_worklist(n, n_act, pred_ptr, pred_row, pred_val, init_labels, n_init, 
                 if not inwl[b]:
                     hsize = _heap_push(hkey, hval, hsize, gstart[1] - lo, b)
                     inwl[b] = True
-        for i in range(nt):
-            r = touched[i]
-            w[r] = 0.0
-            marked[r] = False
+            for i in range(nt):
+                s = touched[i]
+                w[s] = 0.0
+                marked[s] = False
     return blk, nb, pops

@@ -69,10 +69,17 @@ def row_codes(mask: np.ndarray) -> np.ndarray:
 def block_all(labels: np.ndarray, n_blocks: int, mask: np.ndarray) -> np.ndarray:
     """``(B, O)``: whether ``mask[s, o]`` holds for every state ``s`` of each block."""
     mask = np.asarray(mask, dtype=bool)
+    labels = np.asarray(labels)
     counts = np.bincount(labels, minlength=n_blocks)
-    hits = np.zeros((n_blocks, mask.shape[1]), dtype=np.int64)
-    np.add.at(hits, labels, mask.astype(np.int64))
-    return hits == counts[:, None]
+    out = np.ones((n_blocks, mask.shape[1]), dtype=bool)  # an empty block: vacuously all
+    full = np.flatnonzero(counts)
+    if full.size and mask.shape[1]:
+        # one AND-reduction per block over its rows, the rows grouped by block (no np.add.at,
+        # which costs ~1 s for 10^6 states x 20 options)
+        starts = (np.cumsum(counts) - counts)[full]
+        order = np.argsort(labels, kind="stable")
+        out[full] = np.logical_and.reduceat(mask[order], starts, axis=0)
+    return out
 
 
 @dataclass(frozen=True, eq=False)

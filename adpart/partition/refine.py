@@ -40,7 +40,7 @@ import scipy.sparse as sp
 
 from adpart.errors import ModelError
 from adpart.mdp.model import SMDPModel
-from adpart.partition._kernels import delta_worklist, greedy_groups
+from adpart.partition._kernels import delta_worklist, greedy_groups, predecessors_by_option
 from adpart.partition._validate import (
     DEFAULT_ATOL,
     as_model,
@@ -171,13 +171,17 @@ def delta_refine(
 
         return lump_labels(labels, F, k, atol), 0
     S = labels.size
-    FT = sp.csr_array(F.T)
-    FT.eliminate_zeros()
+    F = sp.csr_array(F)
+    # the model's arrays as they are (no int64 / float64 copies: at 10^6 states and 20 options
+    # each copy of the entries is ~2 GB); the kernels compile for the index dtype given
+    ptr, src, val = predecessors_by_option(
+        S, k, F.indptr, F.indices, np.asarray(F.data, dtype=np.float64)
+    )
     out, _, pops = delta_worklist(
-        S, k, FT.indptr.astype(np.int64), FT.indices.astype(np.int64),
-        FT.data.astype(np.float64), labels.copy(), int(labels.max()) + 1, float(delta + atol),
+        S, k, ptr, src, val, labels.copy(), int(labels.max()) + 1, float(delta + atol),
         0 if max_rounds is None else int(max_rounds),
     )
+    del ptr, src, val
     if pops < 0:
         raise ModelError(f"delta refinement did not reach a fixpoint in {max_rounds} splitters")
     return out, int(pops)
