@@ -77,7 +77,10 @@ def make_plugin_manager(*, load_entrypoints: bool = True) -> PluginManager:
                 if ep.group != ENTRY_POINT_GROUP or (package, ep.name) in seen:
                     continue
                 seen.add((package, ep.name))
-                if ep.name in blocked or pm.has_plugin(ep.name):
+                # another package's entry point may share a name with adpart's own ("learners"):
+                # it is registered under "<package>:<name>", so it can never hide a built-in
+                name = ep.name if package == "adpart" else f"{package}:{ep.name}"
+                if {ep.name, name} & blocked or pm.has_plugin(name):
                     continue
                 try:
                     plugin = ep.load()
@@ -91,7 +94,7 @@ def make_plugin_manager(*, load_entrypoints: bool = True) -> PluginManager:
                         stacklevel=2,
                     )
                     continue
-                pm.register_checked(plugin, ep.name, package, dist.version or "")
+                pm.register_checked(plugin, name, package, dist.version or "")
     for name, module in BUILTIN_PLUGINS.items():
         if name not in blocked and not pm.has_plugin(name):
             pm.register_checked(importlib.import_module(module), name, "adpart", adpart_version)

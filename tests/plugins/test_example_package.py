@@ -63,7 +63,9 @@ def run(*args: str, env: dict[str, str] | None = None):
 
 def test_discovered_through_its_entry_points():
     pm = make_plugin_manager()
-    assert {name for name, (pkg, _) in pm.sources.items() if pkg == DIST} == ENTRY_POINTS
+    # a third-party entry point is registered as "<package>:<name>"
+    assert {name for name, (pkg, _) in pm.sources.items() if pkg == DIST} == {
+        f"{DIST}:{ep}" for ep in ENTRY_POINTS}
     reg = build_registry(pm)
     for kind, name in PLUGINS:
         spec = reg.get(kind, name)
@@ -185,7 +187,8 @@ def test_pipeline_with_the_example_learner_and_detector(tmp_path):
     assert tasks[("reach-east", "flat")]["runs"] == 2
     for row in summary["tasks"]:
         assert {"final_gap_mean", "final_gap_max", "runs_within_bound"} <= set(row)
-    assert [Path(f).name for f in summary["figures"]] == ["reach-east.png", "reach-middle.png"]
+    assert [Path(f).name for f in summary["figures"]] == [
+        "reach-east.png", "reach-middle.png", "subgoals_reach-east.png", "layer_reach-middle.png"]
 
 
 # --------------------------------------------------------------------------- the guide

@@ -65,6 +65,17 @@ def test_broken_plugin_warns_with_package_name_and_rest_keeps_working(plugin_sit
     assert "local" in reg.names("executor")
 
 
+def test_an_entry_point_named_like_a_builtin_hides_nothing(plugin_site):
+    source = FAKE_PLUGIN.replace('name = "reversed-serial"', 'name = "clashing-serial"')
+    # the same entry-point name as adpart's own executors module
+    root = install_fake_distribution(plugin_site, "fake-adpart-clash", "fake_adpart_clash", source)
+    (next(root.glob("*.dist-info")) / "entry_points.txt").write_text(
+        "[adpart]\nexecutors = fake_adpart_clash\n")
+    reg = get_registry()
+    assert {"local", "serial", "clashing-serial"} <= set(reg.names("executor"))
+    assert reg.get("executor", "clashing-serial").package == "fake-adpart-clash"
+
+
 def test_misspelled_hook_warns(plugin_site):
     source = (
         "from adpart.plugins import hookimpl\n"
