@@ -54,7 +54,7 @@ demo: $(BASE)
 SINGLE_THREAD := OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
 
 test: $(STAMP)
-	$(SINGLE_THREAD) $(PY) -m pytest -n 2 -q
+	$(SINGLE_THREAD) $(PY) -m pytest -n 2 -q --durations=10
 
 test-all: $(STAMP)
 	$(SINGLE_THREAD) $(PY) -m pytest -n 2 -q -m ""
