@@ -17,7 +17,7 @@ if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
-__all__ = ["RUN_COLOURS", "new_figure"]
+__all__ = ["RUN_COLOURS", "map_figure", "new_figure"]
 
 #: Okabe & Ito's colour-blind-safe palette, black last.
 RUN_COLOURS = ("#0072B2", "#E69F00", "#009E73", "#CC79A7", "#56B4E9", "#D55E00", "#F0E442",
@@ -33,6 +33,15 @@ def new_figure(figsize: tuple[float, float] = (7.0, 4.2), **subplots: Any) -> tu
     for ax in (axes.flat if hasattr(axes, "flat") else [axes]):
         style_axes(ax)
     return fig, axes
+
+
+def map_figure(figsize: tuple[float, float], panels: int) -> tuple[Figure, Any]:
+    """A figure of ``panels`` map panels side by side (one per floor), laid out to fit their
+    colour bar and title; maps keep their own colours (:mod:`adpart.envs.render`)."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=figsize, layout="constrained")
+    return fig, fig.subplots(1, panels, squeeze=False)[0]
 
 
 def style_axes(ax: Axes) -> None:

@@ -25,6 +25,7 @@ from matplotlib.figure import Figure
 
 from adpart.envs.base import Task
 from adpart.errors import AdpartError, ModelError
+from adpart.plotting import map_figure
 
 if TYPE_CHECKING:
     from adpart.envs.base import Domain
@@ -144,9 +145,8 @@ def render_domain(
     labs = _overlay(labels, S, "labels")
 
     panel = 4.5 * min(1.0, max(W, H) / 12.0) + 1.5
-    fig = Figure(figsize=(panel * W / max(W, H) * F + (1.2 if vals is not None else 0.4),
-                          panel * H / max(W, H) + 0.8), layout="constrained")
-    axes = fig.subplots(1, F, squeeze=False)[0]
+    fig, axes = map_figure((panel * W / max(W, H) * F + (1.2 if vals is not None else 0.4),
+                            panel * H / max(W, H) + 0.8), F)
 
     base = np.where(free[..., None], np.array(FREE_RGB), np.array(WALL_RGB))
     cell_lab = None
