@@ -1,11 +1,12 @@
 """The import rules of the package layout (DESIGN.md's layers), checked on the source tree.
 
 Every ``import`` of an ``adpart`` module is read from the syntax tree - module level, inside
-functions and under ``TYPE_CHECKING`` alike - and checked against :data:`ALLOWED`: the numeric
+functions and under ``TYPE_CHECKING`` alike - and checked against :func:`allowed`: the numeric
 cores import only the foundation and cores below them; the executors only the foundation; the
 store the foundation and the cores; plugins and workflows anything but the experiments and the
-CLI; the experiments anything but the CLI. A new violation fails this test with the file, the
-line and the rule it breaks.
+CLI; the experiments anything but the store (they go through the workflows) and the CLI; the
+conformance checks the cores, executors and plugin contracts. A new violation fails this test
+with the file, the line and the rule it breaks.
 """
 
 from __future__ import annotations
@@ -39,8 +40,8 @@ def allowed(unit: str) -> set[str]:
         return FOUNDATION | CORES
     if unit in {"plugins", "workflows"}:
         return FOUNDATION | CORES | {"execution", "store", "plugins", "workflows"}
-    if unit == "experiments":
-        return FOUNDATION | CORES | {"execution", "store", "plugins", "workflows"}
+    if unit == "experiments":  # they reach the knowledge base through the workflows
+        return FOUNDATION | CORES | {"execution", "plugins", "workflows"}
     if unit == "testing":  # the conformance checks know the cores, executors and contracts
         return FOUNDATION | CORES | {"execution", "plugins"}
     return FOUNDATION | CORES | UPPER

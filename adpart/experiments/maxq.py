@@ -44,7 +44,6 @@ as in the exact scores).
 
 from __future__ import annotations
 
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -156,7 +155,7 @@ def _taxi_settings(config: ExperimentConfig) -> dict[str, Any]:
 
 
 def _taxi_pipeline(config: ExperimentConfig, s: dict[str, Any]) -> tuple[Any, dict[str, Any]]:
-    from adpart.store import KnowledgeBase
+    from adpart.workflows.knowledge import working_kb
     from adpart.workflows.pipeline import PipelineConfig, run_pipeline
 
     pc = PipelineConfig(env="taxi-fickle", tasks=("deliver", "deliver"), detector="count-mc",
@@ -165,18 +164,8 @@ def _taxi_pipeline(config: ExperimentConfig, s: dict[str, Any]) -> tuple[Any, di
                         eval_every=s["eval_every"], baseline=False,
                         flat_params={"alpha": ALPHA, "epsilon": EPSILON},
                         fallback=False)  # the decision layer is what is compared
-    tmp = None
-    location = config.kb
-    if location is None:
-        tmp = tempfile.TemporaryDirectory(prefix="adpart-maxq-taxi-")
-        location = tmp.name
-    kb = KnowledgeBase.open(location)
-    try:
+    with working_kb(config.kb, "maxq-taxi") as kb:
         rep = run_pipeline(kb, pc, progress=config.progress)
-    finally:
-        kb.close()
-        if tmp is not None:
-            tmp.cleanup()
     curve = next(iter(rep.curves["deliver"].values()))
     stages = {st.stage: st for st in rep.stages}
     info = {"first_task_steps_mean": rep.rows[0]["steps_total_mean"],

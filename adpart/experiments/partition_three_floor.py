@@ -34,7 +34,6 @@ there count as ``episodes + 1`` (censored, said in the findings).
 
 from __future__ import annotations
 
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -133,8 +132,8 @@ def _learn(mdp: Any, options: list[Any], models: list[Any], partition: Any, s: d
 def partition_three_floor(config: ExperimentConfig) -> ExperimentReport:
     """Partition three-floor over hand-designed and discovered subgoal options; learn a new task."""
     from adpart.mdp.solvers import solve
-    from adpart.store import KnowledgeBase
     from adpart.subgoals import discover_exhaustive
+    from adpart.workflows.knowledge import working_kb
     from adpart.workflows.partitioning import (
         environment_record,
         partition_environment,
@@ -152,13 +151,7 @@ def partition_three_floor(config: ExperimentConfig) -> ExperimentReport:
         ("Fig. 5.5: a new task learned on the partition space converges in about 30 iterations, "
          "against about 300 on the SMDP of the options and about 500 on the flat MDP."),
     ]
-    tmp = None
-    location = config.kb
-    if location is None:
-        tmp = tempfile.TemporaryDirectory(prefix="adpart-partition-three-floor-")
-        location = tmp.name
-    kb = KnowledgeBase.open(location)
-    try:
+    with working_kb(config.kb, "partition-three-floor") as kb:
         domain, env = environment_record(kb, ENV)
         _, source_mdp, _ = task_record(kb, domain, env, SOURCE_TASK)
         _, mdp, task_rec = task_record(kb, domain, env, NEW_TASK)
@@ -192,10 +185,6 @@ def partition_three_floor(config: ExperimentConfig) -> ExperimentReport:
                            title=f"{ENV}, {name} subgoals: {outcome.final.n_blocks} blocks "
                            f"(delta {DELTA}, epsilon {EPSILON:g})")
             report.figures.append(str(fig))
-    finally:
-        kb.close()
-        if tmp is not None:
-            tmp.cleanup()
 
     report.data["settings"] = {**s, "delta": DELTA, "epsilon": EPSILON, "env": ENV,
                                "source_task": SOURCE_TASK, "new_task": NEW_TASK,

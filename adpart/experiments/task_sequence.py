@@ -20,7 +20,6 @@ directly with the same settings.
 
 from __future__ import annotations
 
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -101,7 +100,7 @@ def _plot_blocks(blocks: dict[str, np.ndarray], path: Path) -> str:
 )
 def task_sequence(config: ExperimentConfig) -> ExperimentReport:
     """Five urban tasks on automatically built layers vs flat; task five vs all-subgoals."""
-    from adpart.store import KnowledgeBase
+    from adpart.workflows.knowledge import working_kb
     from adpart.workflows.pipeline import PipelineConfig, hierarchy_layer, run_pipeline
     from adpart.workflows.refs import parse_ref
 
@@ -124,13 +123,7 @@ def task_sequence(config: ExperimentConfig) -> ExperimentReport:
                              "alpha": "1/n^0.8"},
         hierarchy="expected-learning-time", fallback=False,  # the layers are what is compared
     )
-    tmp = None
-    location = config.kb
-    if location is None:
-        tmp = tempfile.TemporaryDirectory(prefix="adpart-task-sequence-")
-        location = tmp.name
-    kb = KnowledgeBase.open(location)
-    try:
+    with working_kb(config.kb, "task-sequence") as kb:
         pipe = run_pipeline(kb, pcfg, progress=config.progress)
         none = next((st for st in pipe.stages if st.stage == "no-subgoals"), None)
         if none is not None:  # a reported outcome: nothing to build layers from
@@ -154,10 +147,6 @@ def task_sequence(config: ExperimentConfig) -> ExperimentReport:
                     kb, auto_ref, TASKS[-1], s, config.seed),
                 f"all-subgoals ({base.blocks} blocks)": _learn_on(
                     kb, base.ref, TASKS[-1], s, config.seed)}
-    finally:
-        kb.close()
-        if tmp is not None:
-            tmp.cleanup()
 
     layers = [st for st in pipe.stages if st.stage == "hierarchy"]
     report.data["settings"] = {**s, "env": ENV, "tasks": list(TASKS), "seed": config.seed,

@@ -62,13 +62,6 @@ class _Setup:
     eval_every: int = 10
 
 
-def _open_kb(config: ExperimentConfig) -> Any:
-    """The knowledge base of ``config`` (``config.out/kb`` when none is given)."""
-    from adpart.store import KnowledgeBase
-
-    return KnowledgeBase.open(config.kb or str(Path(config.out) / "kb"))
-
-
 def _curve_rows(task: str, curves: dict[str, Any], episodes: int
                 ) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
     """Pipeline-style rows per learner and per-run episodes to the bound (censored: N + 1)."""
@@ -138,13 +131,13 @@ def _transfer(config: ExperimentConfig, setup: _Setup, report: ExperimentReport
                              "partition-epsilon": EPSILON},
         gap_fraction=GAP_FRACTION, fallback=False,  # the experiment compares the layer with flat
     )
-    kb = _open_kb(config)
-    try:
+    from adpart.workflows.knowledge import working_kb
+
+    # the knowledge base of config, else config.out/kb (kept, so a rerun resumes)
+    with working_kb(config.kb or Path(config.out) / "kb", "transfer") as kb:
         config.progress(f"{s.env}: pipeline {s.first} -> {s.new} ({s.detector})")
         pipe = run_pipeline(kb, pconfig, out=out, progress=config.progress)
         options, models, partition = _stored_layer(kb, pipe)
-    finally:
-        kb.close()
     report.figures += pipe.figures
     mdp = get_domain(s.env).mdp(s.new)
     # the stored models are the first task's; the learners below work on the new one
