@@ -60,19 +60,17 @@ def _store_options(kb: Any, env: Any, task_rec: Any, mdp: Any, states: np.ndarra
     """Options to ``states`` on ``mdp`` with exact models, stored (one record per option)."""
     from adpart.options.models import option_models
     from adpart.options.subgoal_options import subgoal_options
+    from adpart.workflows.options import store_options
 
     mask = np.zeros(mdp.n_states, dtype=bool)
     mask[states] = True
     options = subgoal_options(mdp, mask, initiation="basin")
     models = option_models(mdp, options, duration=False)
-    records = [
-        kb.put_option(env, f"{label}:{o.name}", initiation=o.initiation, policy=o.policy,
-                      termination=o.beta, reward=m.R, transitions=m.F, gamma=mdp.gamma,
-                      plugin="adpart.experiments",
-                      parameters={"task_id": task_rec.id, "subgoal_state": int(o.subgoal),
-                                  "initiation": "basin", "set": label})
-        for o, m in zip(options, models, strict=True)
-    ]
+    records = store_options(
+        kb, env, mdp, options, models, plugin="adpart.experiments",
+        name=lambda o: f"{label}:{o.name}",
+        parameters=lambda o: {"task_id": task_rec.id, "subgoal_state": int(o.subgoal),
+                              "initiation": "basin", "set": label})
     return records, options, models
 
 

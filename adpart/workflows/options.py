@@ -8,6 +8,7 @@ source task's and is recomputed for a new task (phase 3 of the partitioning does
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -113,30 +114,35 @@ def options_for_subgoals(
     options = subgoal_options(mdp, states, initiation=initiation, radius=radius,
                               cover=bool(cover))
     models = option_models(mdp, options, executor=executor, duration=False)
-    records = []
     subgoal_of_state = {int(s): i for i, s in wanted.items()}
-    for option, model in zip(options, models, strict=True):
-        records.append(
-            kb.put_option(
-                env,
-                option.name,
-                initiation=option.initiation,
-                policy=option.policy,
-                termination=option.beta,
-                reward=model.R,
-                transitions=model.F,
-                gamma=mdp.gamma,
-                subgoal=subgoal_of_state[int(option.subgoal)],
-                plugin="adpart.options",
-                parameters={
-                    **rule,
-                    "task_id": task_id,
-                    "subgoal_set": subgoal_set.id,
-                    "subgoal_state": int(option.subgoal),
-                },
-            )
-        )
+    records = store_options(
+        kb, env, mdp, options, models, plugin="adpart.options",
+        subgoal=lambda o: subgoal_of_state[int(o.subgoal)],
+        parameters=lambda o: {**rule, "task_id": task_id, "subgoal_set": subgoal_set.id,
+                              "subgoal_state": int(o.subgoal)},
+    )
     return StoredOptions(records, options, models, reused=False)
+
+
+def store_options(
+    kb: Any, env: Any, mdp: FiniteMDP, options: list[Option], models: list[OptionModel], *,
+    plugin: str, parameters: Callable[[Option], dict[str, Any]],
+    subgoal: Callable[[Option], int | None] = lambda option: None,
+    name: Callable[[Option], str] = lambda option: option.name,
+) -> list[Any]:
+    """One option record per option, with its exact model (R, F), in one transaction.
+
+    ``parameters(option)`` is the record's provenance, ``subgoal(option)`` its subgoal record id
+    (None for an option to no stored subgoal), ``name(option)`` its name.
+    """
+    with kb.transaction():
+        return [
+            kb.put_option(env, name(option), initiation=option.initiation, policy=option.policy,
+                          termination=option.beta, reward=model.R, transitions=model.F,
+                          gamma=mdp.gamma, subgoal=subgoal(option), plugin=plugin,
+                          parameters=parameters(option))
+            for option, model in zip(options, models, strict=True)
+        ]
 
 
 def load_options(kb: Any, records: list[Any]) -> tuple[list[Option], list[OptionModel]]:
