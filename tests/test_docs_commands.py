@@ -96,3 +96,19 @@ def test_every_documented_command_runs_with_the_shown_shape(page, tmp_path, monk
                 f"{page.name}: `{command}` should print a line starting {word!r}:\n"
                 f"{result.output}")
             position = printed.index(word, position) + 1
+
+
+def test_the_sweep_pages_config_plans_its_grid_without_creating_anything(tmp_path, monkeypatch):
+    """docs/scale-out.md: its TOML is a valid sweep of 3 alphas x 3 seeds x 3 (environment,
+    task) pairs, and `adpart sweep grid.toml --dry-run` - the page's first command - lists the 27
+    cells without creating a knowledge base (the full sweep runs in tests/ray)."""
+    page = (DOCS / "scale-out.md").read_text()
+    (tmp_path / "grid.toml").write_text(
+        re.search(r"```toml\n(.*?)```", page, re.DOTALL).group(1))
+    assert "adpart sweep grid.toml --dry-run" in page
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("ADPART_KB", str(tmp_path / "kb"))
+    result = CliRunner().invoke(cli, ["sweep", "grid.toml", "--dry-run"])
+    assert result.exit_code == 0, result.output
+    assert "27 cells - would run 27, skipped 0" in result.output
+    assert not (tmp_path / "kb").exists()

@@ -73,16 +73,25 @@ def sweep_cmd(
       adpart sweep grid.toml --dry-run
       adpart sweep grid.toml --executor ray --ray-address 10.0.0.5:6379
     """
-    from adpart.store import KnowledgeBase
+    from adpart.store import KnowledgeBase, StoreError
     from adpart.workflows.sweep import load_config, plan_cells, preview, run_sweep
 
     cfg = load_config(config)
     cells = plan_cells(cfg)
-    kb = KnowledgeBase.open(KBLocation.resolve(kb_path, kb_artifacts))
-    try:
-        if dry_run:
+    if dry_run:  # a dry run reads: it creates no knowledge base
+        try:
+            kb = KnowledgeBase.open(KBLocation.resolve(kb_path, kb_artifacts, create=False),
+                                    read_only=True)
+        except StoreError:  # none there yet: nothing is stored, every cell would run
+            kb = None
+        try:
             report = preview(cells, kb)
-        else:
+        finally:
+            if kb is not None:
+                kb.close()
+    else:
+        kb = KnowledgeBase.open(KBLocation.resolve(kb_path, kb_artifacts))
+        try:
             todo = preview(cells, kb).count("pending")
             update, close = progress_callback(
                 not quiet and not as_json and todo > 0, todo, f"sweep {cfg.name}"
@@ -98,8 +107,8 @@ def sweep_cmd(
                     )
             finally:
                 close()
-    finally:
-        kb.close()
+        finally:
+            kb.close()
     data = report.as_dict()
     for row, result in zip(data["results"], report.results, strict=True):
         row["label"] = result.cell.label

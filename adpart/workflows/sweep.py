@@ -531,8 +531,11 @@ def _store(kb: Any, cell: Cell, data: Mapping[str, Any]) -> CellResult:
 
 
 def preview(cells: Sequence[Cell], kb: Any) -> SweepReport:
-    """The dry run: which cells are stored already (``skipped``) and which would run."""
-    done = done_cells(kb)
+    """The dry run: which cells are stored already (``skipped``) and which would run.
+
+    ``kb`` None stands for a knowledge base that does not exist yet: every cell would run.
+    """
+    done = done_cells(kb) if kb is not None else {}
     return SweepReport(
         [CellResult(c, "skipped", run=f"run:{done[c.key]}") if c.key in done
          else CellResult(c, "pending") for c in cells],
