@@ -13,6 +13,22 @@ import numpy as np
 from numba import njit
 
 
+@njit(cache=True, inline="always")
+def add_masses(ptr, idx, val, row, w, marked, touched, nt):  # pragma: no cover - compiled
+    """``w[idx[k]] += val[k]`` over the entries ``k`` of CSR row ``row``; a column touched for
+    the first time is marked and appended to ``touched`` (first-touch order). Returns the new
+    number of touched columns. The splitter step of both worklists (exact lumping and delta):
+    the mass every state sends into the popped block."""
+    for k in range(ptr[row], ptr[row + 1]):
+        s = idx[k]
+        if not marked[s]:
+            marked[s] = True
+            touched[nt] = s
+            nt += 1
+        w[s] += val[k]
+    return nt
+
+
 @njit(cache=True)
 def greedy_groups(segment: np.ndarray, values: np.ndarray, width: float) -> np.ndarray:
     """Group ids for values sorted by ``(segment, value)``: a new group starts whenever the
@@ -122,14 +138,7 @@ def lump(n, n_act, pred_ptr, pred_row, pred_val, init_labels, n_init, tol):
         inwl[c] = False
         nt = 0
         for i in range(bstart[c], bend[c]):
-            t = elems[i]
-            for k in range(pred_ptr[t], pred_ptr[t + 1]):
-                r = pred_row[k]
-                if not marked[r]:
-                    marked[r] = True
-                    touched[nt] = r
-                    nt += 1
-                w[r] += pred_val[k]
+            nt = add_masses(pred_ptr, pred_row, pred_val, elems[i], w, marked, touched, nt)
         for a in range(n_act):
             base = a * n
             ntb = 0
@@ -394,14 +403,8 @@ def delta_worklist(n, n_act, pred_ptr, pred_src, pred_val, init_labels, n_init, 
             # masses into C under option a, first-touch order
             nt = 0
             for i in range(nc):
-                j = splitter[i] * n_act + a
-                for q in range(pred_ptr[j], pred_ptr[j + 1]):
-                    s = pred_src[q]
-                    if not marked[s]:
-                        marked[s] = True
-                        touched[nt] = s
-                        nt += 1
-                    w[s] += pred_val[q]
+                nt = add_masses(pred_ptr, pred_src, pred_val, splitter[i] * n_act + a, w, marked,
+                                touched, nt)
             ntb = 0
             for i in range(nt):
                 s = touched[i]
