@@ -15,6 +15,7 @@ decides), and commands that need a Ray cluster are left to tests/ray.
 
 from __future__ import annotations
 
+import json
 import re
 import shlex
 from pathlib import Path
@@ -98,17 +99,31 @@ def test_every_documented_command_runs_with_the_shown_shape(page, tmp_path, monk
             position = printed.index(word, position) + 1
 
 
-def test_the_sweep_pages_config_plans_its_grid_without_creating_anything(tmp_path, monkeypatch):
-    """docs/scale-out.md: its TOML is a valid sweep of 3 alphas x 3 seeds x 3 (environment,
-    task) pairs, and `adpart sweep grid.toml --dry-run` - the page's first command - lists the 27
-    cells without creating a knowledge base (the full sweep runs in tests/ray)."""
+def test_the_sweep_pages_config_and_commands_run(tmp_path, monkeypatch):
+    """docs/scale-out.md: its TOML is a sweep of 3 alphas x 3 seeds x 3 (environment, task) pairs.
+    The page's commands run in its order, but for the two that need a Ray cluster (tests/ray):
+    the dry run lists 27 pending cells and creates no knowledge base, the sweep on the local pool
+    stores all 27, and the JSON report of a second sweep finds every cell stored."""
     page = (DOCS / "scale-out.md").read_text()
     (tmp_path / "grid.toml").write_text(
         re.search(r"```toml\n(.*?)```", page, re.DOTALL).group(1))
-    assert "adpart sweep grid.toml --dry-run" in page
+    block = re.search(r"```\n(adpart sweep grid.toml --dry-run.*?)```", page, re.DOTALL).group(1)
+    shown = [line.split("  #")[0].strip() for line in block.splitlines()]
+    assert [s for s in shown if "ray" not in s] == [
+        "adpart sweep grid.toml --dry-run", "adpart sweep grid.toml",
+        "adpart sweep grid.toml --json"]
     monkeypatch.chdir(tmp_path)
     monkeypatch.setenv("ADPART_KB", str(tmp_path / "kb"))
-    result = CliRunner().invoke(cli, ["sweep", "grid.toml", "--dry-run"])
-    assert result.exit_code == 0, result.output
-    assert "27 cells - would run 27, skipped 0" in result.output
+    runner = CliRunner()
+    dry = runner.invoke(cli, ["sweep", "grid.toml", "--dry-run"])
+    assert dry.exit_code == 0, dry.output
+    assert "27 cells - would run 27, skipped 0" in dry.output
     assert not (tmp_path / "kb").exists()
+    run = runner.invoke(cli, ["sweep", "grid.toml"])
+    assert run.exit_code == 0, run.output
+    assert "27 cells - stored 27, skipped 0" in run.output
+    again = runner.invoke(cli, ["sweep", "grid.toml", "--json"])
+    assert again.exit_code == 0, again.output
+    report = json.loads(again.stdout)
+    assert report["name"] == "alpha-grid" and len(report["results"]) == 27
+    assert {r["status"] for r in report["results"]} == {"skipped"}
