@@ -9,7 +9,6 @@ checks that they match the commands' own.
 from __future__ import annotations
 
 import importlib
-import sys
 from typing import Any
 
 import click
@@ -27,19 +26,11 @@ class CLIError(click.ClickException):
 INTERRUPTED = 130
 
 
-def _line_buffered(stream: Any) -> None:
-    """Flush ``stream`` at every line, so a log file or a pipe sees each stage as it ends (Python
-    buffers a stdout that is not a terminal in blocks)."""
-    reconfigure = getattr(stream, "reconfigure", None)
-    if reconfigure is not None and not getattr(stream, "line_buffering", True):
-        reconfigure(line_buffering=True)
-
-
 class LazyGroup(click.Group):
     """A group whose sub-commands are ``name -> (module:attribute, short help)``, loaded lazily.
 
     Every :class:`AdpartError` a command raises is reported as one line with exit status 2,
-    Ctrl-C ends the command with status 130 (not click's 1), and output is flushed line by line.
+    and Ctrl-C ends the command with status 130 (not click's 1).
     """
 
     def __init__(self, *args: Any, lazy: dict[str, tuple[str, str]] | None = None,
@@ -69,7 +60,6 @@ class LazyGroup(click.Group):
                 formatter.write_dl(rows)
 
     def invoke(self, ctx: click.Context) -> Any:
-        _line_buffered(sys.stdout)
         try:
             return super().invoke(ctx)
         except AdpartError as exc:

@@ -71,7 +71,8 @@ def test_ctrl_c_exits_130():
 
 def test_output_to_a_pipe_arrives_line_by_line():
     """The first line is readable while the command still runs (not at exit, as with a block
-    buffer): the child prints a line, then waits for our reply on stdin before it goes on."""
+    buffer; click.echo flushes every call, so commands use it): the child prints a line, then
+    waits for our reply on stdin before it goes on."""
     code = ("import click, sys\nfrom adpart.cli.group import LazyGroup\n"
             "@click.group(cls=LazyGroup)\ndef g():\n    pass\n"
             "@g.command()\ndef talk():\n    click.echo('stage 1 done')\n    sys.stdin.readline()\n"
