@@ -74,6 +74,10 @@ def test_quick_experiment_writes_report(name: str, tmp_path) -> None:
         assert any("seed's claims" in f for f in summary["findings"])
         settings = summary["data"]["settings"]
         assert settings["maxq_ceiling"] < settings["v_star_start"]  # graph ceiling below V*
+        smdp = summary["data"]["smdp_q"]
+        assert smdp["initiation"] == "basin" and smdp["q_init"] == pytest.approx(-100.0)
+        assert 0 <= smdp["greedy_reaches_goal"] <= 2
+        assert any("(b) SMDP Q over the discovered options" in f for f in summary["findings"])
     else:
         assert any("Dietterich's ~40,000" in f for f in summary["findings"])
         assert summary["data"]["settings"]["absorbed_unreachable"] == 100
@@ -116,3 +120,46 @@ def test_parr_graph_ceiling_is_below_v_star_by_more_than_the_tolerance() -> None
     v_star = optimal_start_value(mdp, mu)
     assert ceiling < v_star - PARR_TOL
     assert ceiling == pytest.approx(-84.845, abs=0.01)
+
+
+@pytest.mark.slow
+def test_parr_smdp_q_from_below_over_basin_options_reaches_the_goal_in_every_run() -> None:
+    """Issue: SMDP Q over the discovered options reaches the goal in every run on Parr's maze.
+
+    Oracle: the exact value of each run's final greedy policy (a sparse solve of the SMDP over
+    the options and primitives), which is the never-arrive value ``-100`` unless the policy
+    reaches the goal from the start with positive probability. The optimistic local variant is
+    the negative control the experiment's constant was chosen against (docs/maxq.md)."""
+    from adpart.envs.domains.parr_maze import ParrMaze
+    from adpart.experiments.maxq import ALPHA, EPSILON, SMDP_INITIATION, _first_task
+    from adpart.learning.qlearning import q_learning
+    from adpart.learning.smdp_q import smdp_q_learning
+    from adpart.options.models import option_models
+    from adpart.options.subgoal_options import subgoal_options
+    from adpart.subgoals import discover_monte_carlo
+
+    maze = ParrMaze(mini=True)
+    mdp = maze.mdp()
+    first, _goal = _first_task(maze)
+    fr = q_learning(first, runs=1, episodes=3000, seed=0, alpha=ALPHA, epsilon=EPSILON,
+                    eval_every=300, max_steps_per_episode=5000)
+    found = discover_monte_carlo(first, fr.greedy_policies()[0], np.random.default_rng(0),
+                                 on_loop="truncate", horizon=5000, max_samples=5000)
+    entered = np.asarray(mdp.P[np.flatnonzero(np.tile(~mdp.terminal, mdp.n_actions))]
+                         .sum(axis=0)).ravel() > 0
+    goal_cell = np.flatnonzero(mdp.terminal & entered)[:1]
+    states = np.unique(np.r_[found.subgoals[~mdp.terminal[found.subgoals]], goal_cell])
+    common = {"include_primitives": True, "runs": 6, "episodes": 200, "seed": 0,
+              "alpha": ALPHA, "epsilon": EPSILON, "eval_every": 50,
+              "max_steps_per_episode": 5000}
+    never = -1.0 / (1.0 - mdp.gamma)
+    basin = subgoal_options(mdp, states, initiation=SMDP_INITIATION)
+    below = smdp_q_learning(mdp, basin, models=option_models(mdp, basin, duration=False),
+                            q_init=never, **common)
+    final = float(below.v_star_start) - below.curve.matrix("value_gap")[:, -1]
+    assert np.all(final > never + 1.0), final
+    local = subgoal_options(mdp, states, initiation="local")
+    optimistic = smdp_q_learning(mdp, local, models=option_models(mdp, local, duration=False),
+                                 **common)
+    final = float(optimistic.v_star_start) - optimistic.curve.matrix("value_gap")[:, -1]
+    assert np.all(final < never + 1e-6), final
