@@ -14,10 +14,10 @@ Three modes (``mode=``), the alternatives of section 4.3 the seed compares in 5.
   at least ``min_visits`` visits, and ``LCB(s, a*) - max_{o in O_b} Q_P(b, o) > L``, then ``a*``
   joins ``O_b`` and ``b`` is refined for the new set (eqs. 4.6-4.7 with the learner's ``delta``
   and ``epsilon``; only ``b`` is split, to a fixpoint, the other blocks stay). The children
-  inherit ``b``'s Q values and counts; the new option's value in a child starts at the mean
-  lower-bound flat value ``Q_low(s, a*)`` over the child's states where ``a*`` was tried (the
-  optimistic flat mean where none was), the best grounded estimate at hand. Partitions are per
-  run: runs refine independently.
+  inherit ``b``'s option values and counts; their primitive columns start *grounded*, at the
+  mean lower-bound flat value ``Q_low(s, a)`` over the child's states where ``a`` was tried
+  (``a*`` tried in none: the lower bound; :func:`child_values` says why plain inheritance
+  fails). Partitions are per run: runs refine independently.
 * ``action-refinement`` (4.3.2): before learning, every block holding a state with a reward above
   the minimum ``r_min = min R(s, a)`` gets all primitive actions and is refined for them; the other
   blocks keep the options only. No test during learning.
@@ -92,6 +92,7 @@ __all__ = [
     "DecisionLayer",
     "HierarchicalResult",
     "build_decision_layer",
+    "child_values",
     "decision_layer",
     "default_threshold",
     "hierarchical_learning",
@@ -284,6 +285,44 @@ def refine_block(
     return refined.with_admissible(refined.admissible & allowed)
 
 
+def child_values(Q_old: np.ndarray, n_old: np.ndarray, old: Partition, new: Partition,
+                 block: int, Q_low: np.ndarray, tried: np.ndarray, lower_bound: float,
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Starting values and counts of the blocks of ``new``, ``old`` refined at ``block`` (4.3.3).
+
+    Every block keeps its parent's values and counts, except the primitive columns ``0..A-1``
+    (``A = Q_low.shape[1]``) of ``block``'s children, which start *grounded*, with a count of 0:
+    at the mean of ``Q_low(s, a)`` over the child's states where ``a`` was ``tried``, and at
+    ``lower_bound`` where it was tried in none of them - new to the child or inherited alike:
+    a child's primitive values come from its own states' evidence only. Columns the child does
+    not offer are ``-inf``.
+
+    Why not plain inheritance (the seed's "children inherit the values"): a parent's value of a
+    primitive is learned in the states where the agent took it, and a child may hold only states
+    where the same action hits a wall. On three-floor (20 runs, reach-top-west on the pipeline's
+    27-block layer) such stale values, never corrected because the agent's optimistic flat
+    exploration steers around them, made 4 runs lose a policy they had already learned (gap
+    0 -> 66.5, a loop at the start); the optimistic flat mean that new columns started at
+    before, and parent values kept where the child has no evidence, made other runs loop the
+    same way (docs/hierarchical-learning.md has the counts).
+    """
+    A = Q_low.shape[1]
+    parent = new.parent_map(old)
+    Qn = Q_old[parent]
+    n_new = n_old[parent]
+    B = new.n_blocks
+    sums = np.zeros((B, A))
+    counts = np.zeros((B, A))
+    np.add.at(sums, new.labels, np.where(tried, Q_low, 0.0))
+    np.add.at(counts, new.labels, tried)
+    grounded = sums / np.maximum(counts, 1.0)
+    fresh = new.admissible[:, :A] & (parent == block)[:, None]
+    Qn[:, :A][fresh] = np.where(counts[fresh] > 0, grounded[fresh], lower_bound)
+    n_new[:, :A][fresh] = 0
+    Qn[~new.admissible] = -np.inf
+    return Qn, n_new
+
+
 def theorem_bound(mdp: FiniteMDP, *, epsilon: float | None, delta: float) -> float:
     """Theorem 4.5's bound for the layer's ``epsilon`` and ``delta`` (``inf`` when gamma = 1)."""
     if mdp.gamma >= 1.0:
@@ -471,6 +510,7 @@ def hierarchical_learning(
     v_star = optimal_start_value(mdp, mu, reference_values)
     L = default_threshold(v_star, scale=threshold_scale) if threshold is None else float(threshold)
     B0 = part0.n_blocks
+    lower = flat_lower_bound(mdp, H)
     capacity = min(S, max(2 * B0, B0 + 64))
     if reference not in REFERENCES:
         raise TaskError(f"reference = {reference!r}; choose one of {list(REFERENCES)}")
@@ -483,7 +523,7 @@ def hierarchical_learning(
         np.broadcast_to(part0.admissible, (K, B0, len(full))), episodes=N, horizon=H,
         alpha=alpha_s, epsilon=eps_s, q_init=q_init, mu=mu, capacity=capacity,
         track_flat=True, threshold=L if check else np.inf, min_visits=V, prim_opt=prims,
-        intra=2 if intra_option else 0, lower_bound=flat_lower_bound(mdp, H), lcb_z=lcb_z,
+        intra=2 if intra_option else 0, lower_bound=lower, lcb_z=lcb_z,
         flat_explore=flat_explore and check,
         block_values=layer_values(part0) if check and reference == "model" else None,
     )
@@ -509,23 +549,8 @@ def hierarchical_learning(
         B_old, B_new = old.n_blocks, new.n_blocks
         grow(B_new)
         parent = new.parent_map(old)
-        Qn = st.Q[k, :B_old][parent]
-        n_on = st.n_o[k, :B_old][parent]
-        added = new.admissible & ~old.admissible[parent]
-        if added.any():
-            flat = np.where(np.isfinite(st.Qf[k]), st.Qf[k], 0.0)
-            optimistic = np.zeros((B_new, A))
-            np.add.at(optimistic, new.labels, flat)
-            optimistic /= np.bincount(new.labels, minlength=B_new)[:, None]
-            tried = st.nf[k] > 0
-            grounded, n_tried = np.zeros((B_new, A)), np.zeros((B_new, A))
-            np.add.at(grounded, new.labels, np.where(tried, st.Ql[k], 0.0))
-            np.add.at(n_tried, new.labels, tried)
-            mean = np.where(n_tried > 0, grounded / np.maximum(n_tried, 1), optimistic)
-            rows, cols = np.nonzero(added)
-            Qn[rows, cols] = mean[rows, cols]  # primitive columns 0..A-1 are the actions
-            n_on[rows, cols] = 0
-        Qn[~new.admissible] = -np.inf
+        Qn, n_on = child_values(st.Q[k, :B_old], st.n_o[k, :B_old], old, new, b, st.Ql[k],
+                                st.nf[k] > 0, lower)
         st.Q[k, :B_new], st.Q[k, B_new:] = Qn, -np.inf
         st.n_o[k, :B_new], st.n_o[k, B_new:] = n_on, 0
         st.n_d[k, :B_new] = st.n_d[k, :B_old][parent]
@@ -559,7 +584,7 @@ def hierarchical_learning(
         "theorem_4_5_bound": theorem_bound(mdp, epsilon=epsilon, delta=delta),
         "lcb_z": float(lcb_z), "flat_explore": bool(flat_explore and check),
         "test_reference": reference,
-        "flat_lower_bound": flat_lower_bound(mdp, H),
+        "flat_lower_bound": lower,
         "min_visits": V, "alpha": alpha_s.to_dict(), "epsilon_greedy": eps_s.to_dict(),
         "max_steps_per_episode": H, "eval_every": M, "q_init": float(q_init),
         "kernel": kernel_name, "intra_option": bool(intra_option), "options": list(names),

@@ -125,6 +125,31 @@ def test_refine_block_children_inherit_and_only_that_block_splits(setup):
     np.testing.assert_array_equal(new.map_values(Q, part)[kids], Q[[b] * len(kids)])
 
 
+def test_split_children_start_their_primitives_grounded():
+    """Hand-computed: block 0 = {0, 1} offers a0 and the option; the test adds a1 and splits it.
+
+    The children keep the option's value and count; a primitive a child offers starts at the mean
+    lower-bound flat value over the child's states where it was tried (count 0), and at the lower
+    bound where it was tried in none of them (a1 in child {0}, a0 in child {1}, though the parent
+    had a value for a0); the block that did not split is unchanged."""
+    from adpart.learning.hierarchical import child_values
+    from adpart.partition import Partition
+
+    inf = np.inf
+    old = Partition(np.array([0, 0, 1, 1]), np.array([[1, 0, 1], [0, 0, 1]], dtype=bool))
+    new = Partition(np.array([0, 1, 2, 2]),
+                    np.array([[1, 1, 1], [1, 1, 1], [0, 0, 1]], dtype=bool))
+    Q_old = np.array([[-5.0, -inf, -7.0], [-inf, -inf, -9.0]])
+    n_old = np.array([[3, 0, 4], [0, 0, 5]])
+    Q_low = np.array([[-20.0, -30.0], [-10.0, -40.0], [-1.0, -1.0], [-2.0, -2.0]])
+    tried = np.array([[True, False], [False, True], [True, True], [True, True]])
+    Q, n = child_values(Q_old, n_old, old, new, 0, Q_low, tried, -100.0)
+    np.testing.assert_array_equal(Q, [[-20.0, -100.0, -7.0], [-100.0, -40.0, -7.0],
+                                      [-inf, -inf, -9.0]])
+    np.testing.assert_array_equal(n, [[0, 0, 4], [0, 0, 4], [0, 0, 5]])
+    assert np.array_equal(Q_old, [[-5.0, -inf, -7.0], [-inf, -inf, -9.0]])  # not modified
+
+
 def test_children_inherit_q_in_the_learner(setup):
     mdp, opts, part, _ = setup
     res = hierarchical_learning(mdp, opts, part, **dict(SETTINGS, runs=1, episodes=100))
