@@ -58,8 +58,8 @@ RATIO_MODES = ("all", "paths")
 #: Jaccard index the subgoal set is predicted to have with the exact one
 #: (:func:`_predicted_jaccard`) reaches this. The prediction treats the margins as normal and
 #: their per-pass spread as the only error, which is optimistic: over 20 seeds on
-#: three-floor-arm, 0.9 gave actual indices of 0.82-0.98 after 3-4 passes, 0.95 gave 0.90-1.0
-#: after 6-11 passes.
+#: three-floor-arm (pure Gauss-Seidel's optimal policy), 0.9 gave actual indices of 0.82-0.98
+#: after 3-4 passes, 0.95 gave 0.90-1.0 after 3-14 passes.
 PASS_AGREEMENT = 0.95
 #: ... and after at least this many passes (the standard errors need replicates).
 MIN_PASSES = 3
