@@ -11,10 +11,8 @@ learn from uniformly random start states (alpha = 1, the world is deterministic;
 3,000 episodes), which gives a policy defined everywhere, and score the detector on the task's
 own MDP. ``config.runs`` independent learners (seeds spawned from ``config.seed``) give the
 fraction of learned policies whose only subgoal is the doorway; the figure shows run 0's ratios.
-The seed draws 10 ratio trajectories; the sampled-path mode of our detector (``ratios="paths"``,
-the seed's procedure, which this experiment reproduces) defaults to 30 (with 10, N of eq. 4.2 is
-often 2 and t_{0.975,1} = 12.7 lets nothing pass), so we report both. (The detector's default
-takes the ratios over every path instead, docs/subgoals.md.)
+The seed draws 10 ratio trajectories; our detector's default is 30 (with 10, N of eq. 4.2 is
+often 2 and t_{0.975,1} = 12.7 lets nothing pass), so we report both.
 
 ``subgoals-sampling`` (section 5.1.4, Figs. 5.7 and 5.8): on ``three-floor-arm`` (3,600 states,
 moves succeed w.p. 0.5) under the optimal policy of the default task ``deliver``, the exhaustive
@@ -27,10 +25,9 @@ count metric is compared with the Monte Carlo one (definition 4.4, eq. 4.3, theo
   function of the samples (Fig. 5.7);
 * wall-clock times of each (Fig. 5.8).
 
-Each of ``config.runs`` repetitions uses its own generator (the Monte Carlo samples), so the curve
-is a mean over runs with a band. Both detectors take their ratios over every path of the count's
-walker (the default), so the exhaustive set does not depend on the seed and the two sets differ
-only through the counts and the raised threshold of theorem 4.3.
+Each of ``config.runs`` repetitions uses its own generator (ratio paths and samples), so the curve
+is a mean over runs with a band. Both detectors draw the same ratio paths from one seed, so their
+sets differ only through the counts and the raised threshold of theorem 4.3.
 """
 
 from __future__ import annotations
@@ -100,8 +97,7 @@ def subgoals_two_rooms(config: ExperimentConfig) -> ExperimentReport:
         for n_traj, rows in per_run.items():
             rng = np.random.default_rng(seeds[k])
             try:
-                res = discover_exhaustive(mdp, policies[k], rng, p=P_LEVEL, trajectories=n_traj,
-                                          ratios="paths")
+                res = discover_exhaustive(mdp, policies[k], rng, p=P_LEVEL, trajectories=n_traj)
             except AdpartError as err:  # a learned policy that loops: recorded, not hidden
                 rows.append({"run": k, "error": str(err)})
                 continue

@@ -5,14 +5,18 @@ Both pipelines: count metric -> gradient ratios -> the t-test threshold ``mu`` a
 estimates the counts from sampled trajectories in batches (definition 4.4) and requires
 ``ratio > mu + 2 eps / max(1, Delta_H(s_{t+1}))`` (theorem 4.3).
 
-The ratios are taken, by default (``ratios="all"``), over **every** path of the count's walker,
-each weighted by its accumulated likelihood (:class:`~adpart.subgoals.ratios.PathRatios`):
+By default (``ratios="paths"``, the seed's procedure of Fig. 4.2) the ratios are taken along
+``trajectories`` sampled paths, drawn first from ``rng``, so with the same seed both detectors
+judge the same paths and differ only through the counts.
+
+``ratios="all"`` (a choice, not the default) takes them over **every** path of the count's
+walker, each weighted by its accumulated likelihood (:class:`~adpart.subgoals.ratios.PathRatios`):
 section 4.1.1.1 takes ``nu`` and ``sigma`` from "the distribution of gradient ratios over the
-entire space" and asks for "at least one path through s" reaching ``mu``, and a finite sample of
-paths made both - hence the exhaustive subgoal set itself - depend on the seed (30 sampled
-paths on three-floor-arm: ``mu`` from 10.5 to 17.5 and Jaccard 0.25-0.38 between seeds).
-``ratios="paths"`` keeps the seed's procedure of Fig. 4.2 (``trajectories`` sampled paths, drawn
-first from ``rng``, so with the same seed both detectors judge the same paths).
+entire space" and asks for "at least one path through s" reaching ``mu``; this is the limit of
+ever more sampled paths, so the exhaustive set no longer depends on the seed (30 sampled paths on
+three-floor-arm: ``mu`` from 10.5 to 17.5 and Jaccard 0.25-0.38 between seeds). It is not the
+default because it changes the discovered sets the project's measured results rest on
+(three-floor: 36 subgoals instead of about 8, urban: 336 instead of 0-3; docs/subgoals.md).
 """
 
 from __future__ import annotations
@@ -52,19 +56,24 @@ from adpart.subgoals.ratios import (
 )
 from adpart.subgoals.result import SubgoalResult
 
-STOP_RULES = ("passes", "either", "bernstein", "stable", "max")
-RATIO_MODES = ("all", "paths")
-#: The ``"passes"`` rule stops at the end of a full pass over the start states once the
+STOP_RULES = ("passes", "predicted", "either", "bernstein", "stable", "max")
+RATIO_MODES = ("paths", "all")
+#: The ``"passes"`` rule (default) stops when the subgoal sets of two consecutive full passes
+#: over the start states agree to at least this Jaccard index.
+PASS_AGREEMENT = 0.9
+#: The ``"predicted"`` rule stops at the end of a full pass over the start states once the
 #: Jaccard index the subgoal set is predicted to have with the exact one
 #: (:func:`_predicted_jaccard`) reaches this. The prediction treats the margins as normal and
 #: their per-pass spread as the only error, which is optimistic: over 20 seeds on
-#: three-floor-arm (pure Gauss-Seidel's optimal policy), 0.9 gave actual indices of 0.82-0.98
-#: after 3-4 passes, 0.95 gave 0.90-1.0 after 3-14 passes.
-PASS_AGREEMENT = 0.95
+#: three-floor-arm (pure Gauss-Seidel's optimal policy, ratios over every path), 0.9 gave actual
+#: indices of 0.82-0.98 after 3-4 passes, 0.95 gave 0.90-1.0 after 3-14 passes.
+PREDICTED_AGREEMENT = 0.95
 #: ... and after at least this many passes (the standard errors need replicates).
 MIN_PASSES = 3
-#: With the ``"either"``, ``"stable"`` and ``"bernstein"`` rules a batch is at least ``batch``
-#: samples and at least this fraction of the samples drawn so far.
+#: With ``ratios="all"`` and the ``"either"``, ``"stable"`` and ``"bernstein"`` rules a batch is
+#: at least ``batch`` samples and at least this fraction of the samples drawn so far (each
+#: judgement is then an ``O(nnz)`` pass over the walker). With ``ratios="paths"`` every batch
+#: has ``batch`` samples.
 BATCH_GROWTH = 0.1
 
 
@@ -131,7 +140,8 @@ def _threshold(rs: RatioSamples | PathRatios, S: int, p: float,
 
 def _check_ratios(ratios: str) -> str:
     if ratios not in RATIO_MODES:
-        raise TaskError(f"ratios = {ratios!r}; use 'all' (every path) or 'paths' (sampled)")
+        raise TaskError(f"ratios = {ratios!r}; use 'paths' (sampled, default) or 'all' "
+                        "(every path)")
     return ratios
 
 
@@ -145,13 +155,14 @@ def discover_exhaustive(
     n: int = 0,
     horizon: int | None = None,
     on_loop: str = "error",
-    ratios: str = "all",
+    ratios: str = "paths",
 ) -> SubgoalResult:
     """Subgoals from the exhaustive count metric (eq. 4.1) and the t-test threshold (eq. 4.2).
 
-    With the default ``ratios="all"`` the result does not depend on ``rng``: ``nu``, ``sigma``
-    and each state's largest ratio are taken over every path of the count's walker, weighted by
-    likelihood (:class:`~adpart.subgoals.ratios.PathRatios`), and ``N`` defaults to
+    By default (``ratios="paths"``) the ratios are taken along ``trajectories`` paths sampled
+    from ``rng`` (Fig. 4.2). With ``ratios="all"`` the result does not depend on ``rng``: ``nu``,
+    ``sigma`` and each state's largest ratio are taken over every path of the count's walker,
+    weighted by likelihood (:class:`~adpart.subgoals.ratios.PathRatios`), and ``N`` defaults to
     :data:`~adpart.subgoals.ratios.ALL_PATHS_N`.
 
     Args:
@@ -163,7 +174,8 @@ def discover_exhaustive(
             over every path, :func:`samples_per_state` over sampled paths).
         horizon: step cap of the sampled paths (default ``|S|``; ``ratios="paths"`` only).
         on_loop: ``"error"`` or ``"truncate"`` for a policy that never terminates.
-        ratios: ``"all"`` (every path) or ``"paths"`` (``trajectories`` sampled paths).
+        ratios: ``"paths"`` (default: ``trajectories`` sampled paths) or ``"all"`` (every
+            path of the walker).
     """
     t0 = time.perf_counter()
     mdp = check_mdp(mdp)
@@ -220,7 +232,7 @@ def discover_monte_carlo(
     max_samples: int = 50_000,
     horizon: int | None = None,
     on_loop: str = "error",
-    ratios: str = "all",
+    ratios: str = "paths",
 ) -> SubgoalResult:
     """Subgoals from the sampled count metric (definition 4.4), batch by batch.
 
@@ -233,21 +245,24 @@ def discover_monte_carlo(
     After each batch the counts ``C_H``, the threshold ``mu`` and the subgoal set are
     recomputed and recorded (the data of Figs. 5.7/5.12). Sampling stops by ``stop``:
     ``"passes"`` (default) at the end of a full pass over the start states (every ``|S|``
-    samples; a batch is then a pass), after at least :data:`MIN_PASSES` passes, once the Jaccard
-    index the set is predicted to have with the exact one reaches :data:`PASS_AGREEMENT`
+    samples) once the subgoal sets of the last two passes have a Jaccard index of at least
+    :data:`PASS_AGREEMENT`, or after one pass when the policy and dynamics are deterministic
+    (the counts are then exact); a batch is then a pass. ``"predicted"`` (a choice) also stops
+    only at pass ends, after at least :data:`MIN_PASSES` passes, once the Jaccard index the set
+    is predicted to have with the exact one reaches :data:`PREDICTED_AGREEMENT`
     (:func:`_predicted_jaccard`: the passes are independent replicates of the counts, so their
     spread gives each state's chance of being on the other side of ``mu``), or after one pass
-    when the policy and dynamics are deterministic (the counts are then exact). When those
-    passes do not fit under ``max_samples`` (a large model, where the exhaustive count is what
-    Monte Carlo is meant to avoid) the rule is ``"either"``; ``"bernstein"`` when the sample
-    count meets eq. 4.3 with the current ``max C_H`` and ``epsilon`` (the seed's rule; it stops
-    far too early for the counts to be accurate to ``epsilon``, because eq. 4.3 bounds each
-    trajectory's count by ``max C_H`` rather than by ``|S|``); ``"stable"`` when the subgoal set
-    has not changed over ``stable_batches`` batches; ``"either"`` whichever of those two comes
-    first; ``"max"`` only at ``max_samples``. With ``"max"`` every batch has ``batch`` samples;
-    with ``"either"``, ``"stable"`` and ``"bernstein"`` at least ``batch`` and
-    :data:`BATCH_GROWTH` of the samples so far (not past eq. 4.3's count), so the set is judged
-    ``O(log N)`` times. A state is a subgoal when some path reaches
+    on deterministic dynamics. When the passes a pass rule needs do not fit under
+    ``max_samples`` (a large model, where the exhaustive count is what Monte Carlo is meant to
+    avoid) the rule is ``"either"``; ``"bernstein"`` when the sample count meets eq. 4.3 with
+    the current ``max C_H`` and ``epsilon`` (the seed's rule; it stops after a few hundred
+    samples, far too early for the counts to be accurate to ``epsilon``, because eq. 4.3 bounds
+    each trajectory's count by ``max C_H`` rather than by ``|S|``); ``"stable"`` when the
+    subgoal set has not changed over ``stable_batches`` batches; ``"either"`` whichever of those
+    two comes first; ``"max"`` only at ``max_samples``. Batches other than passes have
+    ``batch`` samples; with ``ratios="all"`` and ``"either"``, ``"stable"`` or ``"bernstein"``
+    at least ``batch`` and :data:`BATCH_GROWTH` of the samples so far (not past eq. 4.3's
+    count), so the set is judged ``O(log N)`` times. A state is a subgoal when some path reaches
     ``mu + 2 eps_N / max(1, Delta_H(s_{t+1}))`` (theorem 4.3), with ``eps_N`` the accuracy the
     samples drawn so far guarantee by eq. 4.3 for the ratio's two states
     (:func:`_sample_epsilon`; at most ``epsilon``).
@@ -258,11 +273,11 @@ def discover_monte_carlo(
             the raised threshold).
         confidence: the probability ``p`` of eq. 4.3 (section 5.1.4 uses 0.9).
 
-    With ``ratios="all"`` (default) the ratios are those of every path of the walker under
-    ``C_H`` (:class:`~adpart.subgoals.ratios.PathRatios`: the walker's edges only, ``O(nnz)``
-    per batch, no exhaustive count), so ``C_H -> C*`` makes the result the exhaustive one; the
-    first batch has ``trajectories`` samples. With ``ratios="paths"`` the ``trajectories`` ratio
-    paths are sampled first, as the exhaustive detector samples them.
+    With ``ratios="paths"`` (default) the ``trajectories`` ratio paths are sampled first, as the
+    exhaustive detector samples them. With ``ratios="all"`` the ratios are those of every path of
+    the walker under ``C_H`` (:class:`~adpart.subgoals.ratios.PathRatios`: the walker's edges
+    only, ``O(nnz)`` per batch, no exhaustive count), so ``C_H -> C*`` makes the result the
+    exhaustive one; the first batch has ``trajectories`` samples.
 
     The other arguments are as in :func:`discover_exhaustive`.
     """
@@ -294,8 +309,11 @@ def discover_monte_carlo(
     # deterministic dynamics and policy: one stratified pass of expected arrivals is C* itself
     deterministic = pol.ndim == 1 and bool(
         np.all(np.diff(mdp.P.indptr)[pol * S + np.arange(S)] <= 1))
-    if stop == "passes" and (S if deterministic else MIN_PASSES * S) > max_samples:
+    passes_needed = {"passes": 2, "predicted": MIN_PASSES}.get(stop, 0)
+    predict = stop == "predicted"
+    if passes_needed and (S if deterministic else passes_needed * S) > max_samples:
         stop = "either"  # the passes the rule needs do not fit under the cap: a large model
+    by_pass = stop in ("passes", "predicted")
     starts = StartStream(S, rng)
     # the count samples are drawn apart from the ratio paths (stratified starts, expected
     # arrivals); the first batch is as large as the ratio paths were
@@ -323,9 +341,10 @@ def discover_monte_carlo(
     arrivals, truncated = sample_arrivals(mdp, pol, trajectories, rng, horizon, checked=True,
                                           starts=starts.take(trajectories), expected=True)
     n_samples = trajectories
-    # the "passes" rule: each full pass is an independent replicate of the counts; its margins
+    # the "predicted" rule: each full pass is an independent replicate of the counts; its margins
     pass_arrivals, pass_n = arrivals.copy(), trajectories
     pass_margins: list[np.ndarray] = []
+    pass_sets: list[np.ndarray] = []
     history: list[dict[str, object]] = []
     sets: list[np.ndarray] = []
     reason = "max_samples"
@@ -334,10 +353,10 @@ def discover_monte_carlo(
         rest = max_samples - n_samples
         if rest <= 0:
             size = 0
-        elif stop == "passes":
+        elif by_pass:
             # one batch per pass over the start states: the rule looks only at pass ends
             size = min(rest, S - n_samples % S)
-        elif stop == "max":
+        elif stop == "max" or ratios == "paths":
             size = min(rest, batch)
         else:
             # batches grow with the sample, so the sets are judged O(log N) times, each in O(nnz)
@@ -357,7 +376,7 @@ def discover_monte_carlo(
         max_c = float(counts.max())
         subgoals, rs, mu, nu, sd, n_ps, margin = judge(counts, n_samples)
         predicted = None
-        if stop == "passes" and n_samples % S == 0 and not deterministic:
+        if stop == "predicted" and n_samples % S == 0 and not deterministic:
             pass_margins.append(judge(S * pass_arrivals / pass_n, pass_n)[6])
             pass_arrivals, pass_n = np.zeros(S), 0
             if len(pass_margins) >= MIN_PASSES:
@@ -367,14 +386,22 @@ def discover_monte_carlo(
         needed = bernstein_samples(max_c, epsilon, confidence)
         history.append({"samples": n_samples, "n_subgoals": int(subgoals.size),
                         "subgoals": subgoals.tolist(), "threshold": mu, "max_count": max_c,
-                        "bernstein_samples": needed, "predicted_jaccard": predicted})
+                        "bernstein_samples": needed})
+        if predict:
+            history[-1]["predicted_jaccard"] = predicted
         sets.append(subgoals)
         stable = len(sets) > stable_batches and all(
             np.array_equal(s, subgoals) for s in sets[-stable_batches - 1:]
         )
-        if stop == "passes" and n_samples % S == 0 and (
-                deterministic or (predicted is not None and predicted >= PASS_AGREEMENT)):
-            reason = "passes"
+        if stop == "passes" and n_samples % S == 0:
+            pass_sets.append(subgoals)
+            if deterministic or (len(pass_sets) >= 2
+                                 and _jaccard(pass_sets[-2], subgoals) >= PASS_AGREEMENT):
+                reason = "passes"
+                break
+        if stop == "predicted" and n_samples % S == 0 and (
+                deterministic or (predicted is not None and predicted >= PREDICTED_AGREEMENT)):
+            reason = "predicted"
             break
         if stop in ("either", "bernstein") and n_samples >= needed:
             reason = "bernstein"

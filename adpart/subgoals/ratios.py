@@ -135,12 +135,13 @@ def samples_per_state(samples: RatioSamples, n_states: int) -> int:
     return max(2, round(float(seen.mean()))) if seen.size else 2
 
 
-#: ``N`` of eq. 4.2 when the ratios are taken over every path (``ratios="all"``, the default):
-#: the seed's figures imply N of 3 to 6 (two-rooms, Fig. 4.2: 3; section 5.1.4's exhaustive
-#: three-floor: 6; its Monte Carlo run: 4-5; the 20,000-state urban task of 5.1.5 needs about
-#: 30), and the automatic rule of :func:`samples_per_state` chose 4 on two-rooms, three-floor and
-#: three-floor-arm for most ratio-path seeds. A constant, because over every path there is no
-#: sample whose per-state size could set it.
+#: ``N`` of eq. 4.2 when the ratios are taken over every path (``ratios="all"``, a choice; the
+#: default ``"paths"`` keeps the automatic :func:`samples_per_state`): the seed's figures imply
+#: N of 3 to 6 (two-rooms, Fig. 4.2: 3; section 5.1.4's exhaustive three-floor: 6; its Monte
+#: Carlo run: 4-5; the 20,000-state urban task of 5.1.5 needs about 30), and the automatic rule
+#: of :func:`samples_per_state` chose 4 on two-rooms, three-floor and three-floor-arm for most
+#: ratio-path seeds. A constant, because over every path there is no sample whose per-state
+#: size could set it.
 ALL_PATHS_N = 4
 
 

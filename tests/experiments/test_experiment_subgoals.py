@@ -57,10 +57,7 @@ def test_quick_sampling_curve_times_and_agreement(tmp_path):
     for row in report.data["runs"]:
         ex, mc = row["exhaustive"], row["monte_carlo"]
         assert ex["subgoals"] and ex["mu"] > ex["ratio_mean"]
-        assert mc["stop_reason"] in ("passes", "bernstein", "stable", "max_samples")
-        assert mc["samples"] >= 30
-        if mc["stop_reason"] == "max_samples":  # the predicted agreement was not reached
-            assert mc["samples"] == 50_000
+        assert mc["stop_reason"] in ("passes", "bernstein", "stable") and mc["samples"] >= 30
         assert ex["time_s"] > 0 and mc["time_s"] > 0
         common = len(set(ex["subgoals"]) & set(mc["subgoals"]))
         assert mc["common"] == common

@@ -216,7 +216,7 @@ def test_auto_picks_gauss_seidel_with_sinks_and_mpi_without():
     plain = FiniteMDP.from_dense(P, R, 0.9)
     goal = FiniteMDP.from_dense(P, R, 0.9, terminal=np.arange(6) == 5)
     assert choose_method(plain) == "mpi" and sweep_order(plain.as_smdp()) is None
-    assert choose_method(goal) == "gs-mpi"
+    assert choose_method(goal) == "gs"
     assert sweep_order(goal.as_smdp())[0] == 5  # swept from the sink outwards
 
 
@@ -238,17 +238,22 @@ def test_gauss_seidel_handing_over_to_mpi_keeps_the_guarantee(params, gs_sweeps)
     assert np.max(np.abs(sol.V - V_star)) <= sol.value_error_bound + 1e-9
 
 
-def test_default_solve_on_three_floor_arm_is_epsilon_optimal_after_the_handover():
+def test_gs_mpi_on_three_floor_arm_is_epsilon_optimal_after_the_handover():
     """three-floor-arm (slip 0.5) needs more than GS_SWEEP_BUDGET Gauss-Seidel sweeps, so
-    solve() ends in MPI there; its policy's loss against an independent tight solve (plain
-    value iteration to 1e-10) stays below epsilon."""
+    solve(method="gs-mpi") ends in MPI there; its policy's loss against an independent tight
+    solve (plain value iteration to 1e-10) stays below epsilon. The default solve() stays pure
+    Gauss-Seidel there."""
     from adpart.envs.registry import get_domain
     from adpart.mdp.solvers import GS_SWEEP_BUDGET, gauss_seidel_value_iteration
 
     mdp = get_domain("three-floor-arm").mdp()
     eps = 1e-6
-    assert gauss_seidel_value_iteration(mdp, eps).sweeps > GS_SWEEP_BUDGET
-    sol = solve(mdp, eps)
+    gs = gauss_seidel_value_iteration(mdp, eps)
+    assert gs.sweeps > GS_SWEEP_BUDGET
+    default = solve(mdp, eps)
+    assert default.evaluation_sweeps == 0 and default.sweeps == gs.sweeps
+    np.testing.assert_array_equal(default.policy, gs.policy)
+    sol = solve(mdp, eps, method="gs-mpi")
     assert sol.converged and sol.evaluation_sweeps > 0  # the MPI phase ran
     tight = value_iteration(mdp, 1e-10)
     V_star = tight.V

@@ -301,22 +301,27 @@ def test_monte_carlo_agrees_with_exhaustive_on_slippery_three_floor_arm():
 
 
 def test_monte_carlo_agrees_with_exhaustive_over_seeds_on_slippery_four_rooms():
-    """Issue 22, several seeds and different seeds per detector: four-rooms (slip 2/3).
+    """Issue 22, several seeds and different seeds per detector: four-rooms (slip 2/3), with
+    the opt-in ratios over every path and the predicted-agreement stop.
 
     The exhaustive set must not depend on the seed at all (ratios over every path), and each
-    Monte Carlo seed's set must reach Jaccard >= 0.9 with it under the default stop (over
+    Monte Carlo seed's set must reach Jaccard >= 0.9 with it under the "predicted" stop (over
     Monte Carlo seeds 100-159, 58 give 1.0 and two 0.89: one extra state beside the 8).
     """
     mdp = get_domain("four-rooms").mdp("G1")
     policy = solve(mdp).policy
-    exhaustive = [discover_exhaustive(mdp, policy, np.random.default_rng(k)) for k in range(5)]
+    exhaustive = [discover_exhaustive(mdp, policy, np.random.default_rng(k), ratios="all")
+                  for k in range(5)]
     for res in exhaustive[1:]:
         assert res.subgoals.tolist() == exhaustive[0].subgoals.tolist()
         assert res.threshold == exhaustive[0].threshold
     assert exhaustive[0].subgoals.size > 0
+    assert exhaustive[0].stats["samples_per_state"] == 4  # ALL_PATHS_N
     for k in range(5):
-        mc = discover_monte_carlo(mdp, policy, np.random.default_rng(k))
-        assert mc.stats["stop_reason"] == "passes"
+        mc = discover_monte_carlo(mdp, policy, np.random.default_rng(k), ratios="all",
+                                  stop="predicted")
+        assert mc.stats["stop_reason"] == "predicted"
+        assert mc.stats["history"][-1]["predicted_jaccard"] >= 0.95
         assert mc.stats["samples"] % mdp.n_states == 0
         assert _jaccard(exhaustive[(k + 1) % 5].subgoals, mc.subgoals) >= 0.9
 
@@ -407,6 +412,11 @@ def test_exhaustive_with_sampled_paths_is_the_seed_procedure():
 
     rs = gradient_ratios(counts, traj)
     assert res.stats["ratio_mean"] == pytest.approx(rs.ratios.mean())
+    # the sampled paths are the default
+    default = discover_exhaustive(mdp, policy, np.random.default_rng(0), trajectories=10)
+    assert default.params["ratios"] == "paths"
+    assert default.subgoals.tolist() == res.subgoals.tolist()
+    assert default.threshold == res.threshold
     with pytest.raises(TaskError, match="ratios"):
         discover_exhaustive(mdp, policy, np.random.default_rng(0), ratios="some")
 
@@ -424,3 +434,28 @@ def test_predicted_jaccard_oracle():
     expected = (2 - (1 - q[0]) - (1 - q[2])) / (2 + q[1] + q[3] + q[4])
     assert _predicted_jaccard(decided, margin, reps) == pytest.approx(expected)
     assert _predicted_jaccard(margin > 0, margin, np.stack([margin, margin])) == 1.0
+
+
+def test_defaults_are_sampled_paths_and_the_two_passes_rule():
+    """The every-path ratios, the predicted stop and growing batches are opt-in: by default
+    both detectors take their ratios along sampled paths, Monte Carlo stops by two agreeing
+    passes, and the either/stable/bernstein batches all have ``batch`` samples."""
+    from adpart.plugins import get_registry
+
+    for name in ("count-exhaustive", "count-mc"):
+        det = get_registry().get("subgoal-detector", name).create({})
+        assert det.kw["ratios"] == "paths"
+    mdp = get_domain("four-rooms").mdp("G1")
+    policy = solve(mdp).policy
+    mc = discover_monte_carlo(mdp, policy, np.random.default_rng(0))
+    assert mc.params["ratios"] == "paths" and mc.params["stop"] == "passes"
+    assert mc.stats["stop_reason"] == "passes"
+    assert "predicted_jaccard" not in mc.stats["history"][-1]
+    steps = {}
+    for ratios in ("paths", "all"):
+        res = discover_monte_carlo(mdp, policy, np.random.default_rng(0), stop="stable",
+                                   max_samples=2_000, ratios=ratios)
+        samples = [h["samples"] for h in res.stats["history"]]
+        steps[ratios] = np.diff(samples)
+    assert np.all(steps["paths"] == 50)
+    assert steps["all"].max() > 50  # batches grow with the sample only over every path
