@@ -4,10 +4,13 @@ Workloads: ``three-floor-arm`` (3,600 states, task ``deliver``, optimal policy f
 :func:`adpart.mdp.solvers.solve`), and slippery grids ``random_grid_mdp(n, slip=0.2)`` of 10^5
 and 10^6 cells with one terminal goal in a corner, reward -1 per step, and the
 shortest-path policy of :func:`goal_grid`. Each detector runs with
-seed 0 and its defaults; printed: wall time (best of ``repeats``), the number of subgoals of
+seed 0, once with its defaults and once with the opt-in every-path ratios and predicted-agreement
+stop (:data:`CHOICES`); printed: wall time (best of ``repeats``), the number of subgoals of
 each and their overlap, the ratio exhaustive / Monte Carlo, and the MC samples and stop rule.
-First, :func:`agreement`: the Jaccard index of the two subgoal sets on two-rooms, three-floor,
-three-floor-arm and urban for three seeds, with the samples Monte Carlo's default rule took.
+First, :func:`agreement` for each choice: the Jaccard index of the two subgoal sets on two-rooms,
+three-floor, three-floor-arm and urban for seeds 0-4 (and each MC seed against another exhaustive
+seed), with the samples Monte Carlo's stopping rule took and both detectors' times. Policies come
+from the default :func:`~adpart.mdp.solvers.solve`.
 """
 
 from __future__ import annotations
@@ -51,9 +54,22 @@ def best(fn: Callable[[], SubgoalResult], repeats: int) -> tuple[float, SubgoalR
     return min(times), out
 
 
-def run(label: str, mdp: FiniteMDP, policy: np.ndarray, repeats: int) -> None:
-    te, ex = best(lambda: discover_exhaustive(mdp, policy, np.random.default_rng(0)), repeats)
-    tm, mc = best(lambda: discover_monte_carlo(mdp, policy, np.random.default_rng(0)), repeats)
+#: ``name -> (discover_exhaustive keywords, discover_monte_carlo keywords)``: the defaults (ratios
+#: along sampled paths, the two-passes stop) and the opt-in every-path ratios with the
+#: predicted-agreement stop (docs/subgoals.md).
+CHOICES: dict[str, tuple[dict, dict]] = {
+    "defaults": ({}, {}),
+    "ratios=all, stop=predicted": ({"ratios": "all"}, {"ratios": "all", "stop": "predicted"}),
+}
+
+
+def run(label: str, mdp: FiniteMDP, policy: np.ndarray, repeats: int,
+        choice: str = "defaults") -> None:
+    ex_kw, mc_kw = CHOICES[choice]
+    te, ex = best(lambda: discover_exhaustive(mdp, policy, np.random.default_rng(0), **ex_kw),
+                  repeats)
+    tm, mc = best(lambda: discover_monte_carlo(mdp, policy, np.random.default_rng(0), **mc_kw),
+                  repeats)
     both = np.intersect1d(ex.subgoals, mc.subgoals).size
     print(f"{label:<18} {mdp.n_states:>9,} {te:>8.3f} {tm:>8.3f} {te / tm:>7.1f}x "
           f"{ex.subgoals.size:>5} {mc.subgoals.size:>5} {both:>5} {mc.stats['samples']:>7} "
@@ -64,43 +80,70 @@ AGREEMENT_DOMAINS = (("two-rooms", None), ("three-floor", None), ("three-floor-a
                      ("urban", None))
 
 
-def agreement(seeds: tuple[int, ...] = (0, 1, 2)) -> list[dict]:
-    """Jaccard index of the exhaustive and Monte Carlo subgoal sets with MC's default stop."""
-    print("agreement with the default stopping rule (Jaccard of the subgoal sets; both empty = 1)")
-    print(f"{'domain':<16} {'states':>7} {'seed':>4} {'#exh':>5} {'#MC':>5} {'Jaccard':>7} "
-          f"{'samples':>8} {'stop':<7} {'MC/exh time':>11}")
+def agreement(seeds: tuple[int, ...] = (0, 1, 2, 3, 4), choice: str = "defaults",
+              domains: tuple[tuple[str, str | None], ...] = AGREEMENT_DOMAINS) -> list[dict]:
+    """Jaccard index of the exhaustive and Monte Carlo subgoal sets under ``choice``
+    (:data:`CHOICES`; ``"defaults"``: MC's default stop).
+
+    Per seed ``k``: ``J`` is MC seed ``k`` against exhaustive seed ``k``, ``J x`` MC seed ``k``
+    against exhaustive seed ``k+1`` (a different seed per detector), ``exh~0`` exhaustive seed
+    ``k`` against exhaustive seed 0 (1.00 when the exhaustive set does not depend on the seed).
+    """
+    ex_kw, mc_kw = CHOICES[choice]
+    print(f"agreement with {choice} (Jaccard of the subgoal sets; both empty = 1)")
+    print(f"{'domain':<16} {'states':>7} {'seed':>4} {'#exh':>5} {'#MC':>5} {'J':>5} {'J x':>5} "
+          f"{'exh~0':>5} {'samples':>8} {'stop':<7} {'exh s':>7} {'MC s':>7}")
     rows = []
-    for name, task in AGREEMENT_DOMAINS:
+    for name, task in domains:
         mdp = get_domain(name).mdp(task)
         policy = solve(mdp).policy
+        ex_runs = {k: best(lambda m=mdp, p=policy, k=k: discover_exhaustive(
+            m, p, np.random.default_rng(k), **ex_kw), 3) for k in (*seeds, max(seeds) + 1)}
         for seed in seeds:
-            te, ex = best(lambda m=mdp, p=policy, k=seed: discover_exhaustive(
-                m, p, np.random.default_rng(k)), 3)
+            te, ex = ex_runs[seed]
             tm, mc = best(lambda m=mdp, p=policy, k=seed: discover_monte_carlo(
-                m, p, np.random.default_rng(k)), 3)
-            union = np.union1d(ex.subgoals, mc.subgoals).size
-            jac = np.intersect1d(ex.subgoals, mc.subgoals).size / union if union else 1.0
-            rows.append({"domain": name, "seed": seed, "jaccard": jac,
-                         "samples": mc.stats["samples"], "ratio_time": tm / te})
+                m, p, np.random.default_rng(k), **mc_kw), 3)
+            jac = _jaccard(ex.subgoals, mc.subgoals)
+            jac_x = _jaccard(ex_runs[seed + 1][1].subgoals, mc.subgoals)
+            jac_ex = _jaccard(ex.subgoals, ex_runs[seeds[0]][1].subgoals)
+            rows.append({"choice": choice, "domain": name, "seed": seed, "jaccard": jac,
+                         "jaccard_cross": jac_x, "jaccard_exhaustive": jac_ex,
+                         "samples": mc.stats["samples"], "time_exhaustive": te, "time_mc": tm,
+                         "ratio_time": tm / te})
             print(f"{name:<16} {mdp.n_states:>7,} {seed:>4} {ex.subgoals.size:>5} "
-                  f"{mc.subgoals.size:>5} {jac:>7.2f} {mc.stats['samples']:>8} "
-                  f"{mc.stats['stop_reason']:<7} {tm / te:>11.2f}", flush=True)
-    print(f"lowest Jaccard {min(r['jaccard'] for r in rows):.2f} (target >= 0.9)\n")
+                  f"{mc.subgoals.size:>5} {jac:>5.2f} {jac_x:>5.2f} {jac_ex:>5.2f} "
+                  f"{mc.stats['samples']:>8} {mc.stats['stop_reason']:<7} {te:>7.3f} "
+                  f"{tm:>7.3f}", flush=True)
+    low = min(min(r["jaccard"], r["jaccard_cross"]) for r in rows)
+    print(f"lowest Jaccard {low:.2f} (target >= 0.9)\n")
     return rows
 
 
+def _jaccard(a: np.ndarray, b: np.ndarray) -> float:
+    union = np.union1d(a, b).size
+    return np.intersect1d(a, b).size / union if union else 1.0
+
+
 def main() -> None:
-    agreement()
-    print("subgoal discovery: exhaustive (eq. 4.1) vs Monte Carlo (def. 4.4), seed 0")
-    print(f"{'workload':<18} {'states':>9} {'exh s':>8} {'MC s':>8} {'ratio':>8} "
-          f"{'#exh':>5} {'#MC':>5} {'both':>5} {'samples':>7} stop")
+    for choice in CHOICES:
+        agreement(choice=choice)
     arm = get_domain("three-floor-arm").mdp("deliver")
-    run("three-floor-arm", arm, solve(arm).policy, 3)
-    for n in (10**5, 10**6):
-        t0 = time.perf_counter()
-        mdp, policy = goal_grid(n)
-        print(f"  (grid {n:,}: model and policy in {time.perf_counter() - t0:.1f} s)")
-        run(f"grid {n:,}", mdp, policy, 3 if n <= 10**5 else 1)
+    arm_policy = solve(arm).policy
+    grids = {}
+    for choice in CHOICES:
+        print("subgoal discovery: exhaustive (eq. 4.1) vs Monte Carlo (def. 4.4), seed 0, "
+              f"{choice}")
+        print(f"{'workload':<18} {'states':>9} {'exh s':>8} {'MC s':>8} {'ratio':>8} "
+              f"{'#exh':>5} {'#MC':>5} {'both':>5} {'samples':>7} stop")
+        run("three-floor-arm", arm, arm_policy, 3, choice)
+        for n in (10**5, 10**6):
+            if n not in grids:
+                t0 = time.perf_counter()
+                grids[n] = goal_grid(n)
+                print(f"  (grid {n:,}: model and policy in {time.perf_counter() - t0:.1f} s)")
+            mdp, policy = grids[n]
+            run(f"grid {n:,}", mdp, policy, 3 if n <= 10**5 else 1, choice)
+        print()
 
 
 if __name__ == "__main__":

@@ -26,11 +26,13 @@ epsilon-optimal policy about 5x faster than pymdptoolbox's value iteration
 the order of a backward search from the terminal states, from a lower bound, and stops by the
 same test on a certifying Jacobi backup; ``solve()`` picks it for models with terminal states
 (goal-directed: 0.2x pymdptoolbox's time on a 10^6-state rooms grid) and MPI otherwise
-(:func:`choose_method`).
+(:func:`choose_method`). ``gauss_seidel_then_mpi`` (``method="gs-mpi"``, by name only) hands
+over from Gauss-Seidel to MPI after :data:`GS_SWEEP_BUDGET` sweeps.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 from dataclasses import dataclass
 from typing import Protocol
@@ -681,8 +683,48 @@ def greedy_policy(Q: np.ndarray) -> np.ndarray:
     return np.argmax(Q, axis=1).astype(np.int64, copy=False)
 
 
+#: Gauss-Seidel sweeps :func:`gauss_seidel_then_mpi` allows before it hands over to MPI.
+GS_SWEEP_BUDGET = 100
+
+
+def gauss_seidel_then_mpi(
+    model: HasSMDP,
+    epsilon: float = 1e-6,
+    *,
+    gs_sweeps: int = GS_SWEEP_BUDGET,
+    max_sweeps: int = 100_000,
+    V0: np.ndarray | None = None,
+) -> Solution:
+    """Gauss-Seidel value iteration for at most ``gs_sweeps`` sweeps, then, if its stopping test
+    has not passed, modified policy iteration from its values (``solve(method="gs-mpi")``; not
+    what ``"auto"`` picks).
+
+    Gauss-Seidel from the sinks carries value out of the goals in a few sweeps, which is all a
+    deterministic goal-directed model needs (65 sweeps on the 10^6-state rooms grid); where
+    slip spreads value back and forth (three-floor-arm: 252 sweeps) its residual then contracts
+    only by about ``kappa`` per sweep, and MPI's policy evaluations finish far sooner from the
+    values Gauss-Seidel reached. Either phase stops only by value iteration's own test on a
+    Jacobi backup ``T V`` (sup or span rule, Puterman Thm. 6.3.1 / Prop. 6.6.5) and returns that
+    backup's greedy policy; MPI's guarantee does not depend on its start (Puterman 6.5), so the
+    result carries value iteration's guarantee ``||V* - V^pi|| < epsilon`` either way.
+    ``sweeps`` counts the full backups of both phases, ``evaluation_sweeps`` MPI's policy
+    evaluation mat-vecs. Memory: the MPI phase adds the current policy's ``S`` rows of ``F``
+    (at most ``1 / O`` of the model), and only when Gauss-Seidel did not finish.
+    """
+    if isinstance(gs_sweeps, bool) or not isinstance(gs_sweeps, (int, np.integer)) or \
+            gs_sweeps < 1:
+        raise ModelError(f"gs_sweeps = {gs_sweeps!r} must be an integer >= 1")
+    first = gauss_seidel_value_iteration(model, epsilon, max_sweeps=min(int(gs_sweeps),
+                                                                        max_sweeps), V0=V0)
+    if first.converged or first.sweeps >= max_sweeps:
+        return first
+    second = modified_policy_iteration(model, epsilon, max_sweeps=max_sweeps - first.sweeps,
+                                       V0=first.V)
+    return dataclasses.replace(second, sweeps=first.sweeps + second.sweeps)
+
+
 #: What ``solve(method="auto")`` picks (see :func:`choose_method`).
-METHODS = ("auto", "gs", "mpi", "vi")
+METHODS = ("auto", "gs", "mpi", "vi", "gs-mpi")
 
 
 def choose_method(model: HasSMDP) -> str:
@@ -692,7 +734,9 @@ def choose_method(model: HasSMDP) -> str:
     when the model has sinks (terminal states) and numba is present: value then flows out of
     the goal, which one ordered sweep carries across the state space; ``"mpi"`` otherwise (no
     sinks - discounted everywhere, every state's value shaped by its own rewards - where cheap
-    policy evaluations pay off).
+    policy evaluations pay off). ``"gs-mpi"`` (:func:`gauss_seidel_then_mpi`) is faster on
+    slippery goal models but is only chosen by name: its policy breaks exactly tied optimal
+    actions differently, which moves the subgoals discovered from it (docs/solvers.md).
     """
     smdp = model.as_smdp()
     if not _kernels.numba_available():
@@ -707,14 +751,16 @@ def solve(model: HasSMDP, epsilon: float = 1e-6, *, method: str = "auto", **kwar
 ):
     """Solve to an ``epsilon``-optimal greedy policy with the named method.
 
-    ``method``: ``"auto"`` (default: :func:`choose_method`), ``"gs"``
-    (:func:`gauss_seidel_value_iteration`), ``"mpi"`` (:func:`modified_policy_iteration`) or
-    ``"vi"`` (:func:`value_iteration`). All stop by the same rule, so every one guarantees
-    ``||V* - V^pi||_inf < epsilon``; with ``"auto"``, MPI-only arguments (``evaluation_sweeps``,
-    ``kernel``) select MPI.
+    ``method``: ``"auto"`` (default: :func:`choose_method`), ``"gs-mpi"``
+    (:func:`gauss_seidel_then_mpi`), ``"gs"`` (:func:`gauss_seidel_value_iteration`), ``"mpi"``
+    (:func:`modified_policy_iteration`) or ``"vi"`` (:func:`value_iteration`). All stop by the
+    same rule, so every one guarantees ``||V* - V^pi||_inf < epsilon``; with ``"auto"``,
+    MPI-only arguments (``evaluation_sweeps``, ``kernel``) select MPI.
     """
     if method == "auto":
         method = "mpi" if {"evaluation_sweeps", "kernel"} & kwargs.keys() else choose_method(model)
+    if method == "gs-mpi":
+        return gauss_seidel_then_mpi(model, epsilon, **kwargs)  # type: ignore[arg-type]
     if method == "gs":
         return gauss_seidel_value_iteration(model, epsilon, **kwargs)  # type: ignore[arg-type]
     if method == "mpi":

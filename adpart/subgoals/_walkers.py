@@ -203,3 +203,64 @@ def reach_backwards(indptr, indices, reached):  # pragma: no cover - compiled
                 reached[i] = True
                 order[tail] = i
                 tail += 1
+
+
+@numba.njit(cache=True, nogil=True)
+def path_ratio_sums(counts, in_ptr, in_src, in_w, out_ptr, out_dst, out_w, scores,
+                    next_delta):  # pragma: no cover - compiled
+    """One pass over the walker's edges for :meth:`adpart.subgoals.ratios.PathStructure.ratios`.
+
+    For each state ``s`` (in-edges ``in_ptr[s]:in_ptr[s+1]`` of ``in_src``/``in_w``, out-edges
+    ``out_ptr[s]:out_ptr[s+1]`` of ``out_dst``/``out_w``): the in-sums ``A_k = sum w (1 + C(u))
+    Delta^k`` over predecessors ``u`` with ``Delta = C(s) - C(u) > 0``, the out-sums ``B_k = sum
+    P(v | s) / max(1, C(v) - C(s))^k``; every triple's weight is a product of the two, so the
+    weighted moments are ``sum_s A_k B_k``. Writes ``scores`` (largest ratio, 0 where none) and
+    ``next_delta`` in place; returns ``(sum A0 B0, sum A1 B1, sum A2 B2, number of triples)``.
+    """
+    S = counts.shape[0]
+    t0 = 0.0
+    t1 = 0.0
+    t2 = 0.0
+    n_triples = 0
+    for s in range(S):
+        c = counts[s]
+        a0 = 0.0
+        a1 = 0.0
+        a2 = 0.0
+        a_max = 0.0
+        n_up = 0
+        for k in range(in_ptr[s], in_ptr[s + 1]):
+            u = in_src[k]
+            a = c - counts[u]
+            if a > 0:
+                w = (1.0 + counts[u]) * in_w[k]
+                a0 += w
+                a1 += w * a
+                a2 += w * a * a
+                a_max = max(a_max, a)
+                n_up += 1
+        scores[s] = 0.0
+        next_delta[s] = 0.0
+        n_out = out_ptr[s + 1] - out_ptr[s]
+        if n_up == 0 or n_out == 0:
+            continue
+        b0 = 0.0
+        b1 = 0.0
+        b2 = 0.0
+        min_next = np.inf
+        for k in range(out_ptr[s], out_ptr[s + 1]):
+            v = out_dst[k]
+            b = 1.0 / max(1.0, counts[v] - c)
+            w = out_w[k]
+            b0 += w
+            b1 += w * b
+            b2 += w * b * b
+            min_next = min(min_next, counts[v])
+        t0 += a0 * b0
+        t1 += a1 * b1
+        t2 += a2 * b2
+        n_triples += n_up * n_out
+        nd = min_next - c
+        next_delta[s] = nd
+        scores[s] = a_max / max(1.0, nd)
+    return t0, t1, t2, n_triples

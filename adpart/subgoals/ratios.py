@@ -16,8 +16,10 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
+import scipy.sparse as sp
 
 from adpart.errors import TaskError
+from adpart.subgoals._walkers import path_ratio_sums
 from adpart.subgoals.montecarlo import Trajectories
 
 
@@ -131,3 +133,96 @@ def samples_per_state(samples: RatioSamples, n_states: int) -> int:
     per = samples.samples_per_state(n_states)
     seen = per[per > 0]
     return max(2, round(float(seen.mean()))) if seen.size else 2
+
+
+#: ``N`` of eq. 4.2 when the ratios are taken over every path (``ratios="all"``, a choice; the
+#: default ``"paths"`` keeps the automatic :func:`samples_per_state`): the seed's figures imply
+#: N of 3 to 6 (two-rooms, Fig. 4.2: 3; section 5.1.4's exhaustive three-floor: 6; its Monte
+#: Carlo run: 4-5; the 20,000-state urban task of 5.1.5 needs about 30), and the automatic rule
+#: of :func:`samples_per_state` chose 4 on two-rooms, three-floor and three-floor-arm for most
+#: ratio-path seeds. A constant, because over every path there is no sample whose per-state
+#: size could set it.
+ALL_PATHS_N = 4
+
+
+@dataclass(frozen=True, eq=False)
+class PathRatios:
+    """Gradient ratios over **every** path of the count's walker, weighted by its likelihood.
+
+    The exhaustive reading of section 4.1.1.1: the distribution of gradient ratios over the
+    entire space is that of all interior positions ``(s_{t-1}, s_t, s_{t+1})`` of the paths
+    eq. 4.1 sums over (the walker ``P_pi^0``: uniform start, no self-loop step, ending at a
+    terminal state), each weighted by its accumulated likelihood (definition 4.2) - the limit of
+    the ratio samples of ever more sampled paths - and "at least one path through s along which
+    the gradient ratio is >= mu" is decided over all of them.
+
+    Attributes:
+        scores: ``(S,)`` the largest ratio of any path through each state, 0 where none has
+            ``Delta(s_t) > 0`` and a successor: ``(C(s) - min C(s_{t-1})) /
+            max(1, min C(s_{t+1}) - C(s))`` over the walker's predecessors and successors.
+        next_delta: ``(S,)`` ``Delta(s_{t+1})`` of that path (``min C(s_{t+1}) - C(s)``).
+        mean: ``nu``, the likelihood-weighted mean ratio.
+        sd: ``sigma``, its standard deviation.
+        weight: expected number of ratio positions on one walker path.
+        n_triples: distinct ``(s_{t-1}, s_t, s_{t+1})`` with ``Delta(s_t) > 0``.
+    """
+
+    scores: np.ndarray
+    next_delta: np.ndarray
+    mean: float
+    sd: float
+    weight: float
+    n_triples: int
+
+    def summary(self) -> tuple[float, float]:
+        """``(nu, sigma)`` of eq. 4.2; at least two ratio triples are needed."""
+        if self.n_triples < 2 or not self.weight > 0:
+            raise TaskError(
+                f"the policy's paths have only {self.n_triples} gradient ratio(s); the t-test "
+                "needs at least 2 (the policy may end episodes in one step)"
+            )
+        return self.mean, self.sd
+
+
+class PathStructure:
+    """The walker's edges, grouped by source and by target, for :meth:`ratios` under any counts.
+
+    The edges do not change while the counts do (the Monte Carlo detector re-scores after every
+    batch), so they are sorted once; each :meth:`ratios` call is one compiled ``O(nnz)`` pass
+    (:func:`adpart.subgoals._walkers.path_ratio_sums`).
+    """
+
+    def __init__(self, walker: sp.sparray) -> None:
+        W = sp.csr_array(walker)
+        W.sort_indices()
+        self.n_states = S = W.shape[0]
+        self.out_ptr = W.indptr.astype(np.int64)
+        self.out_dst = W.indices.astype(np.int64)
+        self.out_w = np.asarray(W.data, dtype=np.float64)
+        src = np.repeat(np.arange(S, dtype=np.int64), np.diff(self.out_ptr))
+        order = np.argsort(self.out_dst, kind="stable")
+        self.in_src = src[order]
+        self.in_w = self.out_w[order]
+        self.in_ptr = np.zeros(S + 1, dtype=np.int64)
+        np.cumsum(np.bincount(self.out_dst, minlength=S), out=self.in_ptr[1:])
+
+    def ratios(self, counts: np.ndarray) -> PathRatios:
+        """:class:`PathRatios` of the standard counts ``counts`` (``C*`` or ``C_H``)."""
+        S = self.n_states
+        c = np.ascontiguousarray(counts, dtype=np.float64)
+        scores, next_delta = np.empty(S), np.empty(S)
+        t0, t1, t2, n_triples = path_ratio_sums(c, self.in_ptr, self.in_src, self.in_w,
+                                                self.out_ptr, self.out_dst, self.out_w, scores,
+                                                next_delta)
+        if t0 > 0:
+            mean = t1 / t0
+            var = max(t2 / t0 - mean * mean, 0.0)
+        else:
+            mean, var = 0.0, 0.0
+        return PathRatios(scores, next_delta, float(mean), float(np.sqrt(var)), t0 / S,
+                          int(n_triples))
+
+
+def path_ratios(walker: sp.sparray, counts: np.ndarray) -> PathRatios:
+    """:class:`PathRatios` of ``counts`` over every path of ``walker`` (``P_pi^0``)."""
+    return PathStructure(walker).ratios(counts)

@@ -56,7 +56,7 @@ mdp_params = st.tuples(
 )
 
 
-@given(mdp_params, st.sampled_from(["vi", "mpi", "gs", "auto"]))
+@given(mdp_params, st.sampled_from(["vi", "mpi", "gs", "gs-mpi", "auto"]))
 def test_solution_is_epsilon_optimal_against_dense_oracle(params, method):
     seed, S, A, density, gamma = params
     P, R = random_dense(seed, S, A, density)
@@ -218,3 +218,55 @@ def test_auto_picks_gauss_seidel_with_sinks_and_mpi_without():
     assert choose_method(plain) == "mpi" and sweep_order(plain.as_smdp()) is None
     assert choose_method(goal) == "gs"
     assert sweep_order(goal.as_smdp())[0] == 5  # swept from the sink outwards
+
+
+@given(mdp_params, st.integers(1, 3))
+def test_gauss_seidel_handing_over_to_mpi_keeps_the_guarantee(params, gs_sweeps):
+    """A budget of 1-3 Gauss-Seidel sweeps forces the MPI phase on most models; the policy must
+    still be epsilon-optimal against the dense policy-iteration oracle, with terminal states."""
+    from adpart.mdp.solvers import gauss_seidel_then_mpi
+
+    seed, S, A, density, gamma = params
+    P, R = random_dense(seed, S, A, density)
+    terminal = np.random.default_rng(seed).random(S) < 0.3
+    mdp = FiniteMDP.from_dense(P, R, gamma, terminal=terminal)
+    V_star = dense_optimal_values(P, R, gamma, terminal)
+    eps = 1e-6
+    sol = gauss_seidel_then_mpi(mdp, eps, gs_sweeps=gs_sweeps)
+    assert sol.converged
+    assert np.max(V_star - policy_evaluation(mdp, sol.policy)) <= eps + 1e-9
+    assert np.max(np.abs(sol.V - V_star)) <= sol.value_error_bound + 1e-9
+
+
+def test_gs_mpi_on_three_floor_arm_is_epsilon_optimal_after_the_handover():
+    """three-floor-arm (slip 0.5) needs more than GS_SWEEP_BUDGET Gauss-Seidel sweeps, so
+    solve(method="gs-mpi") ends in MPI there; its policy's loss against an independent tight
+    solve (plain value iteration to 1e-10) stays below epsilon. The default solve() stays pure
+    Gauss-Seidel there."""
+    from adpart.envs.registry import get_domain
+    from adpart.mdp.solvers import GS_SWEEP_BUDGET, gauss_seidel_value_iteration
+
+    mdp = get_domain("three-floor-arm").mdp()
+    eps = 1e-6
+    gs = gauss_seidel_value_iteration(mdp, eps)
+    assert gs.sweeps > GS_SWEEP_BUDGET
+    default = solve(mdp, eps)
+    assert default.evaluation_sweeps == 0 and default.sweeps == gs.sweeps
+    np.testing.assert_array_equal(default.policy, gs.policy)
+    sol = solve(mdp, eps, method="gs-mpi")
+    assert sol.converged and sol.evaluation_sweeps > 0  # the MPI phase ran
+    tight = value_iteration(mdp, 1e-10)
+    V_star = tight.V
+    loss = np.max(V_star - policy_evaluation(mdp, sol.policy))
+    assert loss <= eps + tight.value_error_bound
+    assert sol.loss_bound <= eps
+
+
+def test_gauss_seidel_then_mpi_input_errors():
+    from adpart.mdp.solvers import gauss_seidel_then_mpi
+
+    P, R = random_dense(0, 4, 2, 0.5)
+    mdp = FiniteMDP.from_dense(P, R, 0.9, terminal=np.arange(4) == 3)
+    for bad in (0, -1, 1.5, True):
+        with pytest.raises(ModelError, match="gs_sweeps"):
+            gauss_seidel_then_mpi(mdp, 1e-6, gs_sweeps=bad)

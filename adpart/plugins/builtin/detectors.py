@@ -29,8 +29,13 @@ from adpart.subgoals.result import SubgoalResult
 from adpart.subgoals.reward import with_reward_variation
 
 _P = Param("p", "float", 0.025, "level of the one-sided t-test (eq. 4.2), in (0, 1)", min=0.0)
-_TRAJ = Param("trajectories", "int", 30, "sampled paths along which ratios are taken", min=1)
-_N = Param("n", "int", 0, "N of eq. 4.2 (ratio samples per state); 0 = automatic", min=0)
+_TRAJ = Param("trajectories", "int", 30, "sampled paths along which ratios are taken (--ratios "
+              "paths); count-mc: also its first batch", min=1)
+_N = Param("n", "int", 0, "N of eq. 4.2 (ratio samples per state); 0 = automatic (4 with "
+           "--ratios all)", min=0)
+_RATIOS = Param("ratios", "str", "paths", "gradient ratios along sampled paths (paths, the "
+                "seed's Fig. 4.2) or over every path of the count's walker (all)",
+                choices=("paths", "all"))
 _LOOP = Param("on-loop", "str", "truncate", "a policy that never terminates: error or truncate",
               choices=("error", "truncate"))
 
@@ -40,11 +45,12 @@ class CountExhaustive:
 
     name = "count-exhaustive"
     description = "count metric by sparse mat-vecs (eq. 4.1), gradient ratios, t-test threshold"
-    params = (_P, _TRAJ, _N, _LOOP)
+    params = (_P, _TRAJ, _N, _LOOP, _RATIOS)
 
     def __init__(self, p: float = 0.025, trajectories: int = 30, n: int = 0,
-                 on_loop: str = "truncate") -> None:
-        self.kw = {"p": p, "trajectories": trajectories, "n": n, "on_loop": on_loop}
+                 on_loop: str = "truncate", ratios: str = "paths") -> None:
+        self.kw = {"p": p, "trajectories": trajectories, "n": n, "on_loop": on_loop,
+                   "ratios": ratios}
 
     def detect(self, mdp: FiniteMDP, policy: np.ndarray, rng: np.random.Generator) -> SubgoalResult:
         return discover_exhaustive(mdp, policy, rng, **self.kw)
@@ -64,19 +70,23 @@ class CountMonteCarlo:
         Param("stable-batches", "int", 3, "stop when the subgoals are unchanged this many batches",
               min=1),
         Param("stop", "str", "passes", "stopping rule (passes: two passes over the start "
-              "states agree)", choices=("passes", "either", "bernstein", "stable", "max")),
+              "states agree; predicted: passes until the predicted Jaccard index with the exact "
+              "set is 0.95)", choices=("passes", "predicted", "either", "bernstein", "stable",
+                                       "max")),
         Param("max-samples", "int", 50_000, "most trajectories sampled", min=1),
         _LOOP,
+        _RATIOS,
     )
 
     def __init__(self, p: float = 0.025, trajectories: int = 30, n: int = 0, batch: int = 50,
                  count_epsilon: float = 2.0, confidence: float = 0.9, stable_batches: int = 3,
                  stop: str = "passes", max_samples: int = 50_000,
-                 on_loop: str = "truncate") -> None:
+                 on_loop: str = "truncate", ratios: str = "paths") -> None:
         self.kw = {"p": p, "trajectories": trajectories, "n": n, "batch": batch,
                    "epsilon": count_epsilon, "confidence": confidence,
                    "stable_batches": stable_batches,
-                   "stop": stop, "max_samples": max_samples, "on_loop": on_loop}
+                   "stop": stop, "max_samples": max_samples, "on_loop": on_loop,
+                   "ratios": ratios}
 
     def detect(self, mdp: FiniteMDP, policy: np.ndarray, rng: np.random.Generator) -> SubgoalResult:
         return discover_monte_carlo(mdp, policy, rng, **self.kw)
