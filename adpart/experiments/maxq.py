@@ -588,7 +588,7 @@ def maxq_parr(config: ExperimentConfig) -> ExperimentReport:
         "decision layer options: " + "; ".join(
             f"{k} initiation - option chains from the start reach {v[0]} states, "
             f"{'including' if v[1] else 'NOT'} the goal room" for k, v in chain.items())
-        + f" -> the layer uses {layer_initiation} initiation (SMDP Q keeps the local options "
+        + f" -> the layer uses {layer_initiation} initiation (SMDP Q: {SMDP_INITIATION} options "
         "plus the primitives).")
     report.data["smdp_q"].update({"greedy_reaches_goal": smdp_arrive,
                                   "final_gap_median": float(np.median(smdp_final)),
