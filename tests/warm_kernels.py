@@ -10,8 +10,9 @@ problems, so the cache holds what the library compiles anyway; a kernel or signa
 simply compiled by the first test that needs it, as before.
 
 ``learning``: flat and SMDP Q-learning (interpreted and compiled, both kernels' signatures), the
-exact solvers they evaluate with. ``structure``: hierarchical learning on its decision layer,
-subgoal discovery (exhaustive and Monte Carlo walkers), exact lumping and delta refinement.
+exact solvers they evaluate with. ``structure``: the exact solvers, subgoal discovery (exhaustive
+and Monte Carlo walkers), exact lumping and delta refinement, on models with int64 and int32
+sparse indices, then hierarchical learning on its decision layer.
 """
 
 from __future__ import annotations
@@ -34,7 +35,14 @@ def structure() -> None:
     import numpy as np
 
     from adpart.envs.registry import get_domain
-    from adpart.mdp.solvers import solve
+    from adpart.mdp.solvers import (
+        GREEDY_COMPILED_ROWS,
+        greedy_policy,
+        modified_policy_iteration,
+        policy_evaluation,
+        solve,
+        value_iteration,
+    )
     from adpart.options import doorway_options, option_models
     from adpart.partition import Partition, exact_lumping, refine
     from adpart.subgoals import discover_exhaustive, discover_monte_carlo, sample_arrivals
@@ -44,12 +52,16 @@ def structure() -> None:
     # registry domains index their sparse rows with int64, scipy-built models with int32
     for mdp in (get_domain("two-rooms").mdp(), slippery_grid()):
         policy = solve(mdp).policy
+        value_iteration(mdp, 1e-4)
+        modified_policy_iteration(mdp, 1e-4, evaluation_sweeps=5)
+        policy_evaluation(mdp, policy)
         discover_exhaustive(mdp, policy, np.random.default_rng(0), on_loop="truncate")
         discover_monte_carlo(mdp, policy, np.random.default_rng(0), on_loop="truncate")
         sample_arrivals(mdp, policy, 100, np.random.default_rng(0))
         smdp = mdp.as_smdp()
         exact_lumping(smdp)
         refine(Partition.trivial(smdp.admissible), smdp, delta=0.1)
+    greedy_policy(np.zeros((GREEDY_COMPILED_ROWS, 4)))
     three_floor = get_domain("three-floor").mdp()
     option_models(three_floor, doorway_options(three_floor)[:2])
     # last: by now the learning half has usually cached the SMDP kernel this shares
