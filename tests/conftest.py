@@ -29,6 +29,7 @@ RAY_CLUSTER_MODULES = frozenset(
 )
 
 
+@pytest.hookimpl(optionalhook=True)  # a hook of pytest-xdist; without it (-p no:xdist) unused
 def pytest_xdist_make_scheduler(config, log):
     """``-n N``: tests are load-balanced one by one as with xdist's default ``--dist load``, but
     the tests on the Ray cluster form one unit, run by one worker and scheduled first, so the
