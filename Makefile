@@ -53,10 +53,21 @@ demo: $(BASE)
 # spinning against each other was measured 10-50x slower on this machine.
 SINGLE_THREAD := OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
 
+# Before the suite, numba's on-disk cache is filled (tests/warm_kernels.py: the learning and the
+# structure kernels in parallel, one process per core), so in a fresh clone each kernel is compiled
+# once instead of once per test worker; a warm cache makes this a few seconds of loading. The
+# package is byte-compiled too, so the suite's many Python processes (subprocess tests, process
+# pools) do not each compile adpart's sources where PYTHONDONTWRITEBYTECODE is set.
+WARM_KERNELS = $(SINGLE_THREAD) $(PY) -m tests.warm_kernels learning & warm=$$!; \
+	$(PY) -m compileall -q adpart && \
+	$(SINGLE_THREAD) $(PY) -m tests.warm_kernels structure && wait $$warm
+
 test: $(STAMP)
+	$(WARM_KERNELS)
 	$(SINGLE_THREAD) $(PY) -m pytest -n 2 -q --durations=10
 
 test-all: $(STAMP)
+	$(WARM_KERNELS)
 	$(SINGLE_THREAD) $(PY) -m pytest -n 2 -q -m ""
 
 bench: $(VENV)/.installed-bench
