@@ -30,7 +30,9 @@ flat learner's exactly, :mod:`adpart.learning._kernels`):
    ``u[0] < epsilon`` the option is the ``floor(u[1] m)``-th of the ``m`` options offered in ``b``
    (in index order; hierarchical: also every primitive action admissible in ``s`` - "the agent
    has access to the original actions as well as to all options", 4.3.3 - whose step updates the
-   flat Q only, as it is not an option of ``b``), else the ``floor(u[1] t)``-th of the ``t``
+   flat Q only, as it is not an option of ``b``; with ``prim_eps`` 1, or 2 while the run has not
+   yet arrived in a terminal state with a reward above ``r_min`` (``rewarded[k]``), among those
+   primitive actions alone), else the ``floor(u[1] t)``-th of the ``t``
    options tied for ``max_o Q(b, o)``;
    the option starts: ``s0 = s``, ``b0 = b``, ``G = 0``, ``g = 1``;
 2. the option's action in ``s``: its deterministic action, or for a stochastic policy the first
@@ -117,6 +119,10 @@ class SMDPLockStepState(ScheduledAgents):
     running option so far got its one-step update; ``vr_on``/``vr_b0``/``vr_G``/``vr_g`` (K, O)
     the virtual executions of mode 2 (running?, start block, return, discount).
 
+    Primitive exploration (hierarchical): ``prim_eps`` (0 never, 1 always, 2 until the run's
+    first reward), ``rewarded`` (K,) whether run ``k`` has arrived in a terminal state by a step
+    paying more than ``r_min``.
+
     Sound inconsistency test (hierarchical): ``Ql`` (K, S, A) the grounded lower bound of the flat
     values, ``tsum``/``tsq`` (K, S, A) sums of its targets and their squares, ``succ0`` (K, S, A)
     the first successor seen (-1 none yet, -2 more than one), ``lcb_z`` the z of its lower
@@ -168,6 +174,9 @@ class SMDPLockStepState(ScheduledAgents):
     succ0: np.ndarray
     lcb_z: float
     flat_explore: bool
+    prim_eps: int
+    rewarded: np.ndarray
+    r_min: float
     vr_on: np.ndarray
     vr_b0: np.ndarray
     vr_G: np.ndarray
@@ -207,7 +216,8 @@ class SMDPLockStepState(ScheduledAgents):
             self.n_d, self.n_blocks, self.track_flat, self.Qf, self.nf, self.check_on,
             self.threshold, self.min_visits, self.prim_opt, self.prim_adm, self.fired,
             self.intra, self.chained, self.Ql, self.tsum, self.tsq, self.succ0, self.lcb_z,
-            self.flat_explore, self.vr_on, self.vr_b0, self.vr_G, self.vr_g, self.ref_model,
+            self.flat_explore, self.prim_eps, self.rewarded, self.r_min,
+            self.vr_on, self.vr_b0, self.vr_G, self.vr_g, self.ref_model,
             self.Vref, self.state,
             self.episode,
             self.target, self.t_ep, self.d_ep, self.ret, self.dret, self.gpow, self.cur, self.s0,
@@ -231,7 +241,8 @@ def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, h
              a_scale, a_rate, a_omega, a_floor, e_scale, e_rate, e_omega, e_floor,
              pol_act, pol_cdf, beta, labels, adm, Q, n_o, n_d, n_blocks, track_flat, Qf, nf,
              check_on, threshold, min_visits, prim_opt, prim_adm, fired, intra, chained,
-             Ql, tsum, tsq, succ0, lcb_z, flat_explore, vr_on, vr_b0, vr_G, vr_g, ref_model,
+             Ql, tsum, tsq, succ0, lcb_z, flat_explore, prim_eps, rewarded, r_min,
+             vr_on, vr_b0, vr_G, vr_g, ref_model,
              Vref, state,
              episode, target,
              t_ep,
@@ -300,13 +311,17 @@ def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, h
                 u1 = U[k, c, 1]
                 o_sel = -1
                 if u0 < eps:
+                    only_prim = track_flat and (
+                        prim_eps == 1 or (prim_eps == 2 and not rewarded[k]))
                     m = 0
                     for o in range(O):
-                        if adm[k, d, o] or (track_flat and o < A and prim_adm[s, o]):
+                        if ((adm[k, d, o] and not only_prim)
+                                or (track_flat and o < A and prim_adm[s, o])):
                             m += 1
                     j = min(int(u1 * m), m - 1)
                     for o in range(O):
-                        if adm[k, d, o] or (track_flat and o < A and prim_adm[s, o]):
+                        if ((adm[k, d, o] and not only_prim)
+                                or (track_flat and o < A and prim_adm[s, o])):
                             if j == 0:
                                 o_sel = o
                                 break
@@ -356,6 +371,8 @@ def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, h
             cursor[k] = c + 1
             r = R[s, a]
             done = terminal[s2]
+            if done and r > r_min:
+                rewarded[k] = True
             if track_flat:
                 nf[k, s, a] += 1
                 alpha = alpha_ep[k]

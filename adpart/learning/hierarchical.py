@@ -12,12 +12,19 @@ Three modes (``mode=``), the alternatives of section 4.3 the seed compares in 5.
   ``a*`` the action of the highest *lower confidence bound* ``LCB(s, a)`` of the flat value
   (below), if ``a*`` is not yet offered in ``b``, both the pair ``(s, a*)`` and the block have
   at least ``min_visits`` visits, and ``LCB(s, a*) - max_{o in O_b} Q_P(b, o) > L``, then ``a*``
-  joins ``O_b`` and ``b`` is refined for the new set (eqs. 4.6-4.7 with the learner's ``delta``
-  and ``epsilon``; only ``b`` is split, to a fixpoint, the other blocks stay). The children
-  inherit ``b``'s option values and counts; their primitive columns start *grounded*, at the
-  mean lower-bound flat value ``Q_low(s, a)`` over the child's states where ``a`` was tried
-  (``a*`` tried in none: the lower bound; :func:`child_values` says why plain inheritance
-  fails). Partitions are per run: runs refine independently.
+  joins the option set and ``b`` is refined for the new sets (eqs. 4.6-4.7 with the learner's
+  ``delta`` and ``epsilon``; only ``b`` is split, to a fixpoint, the other blocks stay). Where
+  ``a*`` joins is ``refine=``: ``"state"`` (the default) adds it to the set of ``s`` alone, the
+  state whose evidence fired - ``s`` becomes a block of its own offering ``O_b + {a*}`` and the
+  rest of ``b`` is refined to stability for ``O_b``; ``"block"`` adds it to every state of ``b``,
+  as 4.3.3 writes ``A_B <- A_B + {a*} for all s in B``. The seed's rule was measured to turn the
+  layer into columns of the grid: a primitive move is deterministic, so stability for it splits a
+  room into rows or columns, and one firing took the pipeline's 55-block three-floor layer to
+  344 blocks (docs/hierarchical-learning.md). The children inherit ``b``'s option values and
+  counts; their primitive columns start *grounded*, at the mean lower-bound flat value
+  ``Q_low(s, a)`` over the child's states where ``a`` was tried (``a*`` tried in none: the lower
+  bound; :func:`child_values` says why plain inheritance fails). Partitions are per run: runs
+  refine independently.
 * ``action-refinement`` (4.3.2): before learning, every block holding a state with a reward above
   the minimum ``r_min = min R(s, a)`` gets all primitive actions and is refined for them; the other
   blocks keep the options only. No test during learning.
@@ -38,7 +45,12 @@ then at most ``Q*(s, a)``, so ``Q_low <= Q*`` at all times and a firing certifie
 2.3% at the default z = 2; not a finite-sample guarantee). Exploration is separate: with
 ``flat_explore`` the agent, at a greedy decision, takes the *optimistic* flat action where its
 value beats the block's best - that is how a goal that is no subgoal is found - but the test
-never reads that table.
+never reads that table. Epsilon-exploration draws among the primitive actions alone until the
+run first collects a reward above ``r_min`` (``primitive_exploration="until-reward"``, the
+default; ``"always"``, ``"never"``: over every column and primitive from the start, the former
+rule): a random option carries the agent to a subgoal of the *earlier* task, and on the pipeline's
+28-block three-floor layer such jumps delayed the first arrival at the new goal from episodes 10-24
+to 53-103. Once a reward is found the options are explored too, which the layer's values need.
 
 **Threshold.** Theorem 4.5 bounds ``||V* - V*_P||`` by ``2 (1 + gamma/(1-gamma) max(eps, delta))``;
 the seed uses it as the inconsistency threshold. The bound mixes units: with the seed's own
@@ -103,6 +115,10 @@ __all__ = [
 
 MODES = ("inconsistency", "action-refinement", "reward-variation")
 REFERENCES = ("model", "learned")
+#: Where an action added by a firing joins the layer (module docstring).
+REFINE_RULES = ("state", "block")
+#: When epsilon-exploration draws among the primitive actions alone (module docstring).
+PRIMITIVE_EXPLORATION = {"never": 0, "always": 1, "until-reward": 2}
 #: Default fraction of |V*(start)| used as the inconsistency threshold (module docstring).
 THRESHOLD_SCALE = 0.025
 #: Default z of the lower confidence bound of stochastic flat pairs (module docstring).
@@ -256,22 +272,32 @@ def decision_layer(
 
 def refine_block(
     partition: Partition, block: int, new_options: Sequence[int], model: SMDPModel, *,
-    delta: float, epsilon: float | None, atol: float = DEFAULT_ATOL,
+    delta: float, epsilon: float | None, atol: float = DEFAULT_ATOL, at: int | None = None,
 ) -> Partition:
-    """Add ``new_options`` to ``block`` and refine that block alone for its option set.
+    """Add ``new_options`` to ``block`` and refine that block alone for its option sets.
 
     The block is split by where the new options may start, then by the rewards of its options
     within ``epsilon`` (eq. 4.7) and to delta-stability (eq. 4.6) against the current blocks,
     to a fixpoint (section 4.3.3). Other blocks are unchanged; children inherit the block's
     options, except a new option in a child where some state may not start it.
+
+    With ``at`` (a member state of ``block``) the new options join the option set of ``at``
+    alone, the state whose evidence fired (the ``state`` rule of the module docstring): ``at``
+    becomes a block of its own offering them, and the rest of ``block`` is refined to stability
+    for its unchanged set.
     """
     S = partition.n_states
+    new_options = list(new_options)
     adm_rows = partition.admissible.copy()
-    adm_rows[block, list(new_options)] = True
+    adm_rows[block, new_options] = True
     members = partition.labels == block
     sel = np.flatnonzero(adm_rows[block])
     state_adm = np.zeros(model.admissible.shape, dtype=bool)
     state_adm[:, sel] = model.admissible[:, sel] & members[:, None]
+    if at is not None:
+        if not members[at]:
+            raise ModelError(f"state {at} is not in block {block}")
+        state_adm[:, new_options] &= (np.arange(S) == at)[:, None]
     pattern = np.where(members, row_codes(state_adm[:, sel]) + 1, 0)
     work = combine_labels(partition.labels, pattern)
     if epsilon is not None:
@@ -280,6 +306,10 @@ def refine_block(
     work, _ = delta_refine(work, F, sel.size, delta, atol)
     refined = partition.with_admissible(adm_rows).refine_by(canonical_labels(work))
     allowed = block_all(refined.labels, refined.n_blocks, model.admissible)
+    if at is not None:  # the other children of the block keep its former option set
+        others = (refined.parent_map(partition) == block) & (
+            np.arange(refined.n_blocks) != refined.labels[at])
+        allowed[np.ix_(others, new_options)] = False
     if refined.n_blocks > S:  # pragma: no cover - a partition never has more blocks than states
         raise ModelError("refinement produced more blocks than states")
     return refined.with_admissible(refined.admissible & allowed)
@@ -311,10 +341,15 @@ def child_values(Q_old: np.ndarray, n_old: np.ndarray, old: Partition, new: Part
     Qn = Q_old[parent]
     n_new = n_old[parent]
     B = new.n_blocks
+    members = np.flatnonzero(old.labels == block)  # only the split block's children are read
+    kid = new.labels[members]
+    hit = tried[members]
     sums = np.zeros((B, A))
     counts = np.zeros((B, A))
-    np.add.at(sums, new.labels, np.where(tried, Q_low, 0.0))
-    np.add.at(counts, new.labels, tried)
+    for a in range(A):  # one bincount per action over the block's states
+        sums[:, a] = np.bincount(kid, weights=np.where(hit[:, a], Q_low[members, a], 0.0),
+                                 minlength=B)
+        counts[:, a] = np.bincount(kid, weights=hit[:, a], minlength=B)
     grounded = sums / np.maximum(counts, 1.0)
     fresh = new.admissible[:, :A] & (parent == block)[:, None]
     Qn[:, :A][fresh] = np.where(counts[fresh] > 0, grounded[fresh], lower_bound)
@@ -349,13 +384,18 @@ def default_threshold(v_star_start: float, *, scale: float = THRESHOLD_SCALE) ->
     return float(scale * abs(v_star_start))
 
 
+def reward_floor(mdp: FiniteMDP) -> float:
+    """``r_min``: the smallest reward of a live admissible pair (section 4.3.1; 0 if none)."""
+    live = mdp.admissible & ~mdp.terminal[:, None]
+    return float(mdp.R[live].min()) if live.any() else 0.0
+
+
 def flat_lower_bound(mdp: FiniteMDP, horizon: int) -> float:
     """A value no return of ``mdp`` can fall below: ``r_min / (1 - gamma)``, or 0 if ``r_min >= 0``.
 
     With ``gamma = 1`` the episode cap bounds the sum: ``horizon * r_min``.
     """
-    live = mdp.admissible & ~mdp.terminal[:, None]
-    r_min = float(mdp.R[live].min()) if live.any() else 0.0
+    r_min = reward_floor(mdp)
     if r_min >= 0.0:
         return 0.0
     return r_min / (1.0 - mdp.gamma) if mdp.gamma < 1.0 else r_min * horizon
@@ -427,6 +467,8 @@ def hierarchical_learning(
     q_init: float = 0.0,
     kernel: str | None = None,
     intra_option: bool = False,
+    refine: str = "state",
+    primitive_exploration: str = "until-reward",
 ) -> HierarchicalResult:
     """Learn ``mdp`` on a decision layer over ``options`` (section 4.3; module docstring).
 
@@ -514,6 +556,11 @@ def hierarchical_learning(
     capacity = min(S, max(2 * B0, B0 + 64))
     if reference not in REFERENCES:
         raise TaskError(f"reference = {reference!r}; choose one of {list(REFERENCES)}")
+    if refine not in REFINE_RULES:
+        raise TaskError(f"refine = {refine!r}; choose one of {list(REFINE_RULES)}")
+    if primitive_exploration not in PRIMITIVE_EXPLORATION:
+        raise TaskError(f"primitive_exploration = {primitive_exploration!r}; choose one of "
+                        f"{list(PRIMITIVE_EXPLORATION)}")
 
     def layer_values(partition: Partition) -> np.ndarray:
         """``V*_P`` per block: the optimum of the layer's point model (section 4.2.2)."""
@@ -525,6 +572,8 @@ def hierarchical_learning(
         track_flat=True, threshold=L if check else np.inf, min_visits=V, prim_opt=prims,
         intra=2 if intra_option else 0, lower_bound=lower, lcb_z=lcb_z,
         flat_explore=flat_explore and check,
+        primitive_epsilon=PRIMITIVE_EXPLORATION[primitive_exploration] if check else 0,
+        r_min=reward_floor(mdp),
         block_values=layer_values(part0) if check and reference == "model" else None,
     )
     parts = [part0] * K
@@ -545,7 +594,8 @@ def hierarchical_learning(
     def on_fire(k: int) -> None:
         s, b, a = (int(x) for x in st.fired[k])
         old = parts[k]
-        new = refine_block(old, b, [a], refiner, delta=delta, epsilon=epsilon)
+        new = refine_block(old, b, [a], refiner, delta=delta, epsilon=epsilon,
+                           at=s if refine == "state" else None)
         B_old, B_new = old.n_blocks, new.n_blocks
         grow(B_new)
         parent = new.parent_map(old)
@@ -583,7 +633,8 @@ def hierarchical_learning(
         f"{threshold_scale} x |V*(start)|",
         "theorem_4_5_bound": theorem_bound(mdp, epsilon=epsilon, delta=delta),
         "lcb_z": float(lcb_z), "flat_explore": bool(flat_explore and check),
-        "test_reference": reference,
+        "test_reference": reference, "refine": refine,
+        "primitive_exploration": primitive_exploration if check else "never",
         "flat_lower_bound": lower,
         "min_visits": V, "alpha": alpha_s.to_dict(), "epsilon_greedy": eps_s.to_dict(),
         "max_steps_per_episode": H, "eval_every": M, "q_init": float(q_init),

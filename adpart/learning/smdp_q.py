@@ -159,6 +159,7 @@ def make_state(
     mu: np.ndarray, capacity: int, track_flat: bool = False, threshold: float = np.inf,
     min_visits: int = 0, prim_opt: np.ndarray | None = None, intra: int = 0,
     lower_bound: float = -np.inf, lcb_z: float = 0.0, flat_explore: bool = False,
+    primitive_epsilon: int = 0, r_min: float = np.inf,
     block_values: np.ndarray | None = None,
 ) -> kernels.SMDPLockStepState:
     """Kernel state for K runs on decision layers ``labels`` (K, S) / ``block_adm`` (K, B, O)."""
@@ -220,6 +221,9 @@ def make_state(
         succ0=np.full(flat_shape if check else (1, 1, A), -1, dtype=np.int64),
         lcb_z=float(lcb_z),
         flat_explore=bool(flat_explore and track_flat),
+        prim_eps=int(primitive_epsilon) if track_flat else 0,
+        rewarded=np.zeros(K, dtype=bool),
+        r_min=float(r_min),
         state=np.zeros(K, dtype=np.int64),
         episode=np.zeros(K, dtype=np.int64),
         target=np.zeros(K, dtype=np.int64),

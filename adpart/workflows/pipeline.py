@@ -382,7 +382,9 @@ def run_pipeline(
     first, *later = config.tasks
     defaults = episode_defaults(config.env)
     flat = {**learner_defaults(config.flat_learner, defaults), **config.flat_params}
-    hierarchical = {**defaults, **config.hierarchical_params}
+    # a firing refines its block with the thresholds the layer was built with (eqs. 4.6-4.7)
+    hierarchical = {**defaults, "delta": config.delta, "partition-epsilon": config.epsilon,
+                    **config.hierarchical_params}
 
     def learn_flat(task: str, episodes: int, stage: str = "learn-flat") -> tuple[dict, Any]:
         req = LearnRequest(env=config.env, task=task, learner=config.flat_learner,

@@ -125,6 +125,46 @@ def test_refine_block_children_inherit_and_only_that_block_splits(setup):
     np.testing.assert_array_equal(new.map_values(Q, part)[kids], Q[[b] * len(kids)])
 
 
+def test_the_state_rule_adds_the_action_to_the_firing_state_alone_and_stays_stable(setup):
+    """refine_block(at=s): s becomes a block of its own offering the new action, the rest of its
+    block keeps the former options, and every child of the block is delta-stable for its own
+    option set against the refined layer (the independent checker, eq. 4.6)."""
+    from adpart.partition.checker import check_stability
+
+    mdp, _, part, smdp = setup
+    goal = int(np.flatnonzero(mdp.terminal)[0])
+    s = goal - 1
+    b = int(part.labels[s])
+    assert part.sizes[b] > 1 and not part.admissible[b, 1]
+    new = refine_block(part, b, [1], smdp, delta=DELTA, epsilon=0.0, at=s)
+    parent = new.parent_map(part)
+    own = int(new.labels[s])
+    assert new.sizes[own] == 1 and new.admissible[own, 1]
+    kids = np.flatnonzero(parent == b)
+    assert len(kids) >= 2
+    for kid in kids[kids != own]:  # the rest keeps the block's former set
+        np.testing.assert_array_equal(new.admissible[kid], part.admissible[b])
+    for child in np.flatnonzero(parent != b):  # the other blocks are unchanged
+        assert np.array_equal(new.members(child), part.members(parent[child]))
+    report = check_stability(new, smdp, delta=DELTA)
+    assert not [v for v in report.violations if v.block in set(kids.tolist())]
+    with pytest.raises(Exception, match="not in block"):
+        refine_block(part, b, [1], smdp, delta=DELTA, epsilon=0.0, at=goal)
+
+
+def test_the_former_rule_stays_selectable_and_the_settings_are_checked(setup):
+    mdp, opts, part, _ = setup
+    kw = dict(SETTINGS, runs=2, episodes=100, eval_every=50)
+    old = hierarchical_learning(mdp, opts, part, refine="block", primitive_exploration="never",
+                                **kw)
+    assert old.parameters["refine"] == "block"
+    assert old.parameters["primitive_exploration"] == "never"
+    with pytest.raises(TaskError, match="refine"):
+        hierarchical_learning(mdp, opts, part, refine="cell", **kw)
+    with pytest.raises(TaskError, match="primitive_exploration"):
+        hierarchical_learning(mdp, opts, part, primitive_exploration="sometimes", **kw)
+
+
 def test_split_children_start_their_primitives_grounded():
     """Hand-computed: block 0 = {0, 1} offers a0 and the option; the test adds a1 and splits it.
 
@@ -224,9 +264,12 @@ def test_firings_on_three_floor_are_real_against_the_current_layer():
 
     "Real" is the issue's definition: Q*(s, a*) - V*_P(B) > L, with V*_P the point-model optimum
     of the layer *as it stood when the test fired* (replayed from the recorded refinements).
-    The default compares the grounded flat value with that same V*_P, so every firing is real;
-    comparing with the block's learned value instead (the seed's reading) misfires wherever
-    the learned value is still below what the block can do.
+    ``reference="model"`` compares the grounded flat value with that same V*_P, so every firing
+    is real. The default compares it with the block's learned value (the seed's reading); with
+    the whole block refined for the new action and epsilon-exploration over every column from
+    the start (the former defaults) that misfired wherever the learned value was still below
+    what the block can do; with the state rule and primitive exploration until the first reward
+    the firings on this layer are real.
     """
     from adpart.envs.registry import get_domain
     from adpart.mdp.solvers import q_from_v, solve
@@ -242,11 +285,10 @@ def test_firings_on_three_floor_are_real_against_the_current_layer():
     q_star = q_from_v(mdp, v_star)
     refiner = refinement_model(mdp, smdp)
 
-    def real_fraction(reference: str) -> float:
+    def real_fraction(**rule: str) -> float:
         res = hierarchical_learning(mdp, opts, part, models=models, delta=0.3, epsilon=10.0,
                                     runs=2, episodes=300, seed=1, eval_every=100, alpha=1.0,
-                                    max_steps_per_episode=3000, reference=reference,
-                                    reference_values=v_star)
+                                    max_steps_per_episode=3000, reference_values=v_star, **rule)
         L = res.parameters["threshold"]
         real = []
         for k in range(2):
@@ -254,10 +296,12 @@ def test_firings_on_three_floor_are_real_against_the_current_layer():
             for e in [e for e in res.refinements if e["run"] == k][:25]:
                 v_p = solve(point_model(layer, smdp), 1e-8).V
                 real.append(q_star[e["state"], e["action"]] - v_p[layer.labels[e["state"]]] > L)
+                at = e["state"] if res.parameters["refine"] == "state" else None
                 layer = refine_block(layer, e["block"], [e["action"]], refiner, delta=0.3,
-                                     epsilon=10.0)
+                                     epsilon=10.0, at=at)
         assert len(real) >= 2
         return float(np.mean(real))
 
-    assert real_fraction("model") >= 0.95
-    assert real_fraction("learned") < 0.95
+    assert real_fraction(reference="model") >= 0.95
+    assert real_fraction() >= 0.95  # the defaults: the state rule, primitive exploration
+    assert real_fraction(refine="block", primitive_exploration="never") < 0.95

@@ -87,6 +87,12 @@ class HierarchicalLearner:
               min=0),
         Param("intra-option", "bool", False,
               "update every offered option consistent with each step (block level)"),
+        Param("refine", "str", "state",
+              "where an action added by a firing joins: the firing state (state) or its whole "
+              "block (block)", choices=("state", "block")),
+        Param("primitive-exploration", "str", "until-reward",
+              "when epsilon-exploration draws among the primitive actions alone",
+              choices=("until-reward", "always", "never")),
         ALPHA,
         EPSILON,
         MAX_STEPS,
@@ -97,10 +103,12 @@ class HierarchicalLearner:
                  partition_epsilon: float = 0.0, threshold: float = -1.0,
                  threshold_scale: float = 0.025, lcb_z: float = 2.0, flat_explore: bool = True,
                  reference: str = "learned",
-                 min_visits: int = 2, intra_option: bool = False,
+                 min_visits: int = 2, intra_option: bool = False, refine: str = "state",
+                 primitive_exploration: str = "until-reward",
                  alpha: str = "1/n^0.8", epsilon: str = "0.1", max_steps: int = 1000,
                  kernel: str = "auto") -> None:
         self.intra_option = bool(intra_option)
+        self.refine, self.primitive_exploration = refine, primitive_exploration
         self.lcb_z, self.flat_explore, self.reference = lcb_z, bool(flat_explore), reference
         self.mode, self.delta, self.partition_epsilon = mode, delta, partition_epsilon
         self.threshold = None if threshold < 0 else threshold
@@ -126,7 +134,8 @@ class HierarchicalLearner:
             flat_explore=self.flat_explore, reference=self.reference, runs=runs,
             episodes=episodes, seed=seed, alpha=self.alpha, epsilon_greedy=self.epsilon,
             max_steps_per_episode=self.max_steps, eval_every=eval_every, progress=progress,
-            kernel=self.kernel, intra_option=self.intra_option,
+            kernel=self.kernel, intra_option=self.intra_option, refine=self.refine,
+            primitive_exploration=self.primitive_exploration,
         )
 
 
