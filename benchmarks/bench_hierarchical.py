@@ -60,7 +60,7 @@ def measure(mdp, opts, models, part, rule: dict, *, runs: int = RUNS,
             "final_blocks": float(np.median(res.blocks[:, -1]))}
 
 
-def main() -> None:
+def main() -> dict[str, dict[str, float]]:
     mdp, opts, models, part = workload()
     print(f"three-floor reach-top-west, {part.n_blocks}-block doorway layer, {RUNS} runs x "
           f"{EPISODES} episodes (best of {REPEATS})")
@@ -73,6 +73,7 @@ def main() -> None:
     print(f"ratio defaults / former: steps/s {new['steps_per_s'] / old['steps_per_s']:.2f}, "
           f"decisions/s {new['decisions_per_s'] / old['decisions_per_s']:.2f}, "
           f"wall {new['seconds'] / old['seconds']:.2f}")
+    return rows
 
 
 if __name__ == "__main__":

@@ -300,9 +300,11 @@ def refine_block(
         state_adm[:, new_options] &= (np.arange(S) == at)[:, None]
     pattern = np.where(members, row_codes(state_adm[:, sel]) + 1, 0)
     work = combine_labels(partition.labels, pattern)
+    inside = np.flatnonzero(members)  # only the block's states have rows to refine by
     if epsilon is not None:
-        work = canonical_labels(reward_split(work, model.R, state_adm, sel, epsilon + atol))
-    F = masked_rows(model, sel, state_adm)
+        work = canonical_labels(reward_split(work, model.R, state_adm, sel, epsilon + atol,
+                                             states=inside))
+    F = masked_rows(model, sel, state_adm, states=inside)
     work, _ = delta_refine(work, F, sel.size, delta, atol)
     refined = partition.with_admissible(adm_rows).refine_by(canonical_labels(work))
     allowed = block_all(refined.labels, refined.n_blocks, model.admissible)

@@ -146,9 +146,17 @@ def check_partition_fits(labels: np.ndarray, n_states: int, what: str = "partiti
         )
 
 
-def masked_rows(model: SMDPModel, options: np.ndarray, adm: np.ndarray) -> sp.csr_array:
-    """``(k*S, S)`` CSR of the selected options' rows, zero where the option is not admissible."""
+def masked_rows(model: SMDPModel, options: np.ndarray, adm: np.ndarray,
+                states: np.ndarray | None = None) -> sp.csr_array:
+    """``(k*S, S)`` CSR of the selected options' rows, zero where the option is not admissible.
+
+    With ``states`` only those states' rows are filled (the rest are empty): the rows one block
+    needs when it alone is refined, gathered without stacking the options' whole tables.
+    """
     S, n_opt = model.n_states, model.n_actions
+    if states is not None:
+        return _state_rows(sp.csr_array(model.F), S, np.asarray(options, dtype=np.int64),
+                           adm, np.asarray(states, dtype=np.int64))
     F = sp.csr_array(model.F)
     if not np.array_equal(options, np.arange(n_opt)):
         F = sp.csr_array(sp.vstack([F[int(o) * S:(int(o) + 1) * S] for o in options], format="csr"))
@@ -158,3 +166,29 @@ def masked_rows(model: SMDPModel, options: np.ndarray, adm: np.ndarray) -> sp.cs
         F = sp.csr_array((data, F.indices.copy(), F.indptr.copy()), shape=F.shape)
         F.eliminate_zeros()
     return F
+
+
+def _state_rows(F: sp.csr_array, S: int, options: np.ndarray, adm: np.ndarray,
+                states: np.ndarray) -> sp.csr_array:
+    """:func:`masked_rows` restricted to ``states``: row ``j*S + s`` is ``F[options[j]*S + s]``
+    for ``s`` in ``states`` where ``adm[s, options[j]]``, every other row is empty."""
+    k = options.size
+    keep = adm[states][:, options].T  # (k, m)
+    src = (options[:, None] * S + states[None, :])[keep]
+    dst = (np.arange(k, dtype=np.int64)[:, None] * S + states[None, :])[keep]
+    lengths = np.diff(F.indptr)[src]
+    starts = F.indptr[src]
+    total = int(lengths.sum())
+    take = np.repeat(starts - np.r_[0, np.cumsum(lengths)[:-1]], lengths) + np.arange(total)
+    counts = np.zeros(k * S, dtype=np.int64)
+    counts[dst] = lengths
+    order = np.argsort(dst, kind="stable")  # rows in increasing order of their position
+    block_of = np.repeat(np.arange(src.size), lengths)
+    rank = np.empty(src.size, dtype=np.int64)
+    rank[order] = np.arange(src.size)
+    entry_order = np.argsort(rank[block_of], kind="stable")
+    take = take[entry_order]
+    indptr = np.r_[0, np.cumsum(counts)]
+    out = sp.csr_array((F.data[take], F.indices[take], indptr), shape=(k * S, F.shape[1]))
+    out.eliminate_zeros()
+    return out

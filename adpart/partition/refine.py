@@ -92,17 +92,20 @@ def regroup(
 
 
 def reward_split(
-    labels: np.ndarray, rewards: np.ndarray, adm: np.ndarray, options: np.ndarray, width: float
+    labels: np.ndarray, rewards: np.ndarray, adm: np.ndarray, options: np.ndarray, width: float,
+    states: np.ndarray | None = None,
 ) -> np.ndarray:
     """Split blocks so every option's reward varies by at most ``width`` inside a block (eq. 4.7).
 
     One greedy pass per option (a loop over options, each vectorised over all states); rewards of
     inadmissible pairs are ignored (blocks are admissibility-consistent, so they are 0 throughout).
+    ``states`` restricts the passes to those states, which must hold every member of each block
+    they touch (one block being refined); the other blocks are left as they are.
     """
     n_blocks = int(labels.max()) + 1
-    states = np.arange(labels.size)
+    states = np.arange(labels.size) if states is None else np.asarray(states, dtype=np.int64)
     for o in options:
-        values = np.where(adm[:, o], rewards[:, o], 0.0)
+        values = np.where(adm[states, o], rewards[states, o], 0.0)
         labels, n_blocks, _ = regroup(labels, n_blocks, states, values, width)
     return labels
 

@@ -197,3 +197,17 @@ def test_worklist_and_round_based_refinement_are_both_stable(case, delta):
         assert check_stability(part, model, delta=delta)
         counts.append(part.n_blocks)
     assert counts[0] <= 2 * counts[1] + 1  # comparable, not only valid
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.integers(min_value=-3, max_value=40), min_size=1, max_size=60),
+       st.sampled_from([np.int64, np.int32, np.int8]))
+def test_canonical_labels_numbers_blocks_by_their_first_state(values, dtype):
+    """Both paths of canonical_labels (the scatter for small non-negative ints, np.unique for the
+    rest) against a plain Python oracle: the block of state s is the count of distinct labels
+    first seen before s's label."""
+    labels = np.array(values, dtype=dtype)
+    order: dict[int, int] = {}
+    expected = [order.setdefault(int(v), len(order)) for v in labels]
+    assert canonical_labels(labels).tolist() == expected
+    assert canonical_labels(labels.astype(np.float64)).tolist() == expected
