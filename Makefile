@@ -5,7 +5,7 @@ PY     := $(VENV)/bin/python
 BASE   := $(VENV)/.installed
 STAMP  := $(VENV)/.installed-dev
 
-.PHONY: demo test test-all bench lint docs clean
+.PHONY: demo test test-processes test-all bench lint docs clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -65,6 +65,12 @@ WARM_KERNELS = $(SINGLE_THREAD) $(PY) -m tests.warm_kernels learning & warm=$$!;
 test: $(STAMP)
 	$(WARM_KERNELS)
 	$(SINGLE_THREAD) $(PY) -m pytest -n 2 -q --durations=10
+
+# The process-level robustness tests (a Ray cluster, SIGKILLed and concurrent writers, a killed
+# pipeline): deselected from `make test` for its speed, run here, by `make test-all` and by CI.
+test-processes: $(STAMP)
+	$(WARM_KERNELS)
+	$(SINGLE_THREAD) $(PY) -m pytest -n 2 -q -m processes
 
 test-all: $(STAMP)
 	$(WARM_KERNELS)

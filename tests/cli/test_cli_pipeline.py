@@ -82,6 +82,7 @@ def test_pipeline_runs_stores_everything_and_a_second_run_recomputes_nothing(tmp
     assert counts(kb_dir) == before  # nothing stored twice
 
 
+@pytest.mark.processes
 def test_killed_pipeline_resumes_from_the_knowledge_base(tmp_path):
     kb_dir = tmp_path / "kb"
     # a long transfer step to kill it in; the flat baseline of the last task is not needed to

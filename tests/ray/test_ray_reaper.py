@@ -20,7 +20,8 @@ import pytest
 from adpart.execution.reaper import ray_descendants
 
 pytest.importorskip("ray")
-pytestmark = pytest.mark.skipif(not Path("/proc").is_dir(), reason="needs /proc")
+pytestmark = [pytest.mark.skipif(not Path("/proc").is_dir(), reason="needs /proc"),
+              pytest.mark.processes]
 
 DRIVER = textwrap.dedent(
     """

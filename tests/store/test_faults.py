@@ -31,6 +31,7 @@ def _artifact_file(kb: KnowledgeBase, sha: str) -> Path:
     return Path(kb.artifacts.base) / kb.artifacts.uri_for(sha)
 
 
+@pytest.mark.processes
 def test_sigkill_during_large_artifact_write_leaves_kb_clean(where):
     with where.open() as kb:
         env = kb.put_environment("big", model_hash="b" * 64, n_states=4_000_000, n_actions=8)
@@ -81,6 +82,7 @@ WRITER = """
 """
 
 
+@pytest.mark.processes
 def test_two_processes_writing_at_once_lose_nothing(where):
     where.open().close()
     procs = [_python(WRITER, where.location, str(me), where.artifacts) for me in (1, 2)]

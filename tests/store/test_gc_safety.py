@@ -96,6 +96,7 @@ def _assert_nothing_lost(result: dict[str, int], per_writer: int) -> None:
                       "gc_failed": 0, "check_ok": 1}, result
 
 
+@pytest.mark.processes
 def test_concurrent_writers_and_gc_lose_nothing(where, tmp_path):
     _assert_nothing_lost(_writers_against_gc(where, 15, tmp_path), 15)
 

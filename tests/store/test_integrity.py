@@ -196,6 +196,7 @@ def _first_opens(where) -> None:
         assert kb.schema_version == SCHEMA_VERSION and kb.check().ok
 
 
+@pytest.mark.processes
 def test_concurrent_first_opens_create_the_schema_once(where):
     if where.backend == "sqlite":
         pytest.skip("SQLite creates the schema inside BEGIN IMMEDIATE; the slow test covers it")
