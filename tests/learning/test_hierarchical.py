@@ -96,6 +96,18 @@ def test_without_refinement_the_goal_is_never_reached_with_refinement_it_is(setu
         assert event["action"] in range(mdp.n_actions)
 
 
+def test_with_refinement_every_run_ends_within_the_bound_without_it_none_arrives(setup):
+    """The issue's small-domain check: the goal is no subgoal, so the layer alone never reaches
+    it; with refinement (the defaults, and alpha = 1 as the pipeline sets for a deterministic
+    domain) every run's greedy policy ends within 5 % of V* (the pipeline's success bound)."""
+    mdp, opts, part, _ = setup
+    kw = dict(SETTINGS, alpha=1.0, episodes=1000)
+    off = hierarchical_learning(mdp, opts, part, threshold=np.inf, **kw)
+    on = hierarchical_learning(mdp, opts, part, **kw)
+    np.testing.assert_allclose(final_gap(off), off.v_star_start)
+    assert (final_gap(on) <= 0.05 * on.v_star_start).all()
+
+
 def test_same_seed_same_results_and_kernels_agree(setup):
     mdp, opts, part, _ = setup
     kw = dict(SETTINGS, runs=2, episodes=150, eval_every=50)
