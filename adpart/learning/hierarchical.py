@@ -502,6 +502,12 @@ def hierarchical_learning(
         intra_option: every option offered where the agent's steps follow its policy gets
             the SMDP update it would have had had it been chosen there (virtual executions,
             :mod:`adpart.learning._smdp_kernels`), so the layer learns from flat exploration.
+        refine: where an action added by a firing joins: ``"state"``, the firing state alone
+            (it becomes a block of its own), or ``"block"``, every state of its block (4.3.3 as
+            written); module docstring.
+        primitive_exploration: when epsilon-exploration draws among the primitive actions
+            alone: ``"until-reward"`` (until the run first collects a reward above ``r_min``),
+            ``"always"`` or ``"never"`` (``inconsistency`` mode only).
 
     Returns:
         A :class:`HierarchicalResult`.
