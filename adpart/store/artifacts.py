@@ -49,6 +49,8 @@ _META_KEY = b"adpart"
 _ROW_GROUP = 1 << 20  # row groups of 1M values let pyarrow decode in parallel on read
 _SUPPORTED_KINDS = "biuf"  # bool, signed/unsigned integers, floats
 _TMP_PREFIX = ".tmp-"
+#: Writes of one artifact file before giving up, when a concurrent gc removes its temporary.
+_WRITE_ATTEMPTS = 5
 _NAME = re.compile(r"^[0-9a-f]{2}/[0-9a-f]{64}\.parquet$")
 _TMP_NAME = re.compile(r"^[0-9a-f]{2}/\.tmp-[0-9a-f]+\.parquet$")
 _THREADED_HASH_BYTES = 1 << 20  # below this a second thread costs more than it saves
@@ -316,20 +318,32 @@ class ArtifactStore:
             raise StoreError(f"cannot encode artifact {uri} as Parquet: {exc}") from exc
         final = self.path(uri)
         directory = final.rsplit("/", 1)[0]
-        tmp = f"{directory}/{_TMP_PREFIX}{uuid.uuid4().hex}.parquet"
         with ThreadPoolExecutor(max_workers=1) as pool:
             digest = pool.submit(lambda: hashlib.sha256(encoded).hexdigest())
-            try:
-                self.fs.create_dir(directory, recursive=True)
-                with self.fs.open_output_stream(tmp) as out:
-                    out.write(encoded)
-                self.fs.move(tmp, final)
-            except (pa.ArrowException, OSError) as exc:
-                with contextlib.suppress(pa.ArrowException, OSError):  # may never have been made
-                    self.fs.delete_file(tmp)
-                raise StoreError(f"cannot write artifact {uri} under {self.root!r}: {exc}; check "
-                                 "the artifact root is writable and has space") from exc
+            for attempt in range(_WRITE_ATTEMPTS):
+                tmp = f"{directory}/{_TMP_PREFIX}{uuid.uuid4().hex}.parquet"
+                try:
+                    self.fs.create_dir(directory, recursive=True)
+                    with self.fs.open_output_stream(tmp) as out:
+                        out.write(encoded)
+                    self.fs.move(tmp, final)
+                    break
+                except (pa.ArrowException, OSError) as exc:
+                    with contextlib.suppress(pa.ArrowException, OSError):  # may never have been
+                        self.fs.delete_file(tmp)
+                    if attempt + 1 < _WRITE_ATTEMPTS and self._vanished(tmp, directory):
+                        continue  # a gc with no temporary age took it mid-write: write again
+                    raise StoreError(f"cannot write artifact {uri} under {self.root!r}: {exc}; "
+                                     "check the artifact root is writable and has space") from exc
             return digest.result()
+
+    def _vanished(self, tmp: str, directory: str) -> bool:
+        """Whether ``tmp`` (or its directory) is gone: removed by a concurrent ``gc``."""
+        try:
+            infos = self.fs.get_file_info([tmp, directory])
+        except (pa.ArrowException, OSError):
+            return False
+        return any(info.type == pafs.FileType.NotFound for info in infos)
 
     def _size(self, uri: str) -> int:
         return int(self.fs.get_file_info(self.path(uri)).size or 0)

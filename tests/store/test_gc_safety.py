@@ -69,10 +69,12 @@ def _writers_against_gc(where, per_writer: int, tmp_path: Path) -> dict[str, int
     writers = [_python(WRITER, where.location, str(me), where.artifacts, str(per_writer))
                for me in (1, 2)]
     refused = 0
+    why = []
     for w in writers:
         out, err = w.communicate(timeout=300)
         assert w.returncode == 0, err
         refused += int(out.strip())
+        why += [line for line in err.splitlines() if line.startswith("refused:")]
     stop.touch()
     out, err = gc_proc.communicate(timeout=300)
     assert gc_proc.returncode == 0, err
@@ -87,13 +89,13 @@ def _writers_against_gc(where, per_writer: int, tmp_path: Path) -> dict[str, int
                 lost += 1
         ok = kb.check().ok
     return {"stored": len(runs), "refused": refused, "lost": lost, "gc_rounds": rounds,
-            "gc_failed": gc_failed, "check_ok": int(ok)}
+            "gc_failed": gc_failed, "check_ok": int(ok), "why": why}
 
 
 def _assert_nothing_lost(result: dict[str, int], per_writer: int) -> None:
     assert result["gc_rounds"] > 0
     assert result == {**result, "stored": 2 * per_writer, "refused": 0, "lost": 0,
-                      "gc_failed": 0, "check_ok": 1}, result
+                      "gc_failed": 0, "check_ok": 1}, str(result)  # "why": the refusals
 
 
 @pytest.mark.processes
@@ -180,3 +182,30 @@ def test_gc_keeps_young_files_without_rows(kb):
     size = path.stat().st_size
     assert kb.gc(delete=True, grace_s=0).files == [(stored.uri, size)]
     assert not path.exists()
+
+
+class _GcMidWrite:
+    """An artifact filesystem on which a gc removes the first temporary file just before it is
+    renamed into place (what a gc with no temporary age can do between two writer steps)."""
+
+    def __init__(self, fs):
+        self._fs, self.removed = fs, 0
+
+    def __getattr__(self, name):
+        return getattr(self._fs, name)
+
+    def move(self, src, dest):
+        if self.removed == 0:
+            self._fs.delete_file(src)
+            self.removed += 1
+        return self._fs.move(src, dest)
+
+
+def test_a_temporary_removed_by_gc_mid_write_is_written_again(kb):
+    task = kb.put_task(kb.put_environment("e", model_hash="d" * 64, n_states=3, n_actions=2),
+                       "t", spec={}, gamma=0.9)
+    kb.artifacts.fs = _GcMidWrite(kb.artifacts.fs)
+    run = kb.put_run(task, "w", seed=0, curve={"x": np.arange(5)})
+    assert kb.artifacts.fs.removed == 1
+    np.testing.assert_array_equal(kb.load(run, "curve")["x"], np.arange(5))
+    assert not kb.artifacts.scan().temporary and kb.check().ok
