@@ -1,6 +1,7 @@
 """Hierarchical learning on a decision layer with inconsistency refinement (section 4.3).
 
-The agent decides on the *decision layer*, a :class:`~adpart.partition.Partition` whose blocks
+The agent decides on the *decision layer* (built and refined by
+:mod:`adpart.learning.decision_layer`), a :class:`~adpart.partition.Partition` whose blocks
 offer options (SMDP Q-learning over (block, option), :mod:`adpart.learning.smdp_q`), while every
 primitive step also updates a flat Q over (state, action) (section 4.3.3). The option columns are
 the primitive actions' one-step options ``0..A-1`` followed by the given options, so a primitive
@@ -70,12 +71,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from adpart.errors import ModelError, TaskError
+from adpart.errors import TaskError
 from adpart.learning.curves import (
     LearningCurve,
     optimal_start_value,
     start_distribution,
     start_values,
+)
+from adpart.learning.decision_layer import (
+    DecisionLayer,
+    build_decision_layer,
+    decision_layer,
+    refine_block,
+    refinement_model,
+    reward_floor,
+    reward_states,
 )
 from adpart.learning.result import LearnResult
 from adpart.learning.schedules import Schedule, constant, visit_count
@@ -86,18 +96,8 @@ from adpart.mdp.solvers import greedy_policy, solve
 from adpart.options.models import OptionModel, option_models
 from adpart.options.option import Option
 from adpart.options.subgoal_options import subgoal_option
-from adpart.partition import DEFAULT_ATOL, masked_rows
 from adpart.partition.bpsmdp import point_model, theorem_4_5_bound
-from adpart.partition.layer import resolve_baseline
-from adpart.partition.multiphase import MultiPhasePartitioner, PhaseResult
-from adpart.partition.partition import (
-    Partition,
-    block_all,
-    canonical_labels,
-    combine_labels,
-    row_codes,
-)
-from adpart.partition.refine import delta_refine, reward_split
+from adpart.partition.partition import Partition, block_all
 
 __all__ = [
     "MODES",
@@ -165,158 +165,6 @@ class HierarchicalResult(LearnResult):
                 "blocks": self.blocks.reshape(-1)}
 
 
-# --------------------------------------------------------------------------- decision layers
-
-
-def reward_states(mdp: FiniteMDP, *, arrivals: bool = False) -> np.ndarray:
-    """``(S,)`` bool: non-terminal states with some admissible ``R(s, a) > min R`` (4.3.1).
-
-    With ``arrivals=True`` also the terminal states such a rewarding pair can arrive in: adpart's
-    domains pay a goal's reward on *arrival* in a terminal goal (the seed pays it on leaving the
-    goal), so there the goal itself is the state "with a high reward" an option must capture.
-    """
-    live = mdp.admissible & ~mdp.terminal[:, None]
-    if not live.any():
-        return np.zeros(mdp.n_states, dtype=bool)
-    r_min = float(mdp.R[live].min())
-    rewarding = live & (mdp.R > r_min)
-    found = np.any(rewarding, axis=1)
-    if arrivals and rewarding.any():
-        s, a = np.nonzero(rewarding)
-        reached = np.unique(mdp.P[a * mdp.n_states + s].indices)
-        found[reached[mdp.terminal[reached]]] = True
-    return found
-
-
-@dataclass(frozen=True, eq=False)
-class DecisionLayer:
-    """What :func:`build_decision_layer` returns.
-
-    Attributes:
-        partition: every state's block, over the learner's columns (primitives first): the
-            decision layer's blocks, the task's terminal states as one block, and the states the
-            task cannot reach as one block per pattern of admissible options.
-        options: the learner's columns (the primitive one-step options, then ``options``).
-        model: their stacked models on the task's MDP.
-        phases: the :class:`~adpart.partition.multiphase.PhaseResult` (masks, counts, seconds).
-    """
-
-    partition: Partition
-    options: list[Option]
-    model: SMDPModel
-    phases: PhaseResult
-
-    @property
-    def unreachable(self) -> np.ndarray | None:
-        """``(S,)`` the non-terminal states the task cannot reach from its start states."""
-        return self.phases.unreachable
-
-    def counts(self) -> dict[str, object]:
-        """Blocks per phase: reachable (the decision layer), terminal and unreachable."""
-        return self.phases.layer_counts()
-
-
-def build_decision_layer(
-    mdp: FiniteMDP, options: Sequence[Option], *, delta: float = 0.0,
-    epsilon: float | None = 0.0, models: Sequence[OptionModel] | None = None,
-    reward_baseline: str | float | None = "mode",
-) -> DecisionLayer:
-    """The multi-phase partition (section 4.2.1.2) over ``options`` for the learner's columns.
-
-    Phase 1 starts each option from {beta = 1, rest of I, outside I}; phase 2 intersects and
-    refines for all options; phase 3 (when ``epsilon`` is not None) splits by the options'
-    rewards within ``epsilon``. Primitive actions are columns ``0..A-1`` of the result but offered
-    nowhere. Every phase runs on ``mdp``'s model (:mod:`adpart.partition.layer`): its terminal
-    states are one absorbing block, and the states it cannot reach from its start distribution
-    (with any primitive action, since refinement may offer any of them) are left out. They form
-    one block per pattern of admissible options, which the learner never visits; such a block
-    that no option may start offers the primitive actions, so every block offers a column.
-    Phase 3 compares the rewards beyond the constant step reward
-    ``reward_baseline`` (``"mode"``: the step reward most pairs pay; ``"min"``: the smallest,
-    section 4.3.1; ``"none"``: ``R`` itself; or a number), as
-    :func:`adpart.partition.layer.decision_rewards` derives.
-
-    ``models`` must be the options' models on ``mdp`` (the new task's), not another task's.
-    """
-    full, smdp = option_set(mdp, options, include_primitives=True, models=models)
-    A = mdp.n_actions
-    if len(full) == A:
-        raise ModelError("a decision layer needs at least one option besides the primitives")
-    termination = np.zeros(smdp.R.shape, dtype=bool)
-    termination[:, A:] = np.stack([o.beta >= 1.0 for o in full[A:]], axis=1)
-    baseline = resolve_baseline(reward_baseline, mdp.R, mdp.admissible, mdp.terminal)
-    partitioner = MultiPhasePartitioner(smdp, termination, delta=delta, terminal=mdp.terminal)
-    result = partitioner.run(np.arange(A, len(full)), epsilon=epsilon,
-                             start=start_distribution(mdp), through=mdp,
-                             reward_baseline=baseline, gamma=mdp.gamma)
-    partition = result.final
-    idle = ~partition.admissible.any(axis=1)
-    if idle.any():  # unreachable states no option may start: offer the primitive actions
-        adm = partition.admissible.copy()
-        prims = block_all(partition.labels, partition.n_blocks, smdp.admissible[:, :A])
-        adm[idle, :A] = prims[idle]
-        partition = partition.with_admissible(adm)
-    return DecisionLayer(partition, full, smdp, result)
-
-
-def decision_layer(
-    mdp: FiniteMDP, options: Sequence[Option], *, delta: float = 0.0,
-    epsilon: float | None = 0.0, models: Sequence[OptionModel] | None = None,
-    reward_baseline: str | float | None = "mode",
-) -> tuple[Partition, list[Option], SMDPModel]:
-    """:func:`build_decision_layer` as ``(partition, learner options, stacked model)``."""
-    layer = build_decision_layer(mdp, options, delta=delta, epsilon=epsilon, models=models,
-                                 reward_baseline=reward_baseline)
-    return layer.partition, layer.options, layer.model
-
-
-def refine_block(
-    partition: Partition, block: int, new_options: Sequence[int], model: SMDPModel, *,
-    delta: float, epsilon: float | None, atol: float = DEFAULT_ATOL, at: int | None = None,
-) -> Partition:
-    """Add ``new_options`` to ``block`` and refine that block alone for its option sets.
-
-    The block is split by where the new options may start, then by the rewards of its options
-    within ``epsilon`` (eq. 4.7) and to delta-stability (eq. 4.6) against the current blocks,
-    to a fixpoint (section 4.3.3). Other blocks are unchanged; children inherit the block's
-    options, except a new option in a child where some state may not start it.
-
-    With ``at`` (a member state of ``block``) the new options join the option set of ``at``
-    alone, the state whose evidence fired (the ``state`` rule of the module docstring): ``at``
-    becomes a block of its own offering them, and the rest of ``block`` is refined to stability
-    for its unchanged set.
-    """
-    S = partition.n_states
-    new_options = list(new_options)
-    adm_rows = partition.admissible.copy()
-    adm_rows[block, new_options] = True
-    members = partition.labels == block
-    sel = np.flatnonzero(adm_rows[block])
-    state_adm = np.zeros(model.admissible.shape, dtype=bool)
-    state_adm[:, sel] = model.admissible[:, sel] & members[:, None]
-    if at is not None:
-        if not members[at]:
-            raise ModelError(f"state {at} is not in block {block}")
-        state_adm[:, new_options] &= (np.arange(S) == at)[:, None]
-    pattern = np.where(members, row_codes(state_adm[:, sel]) + 1, 0)
-    work = combine_labels(partition.labels, pattern)
-    inside = np.flatnonzero(members)  # only the block's states have rows to refine by
-    if epsilon is not None:
-        work = canonical_labels(reward_split(work, model.R, state_adm, sel, epsilon + atol,
-                                             states=inside))
-    F = masked_rows(model, sel, state_adm, states=inside)
-    work, _ = delta_refine(work, F, sel.size, delta, atol)
-    refined = partition.with_admissible(adm_rows).refine_by(canonical_labels(work))
-    allowed = block_all(refined.labels, refined.n_blocks, model.admissible)
-    if at is not None:  # the other children of the block keep its former option set
-        others = (refined.parent_map(partition) == block) & (
-            np.arange(refined.n_blocks) != refined.labels[at])
-        allowed[np.ix_(others, new_options)] = False
-    if refined.n_blocks > S:  # pragma: no cover - a partition never has more blocks than states
-        raise ModelError("refinement produced more blocks than states")
-    return refined.with_admissible(refined.admissible & allowed)
-
-
 def child_values(Q_old: np.ndarray, n_old: np.ndarray, old: Partition, new: Partition,
                  block: int, Q_low: np.ndarray, tried: np.ndarray, lower_bound: float,
                  ) -> tuple[np.ndarray, np.ndarray]:
@@ -346,12 +194,10 @@ def child_values(Q_old: np.ndarray, n_old: np.ndarray, old: Partition, new: Part
     members = np.flatnonzero(old.labels == block)  # only the split block's children are read
     kid = new.labels[members]
     hit = tried[members]
-    sums = np.zeros((B, A))
-    counts = np.zeros((B, A))
-    for a in range(A):  # one bincount per action over the block's states
-        sums[:, a] = np.bincount(kid, weights=np.where(hit[:, a], Q_low[members, a], 0.0),
-                                 minlength=B)
-        counts[:, a] = np.bincount(kid, weights=hit[:, a], minlength=B)
+    cell = (kid[:, None] * A + np.arange(A)).ravel()  # (child, action) of every member entry
+    sums = np.bincount(cell, weights=np.where(hit, Q_low[members], 0.0).ravel(),
+                       minlength=B * A).reshape(B, A)
+    counts = np.bincount(cell, weights=hit.ravel(), minlength=B * A).reshape(B, A)
     grounded = sums / np.maximum(counts, 1.0)
     fresh = new.admissible[:, :A] & (parent == block)[:, None]
     Qn[:, :A][fresh] = np.where(counts[fresh] > 0, grounded[fresh], lower_bound)
@@ -367,29 +213,9 @@ def theorem_bound(mdp: FiniteMDP, *, epsilon: float | None, delta: float) -> flo
     return float(theorem_4_5_bound(mdp.gamma, 0.0 if epsilon is None else epsilon, delta))
 
 
-def refinement_model(mdp: FiniteMDP, smdp: SMDPModel,
-                     reward_baseline: str | float | None = "mode") -> SMDPModel:
-    """``smdp`` with the decision rewards ``R~`` that phase 3 split by (eq. 4.7 on the rewards
-    beyond the constant step reward, :func:`adpart.partition.layer.decision_rewards`), so that a
-    refinement during learning splits by the same criterion as the layer was built with."""
-    from adpart.partition.layer import decision_rewards
-
-    baseline = resolve_baseline(reward_baseline, mdp.R, mdp.admissible, mdp.terminal)
-    if baseline is None or not 0.0 < mdp.gamma < 1.0:
-        return smdp
-    rewards = decision_rewards(smdp, mdp.gamma, baseline, mdp.terminal)
-    return SMDPModel(R=rewards, F=smdp.F, admissible=smdp.admissible)
-
-
 def default_threshold(v_star_start: float, *, scale: float = THRESHOLD_SCALE) -> float:
     """``L = scale * |V*(start)|`` (module docstring)."""
     return float(scale * abs(v_star_start))
-
-
-def reward_floor(mdp: FiniteMDP) -> float:
-    """``r_min``: the smallest reward of a live admissible pair (section 4.3.1; 0 if none)."""
-    live = mdp.admissible & ~mdp.terminal[:, None]
-    return float(mdp.R[live].min()) if live.any() else 0.0
 
 
 def flat_lower_bound(mdp: FiniteMDP, horizon: int) -> float:

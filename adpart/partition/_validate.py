@@ -172,23 +172,14 @@ def _state_rows(F: sp.csr_array, S: int, options: np.ndarray, adm: np.ndarray,
                 states: np.ndarray) -> sp.csr_array:
     """:func:`masked_rows` restricted to ``states``: row ``j*S + s`` is ``F[options[j]*S + s]``
     for ``s`` in ``states`` where ``adm[s, options[j]]``, every other row is empty."""
-    k = options.size
+    states = np.unique(states)  # sorted, so the destination rows below are increasing
     keep = adm[states][:, options].T  # (k, m)
     src = (options[:, None] * S + states[None, :])[keep]
-    dst = (np.arange(k, dtype=np.int64)[:, None] * S + states[None, :])[keep]
-    lengths = np.diff(F.indptr)[src]
-    starts = F.indptr[src]
-    total = int(lengths.sum())
-    take = np.repeat(starts - np.r_[0, np.cumsum(lengths)[:-1]], lengths) + np.arange(total)
-    counts = np.zeros(k * S, dtype=np.int64)
-    counts[dst] = lengths
-    order = np.argsort(dst, kind="stable")  # rows in increasing order of their position
-    block_of = np.repeat(np.arange(src.size), lengths)
-    rank = np.empty(src.size, dtype=np.int64)
-    rank[order] = np.arange(src.size)
-    entry_order = np.argsort(rank[block_of], kind="stable")
-    take = take[entry_order]
-    indptr = np.r_[0, np.cumsum(counts)]
-    out = sp.csr_array((F.data[take], F.indices[take], indptr), shape=(k * S, F.shape[1]))
+    dst = (np.arange(options.size, dtype=np.int64)[:, None] * S + states[None, :])[keep]
+    rows = F[src]  # the source rows, in the destination's order
+    counts = np.zeros(options.size * S, dtype=np.int64)
+    counts[dst] = np.diff(rows.indptr)
+    out = sp.csr_array((rows.data, rows.indices, np.r_[0, np.cumsum(counts)]),
+                       shape=(options.size * S, F.shape[1]))
     out.eliminate_zeros()
     return out

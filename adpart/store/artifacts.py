@@ -329,21 +329,23 @@ class ArtifactStore:
                     self.fs.move(tmp, final)
                     break
                 except (pa.ArrowException, OSError) as exc:
+                    # a gc with no temporary age may take the temporary before the rename:
+                    # then it is written again; any other failure is the writer's to report
+                    taken = isinstance(exc, FileNotFoundError) and self._missing(tmp)
                     with contextlib.suppress(pa.ArrowException, OSError):  # may never have been
                         self.fs.delete_file(tmp)
-                    if attempt + 1 < _WRITE_ATTEMPTS and self._vanished(tmp, directory):
-                        continue  # a gc with no temporary age took it mid-write: write again
-                    raise StoreError(f"cannot write artifact {uri} under {self.root!r}: {exc}; "
-                                     "check the artifact root is writable and has space") from exc
+                    if not (taken and attempt + 1 < _WRITE_ATTEMPTS):
+                        raise StoreError(f"cannot write artifact {uri} under {self.root!r}: "
+                                         f"{exc}; check the artifact root is writable and has "
+                                         "space") from exc
             return digest.result()
 
-    def _vanished(self, tmp: str, directory: str) -> bool:
-        """Whether ``tmp`` (or its directory) is gone: removed by a concurrent ``gc``."""
+    def _missing(self, path: str) -> bool:
+        """Whether ``path`` does not exist (False when that cannot be told)."""
         try:
-            infos = self.fs.get_file_info([tmp, directory])
+            return self.fs.get_file_info(path).type == pafs.FileType.NotFound
         except (pa.ArrowException, OSError):
             return False
-        return any(info.type == pafs.FileType.NotFound for info in infos)
 
     def _size(self, uri: str) -> int:
         return int(self.fs.get_file_info(self.path(uri)).size or 0)

@@ -211,3 +211,31 @@ def test_canonical_labels_numbers_blocks_by_their_first_state(values, dtype):
     expected = [order.setdefault(int(v), len(order)) for v in labels]
     assert canonical_labels(labels).tolist() == expected
     assert canonical_labels(labels.astype(np.float64)).tolist() == expected
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.integers(min_value=1, max_value=12), st.integers(min_value=1, max_value=4),
+       st.integers(min_value=0, max_value=2**32 - 1))
+def test_one_blocks_rows_and_rewards_match_the_whole_state_space_path(S, n_opt, seed):
+    """masked_rows(..., states=) and reward_split(..., states=) - what refine_block uses to refine
+    one block - against the same calls over every state with the other states masked out."""
+    from adpart.partition import masked_rows
+    from adpart.partition.refine import reward_split
+
+    rng = np.random.default_rng(seed)
+    F = sp.random(n_opt * S, S, density=0.4, random_state=rng, format="csr") * 0.9
+    model = SMDPModel(R=rng.integers(0, 3, (S, n_opt)).astype(float), F=sp.csr_array(F),
+                      admissible=np.ones((S, n_opt), dtype=bool))
+    labels = canonical_labels(rng.integers(0, 3, S))
+    block = int(labels[rng.integers(S)])
+    members = labels == block
+    adm = (rng.random((S, n_opt)) < 0.8) & members[:, None]
+    options = np.flatnonzero(rng.random(n_opt) < 0.7)
+    assume(options.size > 0)
+    inside = np.flatnonzero(members)
+    whole = masked_rows(model, options, adm)
+    one = masked_rows(model, options, adm, states=inside)
+    assert np.array_equal(whole.indptr, one.indptr)
+    assert abs(whole - one).sum() == 0.0
+    assert np.array_equal(reward_split(labels, model.R, adm, options, 0.5),
+                          reward_split(labels, model.R, adm, options, 0.5, states=inside))

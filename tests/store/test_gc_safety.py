@@ -209,3 +209,21 @@ def test_a_temporary_removed_by_gc_mid_write_is_written_again(kb):
     assert kb.artifacts.fs.removed == 1
     np.testing.assert_array_equal(kb.load(run, "curve")["x"], np.arange(5))
     assert not kb.artifacts.scan().temporary and kb.check().ok
+
+
+class _RenameRefused(_GcMidWrite):
+    """An artifact filesystem that refuses every rename (the temporary stays where it is)."""
+
+    def move(self, src, dest):
+        self.removed += 1
+        raise PermissionError(f"cannot rename {src}")
+
+
+def test_a_refused_rename_is_reported_at_once_not_retried(kb):
+    task = kb.put_task(kb.put_environment("e", model_hash="d" * 64, n_states=3, n_actions=2),
+                       "t", spec={}, gamma=0.9)
+    kb.artifacts.fs = _RenameRefused(kb.artifacts.fs)
+    with pytest.raises(StoreError, match="cannot write artifact"):
+        kb.put_run(task, "w", seed=0, curve={"x": np.arange(5)})
+    assert kb.artifacts.fs.removed == 1  # one attempt: only a vanished temporary is retried
+    assert not kb.artifacts.scan().temporary and not kb.records("run")
