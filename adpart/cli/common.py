@@ -205,7 +205,8 @@ def executor_options(default: str = "local"):  # type: ignore[no-untyped-def]
 
 
 def run_options(  # type: ignore[no-untyped-def]
-    *, runs_help: str = "Independent runs.", episodes_help: str = "Episodes per run."
+    *, runs_help: str = "Independent runs.", episodes_help: str = "Episodes per run.",
+    runs_default: int = 10,
 ):
     """Decorator adding ``--episodes``, ``--runs``, ``--seed`` and ``--eval-every``."""
 
@@ -219,7 +220,8 @@ def run_options(  # type: ignore[no-untyped-def]
         )(func)
         func = click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True,
                             help="Root seed.")(func)
-        func = click.option("--runs", type=click.IntRange(min=1), default=10, show_default=True,
+        func = click.option("--runs", type=click.IntRange(min=1), default=runs_default,
+                            show_default=True,
                             help=runs_help)(func)
         return click.option("--episodes", type=click.IntRange(min=1), default=300,
                             show_default=True, help=episodes_help)(func)

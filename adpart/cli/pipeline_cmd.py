@@ -86,6 +86,13 @@ def _table(rows: list[dict[str, Any]]) -> list[str]:
             f"{r['task'][:22]:<22} {r['learner']:<13} {blocks:>6} "
             f"{r['runs_within_bound']:>3}/{r['runs']:<3} {ep:>9} {r['final_gap_mean']:>10.4g}"
         )
+    for r in rows:
+        if "ratio_to_flat" in r:
+            q = r["ratio_to_flat"]
+            lines.append(
+                f"{r['task']}: median episodes to the bound, {r['learner']} / flat = "
+                f"{q['ratio']:.3g} (95% CI {q['ci95'][0]:.3g}-{q['ci95'][1]:.3g}; a run never "
+                f"within counts as {q['censored_at']})")
     return lines
 
 
@@ -142,7 +149,8 @@ def _say(quiet: bool):  # type: ignore[no-untyped-def]
     show_default=True,
     help="epsilon of eq. 4.7 (reward homogeneity) >= 0.",
 )
-@run_options(runs_help="Runs per learner.", episodes_help="Episodes per later task.")
+@run_options(runs_help="Runs per learner (20: enough for the summary's confidence intervals).",
+             episodes_help="Episodes per later task.", runs_default=20)
 @click.option(
     "--first-episodes",
     type=click.IntRange(min=1),

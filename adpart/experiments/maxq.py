@@ -61,12 +61,8 @@ from adpart.experiments.protocol import (
     steps_to,
 )
 from adpart.experiments.sequential import sequential_test
-from adpart.experiments.stats import (
-    bootstrap_ci,
-    compare,
-    gap_auc_steps,
-    ratio_of_medians_ci,
-)
+from adpart.experiments.stats import bootstrap_ci, compare, gap_auc_steps
+from adpart.learning.comparison import ratio_of_medians_ci
 
 ALPHA, EPSILON = "1/n^0.6", "1/n^0.5"
 #: Tolerance of the value gap (reward units, mean over the start distribution).

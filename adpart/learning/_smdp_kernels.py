@@ -127,8 +127,9 @@ class SMDPLockStepState(ScheduledAgents):
     values, ``tsum``/``tsq`` (K, S, A) sums of its targets and their squares, ``succ0`` (K, S, A)
     the first successor seen (-1 none yet, -2 more than one), ``lcb_z`` the z of its lower
     confidence bound; ``flat_explore``: take the optimistic flat action where it beats the block;
-    ``ref_model``/``Vref`` (K, Bcap): compare with the block's point-model value ``Vref`` instead
-    of its learned ``max_o Q``.
+    ``ref_model``: what the grounded flat value is compared with - 0 the block's learned
+    ``max_o Q``, 1 ``Vref[k, block]`` (K, Bcap) the block's point-model value, 2 ``Vref[k, state]``
+    (K, S) the optimum of the options offered in the state's block, from the state itself.
 
     Agents: ``state``, ``episode``, ``target``, ``t_ep``, ``d_ep``, ``ret``, ``dret``, ``gpow``,
     ``cur`` (running option or -1), ``s0``, ``b0``, ``G``, ``g``, ``alpha_ep``, ``eps_ep``;
@@ -181,7 +182,7 @@ class SMDPLockStepState(ScheduledAgents):
     vr_b0: np.ndarray
     vr_G: np.ndarray
     vr_g: np.ndarray
-    ref_model: bool
+    ref_model: int
     Vref: np.ndarray
     state: np.ndarray
     episode: np.ndarray
@@ -291,8 +292,10 @@ def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, h
                         oa = prim_opt[best_a]
                         if oa >= 0 and not adm[k, d, oa]:
                             vp = neg_inf
-                            if ref_model:
+                            if ref_model == 1:
                                 vp = Vref[k, d]
+                            elif ref_model == 2:
+                                vp = Vref[k, s]
                             else:
                                 for o in range(O):
                                     if adm[k, d, o] and Q[k, d, o] > vp:

@@ -7,6 +7,8 @@
   for all its states or, with ``at``, for the state whose evidence fired
   (:mod:`adpart.learning.hierarchical` says why the second is its default);
   :func:`refinement_model` gives it the rewards the layer was split by.
+* :func:`offered_values`: the best the layer's option sets achieve from each state, the
+  reference of the ``offered`` inconsistency test.
 * :func:`reward_states` and :func:`reward_floor`: the states "with a high reward" and ``r_min``
   of section 4.3.1.
 """
@@ -17,11 +19,13 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 
 from adpart.errors import ModelError
 from adpart.learning.curves import start_distribution
 from adpart.learning.smdp_q import option_set
 from adpart.mdp.model import FiniteMDP, SMDPModel
+from adpart.mdp.solvers import solve
 from adpart.options.models import OptionModel
 from adpart.options.option import Option
 from adpart.partition import DEFAULT_ATOL, masked_rows
@@ -56,8 +60,28 @@ def reward_floor(mdp: FiniteMDP) -> float:
         return 0.0
 
 
+def reward_level(mdp: FiniteMDP) -> float:
+    """The step reward above which a pair counts as rewarding (section 4.3.1).
+
+    The largest reward that at least half of the live (non-terminal) states pay for some
+    admissible action. Section 4.3.1 takes ``r_min``, on tasks whose every step pays the same,
+    where the two agree. Where some actions pay a little less (two-rooms' diagonal moves at -1.2
+    beside -1) or a penalty (Taxi's -10 for an illegal pick-up), every state has a pair above
+    ``r_min``, and the rule would make every state a subgoal; the rewards only a few states pay
+    (a goal) stay above this level.
+    """
+    live = mdp.admissible & ~mdp.terminal[:, None]
+    s, _ = np.nonzero(live)
+    values, inverse = np.unique(mdp.R[live], return_inverse=True)
+    pairs = np.unique(inverse * mdp.n_states + s)  # each (value, state) once
+    states_paying = np.bincount(pairs // mdp.n_states, minlength=values.size)
+    n_live = np.count_nonzero(live.any(axis=1))
+    return float(values[np.flatnonzero(2 * states_paying >= n_live)[-1]])
+
+
 def reward_states(mdp: FiniteMDP, *, arrivals: bool = False) -> np.ndarray:
-    """``(S,)`` bool: non-terminal states with some admissible ``R(s, a) > min R`` (4.3.1).
+    """``(S,)`` bool: non-terminal states with some admissible ``R(s, a)`` above
+    :func:`reward_level` (section 4.3.1's "states with a high reward").
 
     With ``arrivals=True`` also the terminal states such a rewarding pair can arrive in: adpart's
     domains pay a goal's reward on *arrival* in a terminal goal (the seed pays it on leaving the
@@ -66,8 +90,7 @@ def reward_states(mdp: FiniteMDP, *, arrivals: bool = False) -> np.ndarray:
     live = mdp.admissible & ~mdp.terminal[:, None]
     if not live.any():
         return np.zeros(mdp.n_states, dtype=bool)
-    r_min = reward_floor(mdp)
-    rewarding = live & (mdp.R > r_min)
+    rewarding = live & (mdp.R > reward_level(mdp))
     found = np.any(rewarding, axis=1)
     if arrivals and rewarding.any():
         s, a = np.nonzero(rewarding)
@@ -203,6 +226,31 @@ def refine_block(
     if refined.n_blocks > S:  # pragma: no cover - a partition never has more blocks than states
         raise ModelError("refinement produced more blocks than states")
     return refined.with_admissible(refined.admissible & allowed)
+
+
+def offered_values(partition: Partition, smdp: SMDPModel, terminal: np.ndarray,
+                   floor: float) -> np.ndarray:
+    """``(S,)`` the best value the layer's options achieve from each state, choosing per state.
+
+    The optimum of the SMDP whose state ``s`` may choose only the columns its block offers
+    (``admissible[labels[s]]``), solved exactly over the columns' models (eqs. 3.1-3.2): what the
+    layer can do from ``s`` at best, with no block average in it. A non-terminal state whose
+    block offers nothing it may start gets ``floor`` (the agent has no decision there), a terminal
+    one 0.
+    """
+    adm = smdp.admissible & partition.admissible[partition.labels]
+    R, F = smdp.R, smdp.F
+    stuck = np.flatnonzero(~adm.any(axis=1))
+    if stuck.size:  # one column whose whole value is the floor makes their Bellman rows defined
+        adm = adm.copy()
+        adm[stuck, 0] = True
+        R = R.copy()
+        R[stuck, 0] = np.where(terminal[stuck], 0.0, floor)
+        keep = np.ones(F.shape[0])
+        keep[stuck] = 0.0  # rows 0*S + s of column 0
+        F = sp.csr_array(sp.diags_array(keep) @ F)
+    model = SMDPModel(R=R, F=F, admissible=adm)
+    return solve(model, 1e-8).V
 
 
 def refinement_model(mdp: FiniteMDP, smdp: SMDPModel,

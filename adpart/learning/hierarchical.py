@@ -33,6 +33,14 @@ Three modes (``mode=``), the alternatives of section 4.3 the seed compares in 5.
   becomes an extra subgoal (an option to it from every state that can reach it); the decision layer
   is then built by the multi-phase partitioner from the extended option set. No test during
   learning.
+* ``reward-variation+inconsistency`` (the transfer pipeline's default): the layer of
+  ``reward-variation``, learned with the test of ``inconsistency`` against the ``offered``
+  reference (below), so a layer whose options cannot serve the task is still refined where the
+  evidence shows it. On three-floor ``reach-goal -> reach-top-west`` the test never fires there
+  (the goal option makes every state's best offered value optimal) and learning takes the
+  episodes of ``reward-variation``; compared with the block's learned value instead, it fired
+  about 230 times a run on block-internal value spread and took 16 times as many episodes
+  (docs/hierarchical-learning.md, "Session 7").
 
 **A sound test** (docs/hierarchical-learning.md has the measurements). The seed compares the flat
 value with the block's. Compared with an *optimistic* flat table (Q = 0 against -1 a step), the
@@ -82,6 +90,7 @@ from adpart.learning.decision_layer import (
     DecisionLayer,
     build_decision_layer,
     decision_layer,
+    offered_values,
     refine_block,
     refinement_model,
     reward_floor,
@@ -113,8 +122,10 @@ __all__ = [
     "reward_states",
 ]
 
-MODES = ("inconsistency", "action-refinement", "reward-variation")
-REFERENCES = ("model", "learned")
+MODES = ("inconsistency", "action-refinement", "reward-variation",
+         "reward-variation+inconsistency")
+#: What the grounded flat value must beat by L (module docstring).
+REFERENCES = ("model", "learned", "offered")
 #: Where an action added by a firing joins the layer (module docstring).
 REFINE_RULES = ("state", "block")
 #: When epsilon-exploration draws among the primitive actions alone (module docstring).
@@ -281,7 +292,7 @@ def hierarchical_learning(
     min_visits: int = MIN_VISITS,
     lcb_z: float = LCB_Z,
     flat_explore: bool = True,
-    reference: str = "learned",
+    reference: str | None = None,
     models: Sequence[OptionModel] | None = None,
     runs: int = 10,
     episodes: int = 500,
@@ -304,19 +315,25 @@ def hierarchical_learning(
         options: the (subgoal) options of the decision layer.
         partition: the decision layer, over ``options`` (``(B, len(options))`` admissibility) or
             over the primitives then the options; built by :func:`decision_layer` when omitted.
-            Must be omitted in ``reward-variation`` mode (it builds its own).
-        mode: ``inconsistency``, ``action-refinement`` or ``reward-variation``.
+            Must be omitted in the ``reward-variation`` modes (they build their own).
+        mode: ``inconsistency``, ``action-refinement``, ``reward-variation`` or
+            ``reward-variation+inconsistency`` (module docstring).
         delta, epsilon: thresholds of eqs. 4.6-4.7 for building and refining blocks
             (``epsilon=None``: no reward split).
         threshold: the inconsistency threshold ``L``; default :func:`default_threshold`.
         threshold_scale: the ``|V*(start)|`` fraction of the default threshold.
         min_visits: visits of the flat pair and of the block before the test may fire.
         lcb_z: standard errors subtracted from a stochastic pair's lower-bound flat value.
-        reference: what the grounded flat value is compared with: ``"learned"`` (default), the
-            block's learned ``max_o Q_P(b, o)``, or ``"model"``, its value ``V*_P(b)`` in the
-            layer's point model, recomputed after every refinement: then every firing is a real
-            inconsistency by the definition ``Q*(s, a*) - V*_P(B) > L``, at a measured cost
-            (docs/hierarchical-learning.md).
+        reference: what the grounded flat value is compared with: ``"learned"``, the block's
+            learned ``max_o Q_P(b, o)``; ``"model"``, its value ``V*_P(b)`` in the layer's point
+            model, recomputed after every refinement (every firing is then a real inconsistency
+            by the definition ``Q*(s, a*) - V*_P(B) > L``, at a measured cost); ``"offered"``,
+            the larger of that ``V*_P(b)`` and the best value the options offered in ``s``'s
+            block achieve from ``s`` itself
+            (:func:`~adpart.learning.decision_layer.offered_values`), recomputed after every
+            refinement: a firing then also certifies that ``a*`` beats everything the layer
+            offers at ``s``. Default (``None``): ``"offered"`` in ``reward-variation+inconsistency``
+            mode, ``"learned"`` in ``inconsistency`` mode (docs/hierarchical-learning.md).
         flat_explore: at a greedy decision take the optimistic flat action where it beats
             the block's best value (exploration for goals that are no subgoal; ``inconsistency``
             mode only - the other modes make the goal reachable on the layer).
@@ -355,7 +372,7 @@ def hierarchical_learning(
     options = list(options)
 
     extra: list[Option] = []
-    if mode == "reward-variation":
+    if mode.startswith("reward-variation"):
         if partition is not None:
             raise TaskError(
                 "reward-variation builds its own decision layer from the options plus the "
@@ -381,7 +398,9 @@ def hierarchical_learning(
             b = int(part0.labels[s])
             if not part0.admissible[b, :A].all():
                 part0 = refine_block(part0, b, prims, refiner, delta=delta, epsilon=epsilon)
-    check = mode == "inconsistency"
+    check = mode.endswith("inconsistency")
+    if reference is None:
+        reference = "offered" if mode == "reward-variation+inconsistency" else "learned"
     mu = start_distribution(mdp)
     v_star = optimal_start_value(mdp, mu, reference_values)
     L = default_threshold(v_star, scale=threshold_scale) if threshold is None else float(threshold)
@@ -399,16 +418,23 @@ def hierarchical_learning(
     def layer_values(partition: Partition) -> np.ndarray:
         """``V*_P`` per block: the optimum of the layer's point model (section 4.2.2)."""
         return solve(point_model(partition, smdp), 1e-8).V
+
+    def state_values(partition: Partition) -> np.ndarray:
+        """Per state, the larger of its block's ``V*_P`` and the best the options offered there
+        achieve from it (:func:`offered_values`)."""
+        return np.maximum(offered_values(partition, smdp, mdp.terminal, lower),
+                          layer_values(partition)[partition.labels])
     st = make_state(
         mdp, full, np.broadcast_to(part0.labels, (K, S)),
         np.broadcast_to(part0.admissible, (K, B0, len(full))), episodes=N, horizon=H,
         alpha=alpha_s, epsilon=eps_s, q_init=q_init, mu=mu, capacity=capacity,
         track_flat=True, threshold=L if check else np.inf, min_visits=V, prim_opt=prims,
         intra=2 if intra_option else 0, lower_bound=lower, lcb_z=lcb_z,
-        flat_explore=flat_explore and check,
+        flat_explore=flat_explore and mode == "inconsistency",
         primitive_epsilon=PRIMITIVE_EXPLORATION[primitive_exploration] if check else 0,
         r_min=reward_floor(mdp),
         block_values=layer_values(part0) if check and reference == "model" else None,
+        state_values=state_values(part0) if check and reference == "offered" else None,
     )
     parts = [part0] * K
     events: list[dict[str, int]] = []
@@ -423,7 +449,8 @@ def hierarchical_learning(
         st.adm = np.concatenate([st.adm, np.zeros((K, pad, st.adm.shape[2]), bool)], axis=1)
         st.n_o = np.concatenate([st.n_o, np.zeros((K, pad, st.n_o.shape[2]), np.int64)], axis=1)
         st.n_d = np.concatenate([st.n_d, np.zeros((K, pad), np.int64)], axis=1)
-        st.Vref = np.concatenate([st.Vref, np.zeros((K, pad))], axis=1)
+        if reference == "model":  # the other references have no per-block column
+            st.Vref = np.concatenate([st.Vref, np.zeros((K, pad))], axis=1)
 
     def on_fire(k: int) -> None:
         s, b, a = (int(x) for x in st.fired[k])
@@ -445,6 +472,8 @@ def hierarchical_learning(
         st.vr_on[k] = False  # virtual executions started in the old blocks are dropped
         if reference == "model":
             st.Vref[k, :B_new] = layer_values(new)
+        elif reference == "offered":
+            st.Vref[k] = state_values(new)
         parts[k] = new
         events.append({"run": k, "episode": int(st.episode[k]), "state": s, "block": b,
                        "action": a, "blocks_before": B_old, "blocks_after": B_new})
@@ -466,7 +495,7 @@ def hierarchical_learning(
         "threshold_rule": "given" if threshold is not None else
         f"{threshold_scale} x |V*(start)|",
         "theorem_4_5_bound": theorem_bound(mdp, epsilon=epsilon, delta=delta),
-        "lcb_z": float(lcb_z), "flat_explore": bool(flat_explore and check),
+        "lcb_z": float(lcb_z), "flat_explore": bool(flat_explore and mode == "inconsistency"),
         "test_reference": reference, "refine": refine,
         "primitive_exploration": primitive_exploration if check else "never",
         "flat_lower_bound": lower,

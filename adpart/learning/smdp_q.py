@@ -160,9 +160,15 @@ def make_state(
     min_visits: int = 0, prim_opt: np.ndarray | None = None, intra: int = 0,
     lower_bound: float = -np.inf, lcb_z: float = 0.0, flat_explore: bool = False,
     primitive_epsilon: int = 0, r_min: float = np.inf,
-    block_values: np.ndarray | None = None,
+    block_values: np.ndarray | None = None, state_values: np.ndarray | None = None,
 ) -> kernels.SMDPLockStepState:
-    """Kernel state for K runs on decision layers ``labels`` (K, S) / ``block_adm`` (K, B, O)."""
+    """Kernel state for K runs on decision layers ``labels`` (K, S) / ``block_adm`` (K, B, O).
+
+    The inconsistency test compares with ``block_values`` (B,) per block or ``state_values`` (S,)
+    per state when one is given (at most one), else with the block's learned values.
+    """
+    if block_values is not None and state_values is not None:
+        raise ValueError("give block_values or state_values, not both")
     K, S = labels.shape
     A = mdp.n_actions
     O = len(options)  # noqa: E741 (the thesis' symbol)
@@ -209,10 +215,12 @@ def make_state(
         vr_b0=np.zeros((K, O), dtype=np.int64),
         vr_G=np.zeros((K, O)),
         vr_g=np.ones((K, O)),
-        ref_model=block_values is not None,
-        Vref=np.zeros((K, capacity)) if block_values is None else np.pad(
-            np.broadcast_to(block_values, (K, block_values.shape[-1])),
-            ((0, 0), (0, capacity - block_values.shape[-1]))).astype(np.float64),
+        ref_model=1 if block_values is not None else 2 if state_values is not None else 0,
+        Vref=(np.zeros((K, capacity)) if block_values is None and state_values is None
+              else np.broadcast_to(state_values, (K, S)).astype(np.float64)
+              if state_values is not None else np.pad(
+                  np.broadcast_to(block_values, (K, block_values.shape[-1])),
+                  ((0, 0), (0, capacity - block_values.shape[-1]))).astype(np.float64)),
         Ql=np.broadcast_to(np.where(mdp.admissible, float(lower_bound), -np.inf)
                            if check else np.zeros((1, A)), flat_shape if check else (1, 1, A)
                            ).copy(),

@@ -88,15 +88,21 @@ class LearnOutcome:
     option_ids: tuple[int, ...] = ()
 
     def q_columns(self, action_names: Sequence[str]) -> list[str] | None:
-        """Names of Q's columns when they are not just the primitive actions (option learners)."""
+        """Names of Q's columns when they are not just the primitive actions (option learners).
+
+        A learner that added options of its own (the hierarchical learner's reward-variation
+        modes: one per reward state, recorded as ``extra_subgoals`` in its curve's metadata) has
+        them last, named ``reward-subgoal:S``.
+        """
         cols = self.Q.shape[2]
         if not self.option_ids:
             return None
         names = [f"option:{i}" for i in self.option_ids]
+        extra = [f"reward-subgoal:{s}" for s in self.curve.metadata.get("extra_subgoals") or ()]
         if cols == len(names):
             return names
-        if cols == self.n_actions + len(names):
-            return [*action_names, *names]
+        if cols == self.n_actions + len(names) + len(extra):
+            return [*action_names, *names, *extra]
         return None
 
     def summary(self) -> dict[str, Any]:
@@ -387,6 +393,8 @@ def _record_learning(kb: Any, outcome: LearnOutcome) -> dict[str, Any]:
     }
     if "final_blocks" in outcome.curve.metadata:  # a decision layer's blocks after refinement
         metrics["final_blocks"] = list(outcome.curve.metadata["final_blocks"])
+    if "initial_blocks" in outcome.curve.metadata:
+        metrics["initial_blocks"] = int(outcome.curve.metadata["initial_blocks"])
     partition_id = None
     if request.partition is not None:
         from adpart.workflows.refs import parse_ref
@@ -469,6 +477,7 @@ def load_curve(kb: Any, run: Any) -> LearningCurve:
         "learner": run.learner,
         "v_star_start": run.metrics.get("v_star_start", curve.metadata.get("v_star_start")),
     }
-    if "final_blocks" in run.metrics:
-        metadata["final_blocks"] = run.metrics["final_blocks"]
+    for key in ("initial_blocks", "final_blocks"):  # a decision layer's blocks
+        if key in run.metrics:
+            metadata[key] = run.metrics[key]
     return LearningCurve(dict(curve.columns), metadata)

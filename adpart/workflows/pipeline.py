@@ -8,7 +8,13 @@
    with that ``hierarchy-estimator`` plugin from the tasks of the sequence learned before it
    (section 4.4, Algorithm 3; :mod:`adpart.hierarchy`);
 5. learn every later task on that decision layer with the hierarchical learner (refinement
-   where flat and abstract values disagree), and flat without transfer for comparison.
+   where flat and abstract values disagree), and flat without transfer for comparison. The
+   learner's mode is ``reward-variation+inconsistency`` unless ``--hier-opt mode=`` names
+   another (:data:`DEFAULT_MODE`): the states where the new task pays more than its minimum
+   reward become subgoals too (4.3.1; the task's rewards are known, as phase 3 already uses
+   them), the learner builds its layer from the discovered and these options, and the
+   inconsistency test (4.3.3) refines it where a primitive beats every offered option. With
+   ``hierarchy=NAME`` the built layer is learned in ``inconsistency`` mode.
 
 Two outcomes end the abstraction and are reported, not raised: the detector finds **no
 subgoals** (stage ``no-subgoals``), and the knowledge base **predicts that abstraction will not
@@ -33,6 +39,7 @@ from typing import Any
 import numpy as np
 
 from adpart.errors import TaskError
+from adpart.learning.comparison import ratio_of_medians_ci
 from adpart.learning.curves import LearningCurve, episodes_within, plot_curves
 from adpart.options.subgoal_options import LOCAL_RADIUS
 from adpart.workflows.discovery import discover_subgoals
@@ -47,6 +54,9 @@ from adpart.workflows.options import options_for_subgoals
 from adpart.workflows.partitioning import partition_environment
 from adpart.workflows.refs import parse_ref
 from adpart.workflows.reports import folder_name
+
+#: The hierarchical learner's mode in the pipeline (module docstring; docs/pipeline.md).
+DEFAULT_MODE = "reward-variation+inconsistency"
 
 
 @dataclass(frozen=True)
@@ -84,7 +94,7 @@ class PipelineConfig:
     radius: float = LOCAL_RADIUS
     delta: float = 0.3
     epsilon: float = 10.0
-    runs: int = 10
+    runs: int = 20
     episodes: int = 300
     first_episodes: int = 500
     seed: int = 0
@@ -109,6 +119,10 @@ class PipelineConfig:
                 "--hierarchy builds each layer from the flat (primitive-action) Q values of the "
                 "earlier tasks, which the flat baseline provides; drop --no-baseline"
             )
+        mode = str(self.hierarchical_params.get("mode", ""))
+        if self.hierarchy is not None and mode.startswith("reward-variation"):
+            raise TaskError(f"--hier-opt mode={mode} builds its own decision layer, so it cannot "
+                            "learn on the --hierarchy layer; drop one of the two")
 
 
 @dataclass
@@ -176,6 +190,25 @@ def task_row(
         "decisions_total_mean": float(curve.matrix("decisions").sum(axis=1).mean()),
         **extra,
     }
+
+
+def episodes_to_bound(curve: LearningCurve, fraction: float) -> np.ndarray:
+    """Per run, the episode after which the gap stays within ``fraction |V*(start)|``; a run
+    never within it counts as censored at the curve's episodes + 1."""
+    v_star = float(curve.metadata.get("v_star_start", np.nan))
+    bound = max(1e-9, fraction * abs(v_star)) if np.isfinite(v_star) else np.inf
+    within = episodes_within(curve.matrix("value_gap"), curve.evaluated_episodes(), bound)
+    episodes = int(curve.evaluated_episodes()[-1])
+    return np.where(within < 0, episodes + 1.0, within.astype(np.float64))
+
+
+def ratio_to_flat(method: LearningCurve, flat: LearningCurve, fraction: float, seed: int
+                  ) -> dict[str, Any]:
+    """The method's median episodes to the bound over flat's, with a 95 % bootstrap CI."""
+    est, lo, hi = ratio_of_medians_ci(episodes_to_bound(method, fraction),
+                                      episodes_to_bound(flat, fraction), seed=seed)
+    return {"ratio": est, "ci95": [lo, hi], "censored_at": int(
+        method.evaluated_episodes()[-1]) + 1}
 
 
 # --------------------------------------------------------------------------- hierarchy layers
@@ -384,7 +417,10 @@ def run_pipeline(
     flat = {**learner_defaults(config.flat_learner, defaults), **config.flat_params}
     # a firing refines its block with the thresholds the layer was built with (eqs. 4.6-4.7)
     hierarchical = {**defaults, "delta": config.delta, "partition-epsilon": config.epsilon,
+                    "mode": "inconsistency" if config.hierarchy else DEFAULT_MODE,
                     **config.hierarchical_params}
+    # the reward-variation modes build their layer from the options plus the task's reward states
+    own_layer = str(hierarchical["mode"]).startswith("reward-variation")
 
     def learn_flat(task: str, episodes: int, stage: str = "learn-flat") -> tuple[dict, Any]:
         req = LearnRequest(env=config.env, task=task, learner=config.flat_learner,
@@ -506,7 +542,9 @@ def run_pipeline(
                       {**layer.detail, "built": layer.built, "final_blocks": layer.blocks})
             )
             label = f"{config.hierarchy} ({layer.blocks} blocks)"
-        say(f"learning {task} on {layer.blocks} blocks (hierarchical)")
+        say(f"learning {task} on the layer of the options and {task}'s reward states "
+            f"({hierarchical['mode']})" if own_layer else
+            f"learning {task} on {layer.blocks} blocks (hierarchical)")
         hier_req = LearnRequest(
             env=config.env,
             task=task,
@@ -516,9 +554,13 @@ def run_pipeline(
             episodes=config.episodes,
             seed=config.seed,
             eval_every=config.eval_every,
-            partition=layer.ref,
+            partition=None if own_layer else layer.ref,
+            options=",".join(f"option:{i}" for i in option_ids) if own_layer else None,
         )
         hier_ids, hier_curve = _learn(kb, hier_req, report, "learn-hierarchical")
+        if own_layer:
+            label = (f"{hierarchical['mode']} ({int(hier_curve.metadata['initial_blocks'])} "
+                     f"blocks)")
         after = hier_curve.metadata.get("final_blocks")
         if after:
             label = label.replace(" blocks)", f" blocks before refinement, median "
@@ -530,7 +572,9 @@ def run_pipeline(
                 "hierarchical",
                 hier_curve,
                 config.gap_fraction,
-                {"initial_blocks": layer.blocks, "partition": layer.ref},
+                {"initial_blocks": int(hier_curve.metadata.get("initial_blocks", layer.blocks)),
+                 "partition": None if own_layer else layer.ref,
+                 "mode": hierarchical["mode"]},
             )
         )
         task_id = parse_ref(hier_ids["task"], "task")
@@ -538,6 +582,8 @@ def run_pipeline(
             say(f"learning {task} flat for comparison")
             _, base_curve = learn_flat(task, config.episodes)
             report.curves[task]["flat (no transfer)"] = base_curve
+            report.rows[-1]["ratio_to_flat"] = ratio_to_flat(hier_curve, base_curve,
+                                                             config.gap_fraction, config.seed)
             report.rows.append(task_row(task, "flat", base_curve, config.gap_fraction, {}))
             if report.rows[-1]["runs_within_bound"] > 0 and task_id not in evidence:
                 evidence.append(task_id)

@@ -66,7 +66,10 @@ def test_pipeline_runs_stores_everything_and_a_second_run_recomputes_nothing(tmp
     assert summary["stages"][1]["detail"]["subgoals"] == [23]  # the doorway
     assert not any(s["reused"] for s in summary["stages"])
     rows = {(r["task"], r["learner"]): r for r in summary["tasks"]}
-    assert rows[("goal:x=9,y=5", "hierarchical")]["initial_blocks"] < 55
+    hier = rows[("goal:x=9,y=5", "hierarchical")]
+    # the default mode: the learner's own layer over the doorway option and the goal's states
+    assert hier["mode"] == "reward-variation+inconsistency" and hier["partition"] is None
+    assert hier["initial_blocks"] < 55
     assert (out / "summary.json").exists() and (out / "goal-x-9-y-5.png").exists()
     # the subgoal map of the first task and the layer of the second, beside the curves
     drawn = {Path(f).name for f in summary["figures"]}
@@ -118,6 +121,21 @@ def test_killed_pipeline_resumes_from_the_knowledge_base(tmp_path):
     reused = {s["stage"]: s["reused"] for s in json.loads(resumed.output)["stages"][:3]}
     assert reused == {"learn-flat": True, "discover": True, "options": True}
     assert counts(kb_dir)["subgoal-set"] == 1 and counts(kb_dir)["option"] == 1
+
+
+def test_inconsistency_mode_learns_on_the_stored_partition_and_refuses_a_hierarchy(tmp_path):
+    kb_dir = tmp_path / "kb"
+    args = [*PIPELINE, "--kb", str(kb_dir), "--out", str(tmp_path / "p"), "--no-baseline"]
+    run = CliRunner().invoke(cli, [*args, "--json", "--hier-opt", "mode=inconsistency"])
+    assert run.exit_code == 0, run.output
+    summary = json.loads(run.output)
+    partition = next(s["result"] for s in summary["stages"] if s["stage"] == "partition")
+    hier = next(r for r in summary["tasks"] if r["learner"] == "hierarchical")
+    assert hier["mode"] == "inconsistency" and hier["partition"] == partition
+    both = CliRunner().invoke(cli, [*PIPELINE, "--kb", str(tmp_path / "kb2"), "--hierarchy",
+                                    "all-subgoals", "--hier-opt", "mode=reward-variation"])
+    assert both.exit_code == 2 and "drop one of the two" in both.output
+    assert "Traceback" not in both.output and not (tmp_path / "kb2").exists()
 
 
 def test_transfer_runs_the_last_step_alone(tmp_path):

@@ -317,3 +317,98 @@ def test_firings_on_three_floor_are_real_against_the_current_layer():
     assert real_fraction(reference="model") >= 0.95
     assert real_fraction() >= 0.95  # the defaults: the state rule, primitive exploration
     assert real_fraction(refine="block", primitive_exploration="never") < 0.95
+
+
+def brute_force_offered(partition, smdp, terminal, floor, sweeps=2000):
+    """Value iteration one state and one column at a time, on dense arrays (the oracle of
+    :func:`offered_values`): state ``s`` may choose the columns its block offers and may start."""
+    S, O = smdp.R.shape  # noqa: E741 (the thesis' symbol)
+    F = smdp.F.toarray().reshape(O, S, S)
+    V = np.zeros(S)
+    for _ in range(sweeps):
+        new = np.empty(S)
+        for s in range(S):
+            best = -np.inf
+            for o in range(O):
+                if partition.admissible[partition.labels[s], o] and smdp.admissible[s, o]:
+                    best = max(best, smdp.R[s, o] + F[o, s] @ V)
+            new[s] = best if np.isfinite(best) else (0.0 if terminal[s] else floor)
+        V = new
+    return V
+
+
+def test_offered_values_are_the_optimum_of_the_offered_columns(setup):
+    from adpart.learning.decision_layer import offered_values
+    from adpart.partition import Partition
+
+    mdp, _, part, smdp = setup
+    refiner = refinement_model(mdp, smdp)
+    goal = int(np.flatnonzero(mdp.terminal)[0])
+    fired = refine_block(part, int(part.labels[goal - 1]), [1], refiner, delta=DELTA,
+                         epsilon=0.0, at=goal - 1)  # East joins the goal's west neighbour
+    # a layer with a block that offers nothing: its states get the floor
+    bare = Partition(part.labels, np.where(np.arange(part.n_blocks)[:, None] == 0, False,
+                                           part.admissible))
+    for layer in (part, fired, bare):
+        got = offered_values(layer, smdp, mdp.terminal, -3.0)
+        np.testing.assert_allclose(got, brute_force_offered(layer, smdp, mdp.terminal, -3.0),
+                                   atol=1e-7)
+    assert offered_values(fired, smdp, mdp.terminal, -3.0)[goal - 1] == pytest.approx(1.0)
+
+
+def test_the_offered_reference_fires_only_where_the_layer_cannot_do_as_well(setup):
+    """With ``reference="offered"`` a firing certifies ``Q*(s, a*) - V > L`` for both ``V*_P`` of
+    s's block and the best the offered options achieve from s, in the layer as it stood
+    (replayed from the recorded refinements): every firing is real by both definitions."""
+    from adpart.learning.decision_layer import offered_values
+    from adpart.mdp.solvers import q_from_v, solve
+    from adpart.partition.bpsmdp import point_model
+
+    mdp, opts, part, smdp = setup
+    res = hierarchical_learning(mdp, opts, part, reference="offered",
+                                **dict(SETTINGS, alpha=1.0, episodes=1000))
+    assert res.parameters["test_reference"] == "offered"
+    assert (final_gap(res) <= 0.05 * res.v_star_start).all()
+    q_star = q_from_v(mdp, solve(mdp, 1e-10).V)
+    L, refiner = res.parameters["threshold"], refinement_model(mdp, smdp)
+    checked = 0
+    for k in range(SETTINGS["runs"]):
+        layer = part
+        for e in (e for e in res.refinements if e["run"] == k):
+            s, a = e["state"], e["action"]
+            v_block = solve(point_model(layer, smdp), 1e-10).V[layer.labels[s]]
+            v_offered = offered_values(layer, smdp, mdp.terminal, 0.0)[s]
+            assert q_star[s, a] - max(v_block, v_offered) > L
+            checked += 1
+            layer = refine_block(layer, e["block"], [a], refiner, delta=DELTA, epsilon=0.0,
+                                 at=s)
+    assert checked >= 4
+
+
+def test_reward_variation_with_the_test_learns_the_task_and_fires_only_on_real_evidence(setup):
+    """The pipeline's default mode: the reward states' options make the goal reachable, so every
+    run ends within the bound; the test (``offered`` reference) does not fire where an offered
+    option already achieves the optimum, and optimistic flat exploration is off."""
+    mdp, opts, _, _ = setup
+    res = hierarchical_learning(mdp, opts, mode="reward-variation+inconsistency",
+                                **dict(SETTINGS, alpha=1.0))
+    p = res.parameters
+    assert p["test_reference"] == "offered" and p["flat_explore"] is False
+    assert np.isfinite(p["threshold"])
+    goal = int(np.flatnonzero(mdp.terminal)[0])
+    assert goal in p["extra_subgoals"]
+    assert (final_gap(res) <= 0.05 * res.v_star_start).all()
+    assert res.refinements == []  # the goal option is optimal from every state
+
+
+def test_reward_level_is_the_step_reward_most_states_pay():
+    from adpart.envs.registry import get_domain
+    from adpart.learning.decision_layer import reward_level
+
+    two_rooms = get_domain("two-rooms").mdp("goal:x=9,y=5")  # moves -1, diagonals -1.2
+    assert reward_level(two_rooms) == -1.0
+    assert sorted(np.flatnonzero(reward_states(two_rooms))) == [44, 45, 53]  # 54: the goal
+    taxi = get_domain("taxi").mdp()  # -1 a step, -10 an illegal pick-up or drop-off, +20
+    assert reward_level(taxi) == -1.0
+    assert (taxi.R[reward_states(taxi)] == 20.0).any(axis=1).all()
+    assert reward_level(goal_grid()) == 0.0  # every step pays 0: r_min of section 4.3.1

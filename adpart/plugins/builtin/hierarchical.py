@@ -71,7 +71,8 @@ class HierarchicalLearner:
     accepts = frozenset({"options", "partition"})
     params = (
         Param("mode", "str", "inconsistency", "how the goal becomes reachable (section 4.3)",
-              choices=("inconsistency", "action-refinement", "reward-variation")),
+              choices=("inconsistency", "action-refinement", "reward-variation",
+                       "reward-variation+inconsistency")),
         Param("delta", "float", 0.0, "delta of eq. 4.6 for building/refining blocks", min=0.0),
         Param("partition-epsilon", "float", 0.0, "epsilon of eq. 4.7 (reward split)", min=0.0),
         Param("threshold", "float", -1.0, "inconsistency threshold L; < 0 = scale-aware default"),
@@ -80,9 +81,11 @@ class HierarchicalLearner:
               "standard errors off a stochastic pair's lower-bound flat value", min=0.0),
         Param("flat-explore", "bool", True,
               "take the optimistic flat action where it beats the block's best"),
-        Param("reference", "str", "learned",
+        Param("reference", "str", "auto",
               "what the grounded flat value must beat by L: the block's point-model value "
-              "(model) or its learned value (learned)", choices=("model", "learned")),
+              "(model), its learned value (learned), or the best the options offered at the "
+              "state achieve from it (offered); auto: offered in reward-variation+inconsistency "
+              "mode, else learned", choices=("auto", "model", "learned", "offered")),
         Param("min-visits", "int", 2, "visits of the flat pair and block before a test fires",
               min=0),
         Param("intra-option", "bool", False,
@@ -102,14 +105,15 @@ class HierarchicalLearner:
     def __init__(self, mode: str = "inconsistency", delta: float = 0.0,
                  partition_epsilon: float = 0.0, threshold: float = -1.0,
                  threshold_scale: float = 0.025, lcb_z: float = 2.0, flat_explore: bool = True,
-                 reference: str = "learned",
+                 reference: str = "auto",
                  min_visits: int = 2, intra_option: bool = False, refine: str = "state",
                  primitive_exploration: str = "until-reward",
                  alpha: str = "1/n^0.8", epsilon: str = "0.1", max_steps: int = 1000,
                  kernel: str = "auto") -> None:
         self.intra_option = bool(intra_option)
         self.refine, self.primitive_exploration = refine, primitive_exploration
-        self.lcb_z, self.flat_explore, self.reference = lcb_z, bool(flat_explore), reference
+        self.lcb_z, self.flat_explore = lcb_z, bool(flat_explore)
+        self.reference = None if reference == "auto" else reference
         self.mode, self.delta, self.partition_epsilon = mode, delta, partition_epsilon
         self.threshold = None if threshold < 0 else threshold
         self.threshold_scale, self.min_visits = threshold_scale, min_visits
