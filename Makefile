@@ -43,10 +43,8 @@ demo: $(BASE)
 	$(ADPART) learn three-floor --runs 10 --episodes 500 --alpha 1 --max-steps 5000 \
 		--eval-every 25 -q --out $(DEMO)/learn-three-floor
 	$(ADPART) env show three-floor --task reach-goal --out $(DEMO)/three-floor-vstar.png --json
-	$(ADPART) pipeline three-floor --tasks reach-goal,reach-top-west --runs 10 --episodes 500 \
-		--first-episodes 500 --eval-every 25 --flat-opt alpha=1 --flat-opt max-steps=5000 \
-		--hier-opt alpha=1 --hier-opt max-steps=5000 --detector-opt on-loop=truncate \
-		--out $(DEMO)/pipeline
+	$(ADPART) pipeline three-floor --tasks reach-goal,reach-top-west --runs 20 --episodes 500 \
+		--eval-every 10 --out $(DEMO)/pipeline
 	$(ADPART) kb info
 
 # One BLAS thread per test worker: two workers already fill the two cores, and threaded BLAS

@@ -235,16 +235,22 @@ def pipeline_cmd(
     """Learn the first task, discover subgoals, learn options, partition, transfer to the rest.
 
     \b
-    With --hierarchy NAME each later task starts from the layer that estimator builds from the
-    tasks learned before it in the sequence (section 4.4) instead of the multi-phase partition.
-    Every step is stored in the knowledge base and reused when the same step is asked again,
-    so a second run (or one resumed after a crash) recomputes nothing it already has. When the
-    detector finds no subgoals, or the knowledge base predicts that abstraction will not pay
-    for a task (its expected learning time on the best layer is not below flat's), that task is
-    learned with the flat learner and the stage says why (--no-fallback: always use the layer).
-    Ends with
-    a table (runs within the bound, median episodes to reach it, final value gap) and one figure
-    per task comparing the decision layer with flat learning.
+    Later tasks are learned in the hierarchical learner's reward-variation+inconsistency mode:
+    the states where the task pays more than its step reward become subgoals beside the
+    discovered ones (section 4.3.1), and the layer is refined where a primitive action beats
+    every option it offers (4.3.3); --hier-opt mode=inconsistency learns on the stored partition
+    with refinement alone. With --hierarchy NAME each later task starts from the layer that
+    estimator builds from the tasks learned before it in the sequence (section 4.4) instead of
+    the multi-phase partition, in inconsistency mode. Every step is stored in the knowledge
+    base and reused when the same step is asked again, so a second run (or one resumed after a
+    crash) recomputes nothing it already has. When the detector finds no subgoals, or the
+    knowledge base predicts that abstraction will not pay for a task (its expected learning time
+    on the best layer is not below flat's, or no earlier task was learned to the bound), that
+    task is learned with the flat learner and the stage says why (--no-fallback: always use the
+    layer).
+    Ends with a table (runs within the bound, median episodes to reach it, final value gap), the
+    layer's median episodes over flat's with a 95% bootstrap CI, and one figure per task comparing
+    the decision layer with flat learning.
     """
     from adpart.store import KnowledgeBase
     from adpart.workflows.pipeline import PipelineConfig, run_pipeline

@@ -9,8 +9,9 @@
   :func:`refinement_model` gives it the rewards the layer was split by.
 * :func:`offered_values`: the best the layer's option sets achieve from each state, the
   reference of the ``offered`` inconsistency test.
-* :func:`reward_states` and :func:`reward_floor`: the states "with a high reward" and ``r_min``
-  of section 4.3.1.
+* :func:`reward_states`, :func:`reward_level`, :func:`reward_floor` and :func:`reward_options`:
+  the states "with a high reward" of section 4.3.1, the level they exceed, ``r_min``, and the
+  options to them.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ from adpart.mdp.model import FiniteMDP, SMDPModel
 from adpart.mdp.solvers import solve
 from adpart.options.models import OptionModel
 from adpart.options.option import Option
+from adpart.options.subgoal_options import subgoal_option
 from adpart.partition import DEFAULT_ATOL, masked_rows
 from adpart.partition.layer import decision_rewards, resolve_baseline, step_baseline
 from adpart.partition.multiphase import MultiPhasePartitioner, PhaseResult
@@ -97,6 +99,13 @@ def reward_states(mdp: FiniteMDP, *, arrivals: bool = False) -> np.ndarray:
         reached = np.unique(mdp.P[a * mdp.n_states + s].indices)
         found[reached[mdp.terminal[reached]]] = True
     return found
+
+
+def reward_options(mdp: FiniteMDP) -> list[Option]:
+    """Section 4.3.1's extra subgoal options: one to each of :func:`reward_states` (with
+    arrivals), startable from every state that can reach it, named ``reward-S``."""
+    return [subgoal_option(mdp, int(g), initiation="reachable", name=f"reward-{int(g)}")
+            for g in np.flatnonzero(reward_states(mdp, arrivals=True))]
 
 
 @dataclass(frozen=True, eq=False)

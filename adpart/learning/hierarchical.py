@@ -94,6 +94,7 @@ from adpart.learning.decision_layer import (
     refine_block,
     refinement_model,
     reward_floor,
+    reward_options,
     reward_states,
 )
 from adpart.learning.result import LearnResult
@@ -104,7 +105,6 @@ from adpart.mdp.model import FiniteMDP, SMDPModel
 from adpart.mdp.solvers import greedy_policy, solve
 from adpart.options.models import OptionModel, option_models
 from adpart.options.option import Option
-from adpart.options.subgoal_options import subgoal_option
 from adpart.partition.bpsmdp import point_model, theorem_4_5_bound
 from adpart.partition.partition import Partition, block_all
 
@@ -378,9 +378,7 @@ def hierarchical_learning(
                 "reward-variation builds its own decision layer from the options plus the "
                 "reward states as subgoals (section 4.3.1); do not pass a partition"
             )
-        goals = np.flatnonzero(reward_states(mdp, arrivals=True))
-        extra = [subgoal_option(mdp, int(g), initiation="reachable", name=f"reward-{int(g)}")
-                 for g in goals]
+        extra = reward_options(mdp)
         if models is not None:
             models = list(models) + option_models(mdp, extra, duration=False)
         options = options + extra

@@ -607,6 +607,8 @@ def _maps(kb: Any, report: PipelineReport, config: PipelineConfig, out: Path) ->
                 path = out / f"subgoals_{folder_name(stage.task or config.env)}.png"
                 domain.render(str(path), marked=mask, task=stage.task, title=(
                     f"{config.env}: {int(mask.sum())} subgoals in the policy of {stage.task}"))
+            elif stage.stage == "partition" and _own_layer_row(report, stage.task):
+                path = _draw_own_layer(kb, report, config, domain, stage.task, out)
             elif stage.stage in ("partition", "hierarchy"):
                 record = kb.get("partition", parse_ref(stage.result, "partition"))
                 labels = kb.load(record, "labels")
@@ -619,6 +621,33 @@ def _maps(kb: Any, report: PipelineReport, config: PipelineConfig, out: Path) ->
         except ModelError:
             return  # a domain without a map (x, y features): nothing to draw
         report.figures.append(str(path))
+
+
+def _own_layer_row(report: PipelineReport, task: str | None) -> bool:
+    """Whether ``task`` was learned on the layer the learner built itself (reward variation)."""
+    return any(r["task"] == task and r["learner"] == "hierarchical"
+               and str(r.get("mode", "")).startswith("reward-variation") for r in report.rows)
+
+
+def _draw_own_layer(kb: Any, report: PipelineReport, config: PipelineConfig, domain: Any,
+                    task: str, out: Path) -> Path:
+    """The layer a reward-variation mode learns on: the multi-phase partition over the
+    discovered options plus the options to ``task``'s reward states (the learner's own call)."""
+    from adpart.learning.decision_layer import decision_layer, reward_options
+    from adpart.workflows.options import load_options
+
+    stage = next(s for s in report.stages if s.stage == "options")
+    records = [kb.get("option", parse_ref(r, "option")) for r in stage.result.split(",")]
+    options, _ = load_options(kb, records)
+    mdp = domain.mdp(task)
+    extra = reward_options(mdp)
+    layer, _, _ = decision_layer(mdp, options + extra, delta=config.delta,
+                                 epsilon=config.epsilon)
+    path = out / f"layer_{folder_name(task)}.png"
+    domain.render(str(path), labels=layer.labels, task=task, title=(
+        f"{config.env}/{task}: decision layer of {len(options)} subgoal and {len(extra)} "
+        f"reward-state options, {layer.n_blocks} blocks before refinement"))
+    return path
 
 
 def _figures(kb: Any, report: PipelineReport, config: PipelineConfig, out: Path | None) -> None:
