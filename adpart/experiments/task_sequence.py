@@ -31,18 +31,23 @@ ENV = "urban"
 TASKS = ("navigate", "navigate-pickup", "navigate-2", "navigate-dropoff", "pickup-dropoff")
 
 
-def _settings(config: ExperimentConfig) -> dict[str, int]:
-    """Runs, episodes, step cap; quick raises ``min-visits`` so the learner hardly refines (a
-    refinement on 20,004 states costs about a second; the smoke test must stay under 30 s) and
-    learns the first task for 150 episodes (with 40 the detector found no subgoals)."""
+def _settings(config: ExperimentConfig) -> dict[str, Any]:
+    """Runs, episodes, step cap, learner settings. The full size takes the pipeline's own
+    learner defaults (alpha = 1 on this deterministic domain, step cap 2 |S|) and its default
+    hierarchical mode (the built layer's blocks are offered each task's reward-state options,
+    refined where a primitive beats every offered option). Quick raises ``min-visits`` so the
+    learner hardly refines and caps episodes at 150 steps (the smoke test must stay under 30 s),
+    and learns the first task for 150 episodes (with 40 the detector found no subgoals)."""
     if config.quick:
+        learner = {"max-steps": 150, "alpha": "1/n^0.8"}
         return {"runs": min(config.runs, 2), "first_episodes": 150, "episodes": 10,
-                "eval_every": 5, "horizon": 150, "min_visits": 1000}
-    return {"runs": min(config.runs, 3), "first_episodes": 300, "episodes": 100,
-            "eval_every": 10, "horizon": 500, "min_visits": 20}
+                "eval_every": 5, "flat": learner, "hierarchical": {**learner,
+                                                                    "min-visits": 1000}}
+    return {"runs": config.runs, "first_episodes": 500, "episodes": 1000, "eval_every": 10,
+            "flat": {}, "hierarchical": {}}
 
 
-def _learn_on(kb: Any, ref: str, task: str, s: dict[str, int], seed: int) -> Any:
+def _learn_on(kb: Any, ref: str, task: str, s: dict[str, Any], seed: int) -> Any:
     """Hierarchical learning of ``task`` on the stored layer ``ref`` (keeps the block counts)."""
     from adpart.learning.hierarchical import hierarchical_learning
     from adpart.partition import Partition
@@ -53,11 +58,19 @@ def _learn_on(kb: Any, ref: str, task: str, s: dict[str, int], seed: int) -> Any
     rec = get_ref(kb, ref, "partition")
     opts = resolve_option_set(kb, ",".join(f"option:{i}" for i in rec.option_ids), ENV)
     layer = Partition(kb.load(rec, "labels"), kb.load(rec, "block_actions").astype(bool))
+    from adpart.plugins import get_registry
+    from adpart.workflows.pipeline import DEFAULT_MODE, episode_defaults
+
     mdp = resolve_domain(ENV).mdp(task)
+    # the pipeline's settings, through the plugin's own parameter spelling
+    params = {**episode_defaults(ENV), "mode": DEFAULT_MODE, "delta": 0.3,
+              "partition-epsilon": 10.0, **s["hierarchical"]}
+    learner = get_registry().get("learner", "hierarchical").create(params)
     return hierarchical_learning(
-        mdp, list(opts.options), layer, runs=s["runs"], episodes=s["episodes"], seed=seed,
-        eval_every=s["eval_every"], max_steps_per_episode=s["horizon"],
-        min_visits=s["min_visits"])
+        mdp, list(opts.options), layer, mode=learner.mode, delta=learner.delta,
+        epsilon=learner.partition_epsilon, min_visits=learner.min_visits,
+        alpha=learner.alpha, runs=s["runs"], episodes=s["episodes"], seed=seed,
+        eval_every=s["eval_every"], max_steps_per_episode=learner.max_steps)
 
 
 def _plot(curves: dict[str, Any], path: Path, title: str, column: str = "value_gap") -> str:
@@ -118,9 +131,7 @@ def task_sequence(config: ExperimentConfig) -> ExperimentReport:
         env=ENV, tasks=TASKS, detector_params={"on-loop": "truncate"}, initiation="reachable",
         runs=s["runs"], episodes=s["episodes"], first_episodes=s["first_episodes"],
         seed=config.seed, eval_every=s["eval_every"],
-        flat_params={"max-steps": s["horizon"], "alpha": "1/n^0.8"},
-        hierarchical_params={"max-steps": s["horizon"], "min-visits": s["min_visits"],
-                             "alpha": "1/n^0.8"},
+        flat_params=s["flat"], hierarchical_params=s["hierarchical"],
         hierarchy="expected-learning-time", fallback=False,  # the layers are what is compared
     )
     with working_kb(config.kb, "task-sequence") as kb:
@@ -140,8 +151,8 @@ def task_sequence(config: ExperimentConfig) -> ExperimentReport:
         base = hierarchy_layer(kb, ENV, "all-subgoals", {}, task_ids, options)
         auto_ref = next(r["partition"] for r in pipe.rows
                         if r["task"] == TASKS[-1] and r["learner"] == "hierarchical")
-        auto_blocks = next(r["initial_blocks"] for r in pipe.rows
-                           if r["task"] == TASKS[-1] and r["learner"] == "hierarchical")
+        auto_blocks = next(st.detail["final_blocks"] for st in pipe.stages
+                           if st.stage == "hierarchy" and st.task == TASKS[-1])
         config.progress("learning task five on both layers (block counts)")
         five = {f"expected-learning-time ({auto_blocks} blocks)": _learn_on(
                     kb, auto_ref, TASKS[-1], s, config.seed),
@@ -183,8 +194,9 @@ def task_sequence(config: ExperimentConfig) -> ExperimentReport:
         f"{np.mean(final[names[0]]):.1f} vs {np.mean(final[names[1]]):.1f} - seed: similar.")
     report.findings.append(
         f"settings: {s['runs']} runs, {s['first_episodes']} episodes for the first task, "
-        f"{s['episodes']} for each later one, step cap {s['horizon']} (the seed averages 50 runs "
-        "over longer learning); estimator defaults (threshold 1% of each task's value range).")
+        f"{s['episodes']} for each later one, learner settings {s['flat'] or 'the pipeline'}'s "
+        f"(flat) and {s['hierarchical'] or 'the pipeline'}'s (hierarchical; the seed averages "
+        "50 runs); estimator defaults (threshold 1% of each task's value range).")
     for task in TASKS[1:]:
         report.figures.append(_plot(pipe.curves[task], out / f"{task}.png",
                                     f"{ENV} / {task}: built layer vs flat"))

@@ -31,8 +31,10 @@ Three modes (``mode=``), the alternatives of section 4.3 the seed compares in 5.
   blocks keep the options only. No test during learning.
 * ``reward-variation`` (4.3.1): before partitioning, every state with some ``R(s, a) > r_min``
   becomes an extra subgoal (an option to it from every state that can reach it); the decision layer
-  is then built by the multi-phase partitioner from the extended option set. No test during
-  learning.
+  is then built by the multi-phase partitioner from the extended option set. Given a layer (one
+  Algorithm 3 built), the extra options join each of its blocks where all its states may start
+  them instead (blocks split by where they may start; not refined to delta-stability, which splits
+  a block offering primitive actions into lines). No test during learning.
 * ``reward-variation+inconsistency`` (the transfer pipeline's default): the layer of
   ``reward-variation``, learned with the test of ``inconsistency`` against the ``offered``
   reference (below), so a layer whose options cannot serve the task is still refined where the
@@ -106,7 +108,7 @@ from adpart.mdp.solvers import greedy_policy, solve
 from adpart.options.models import OptionModel, option_models
 from adpart.options.option import Option
 from adpart.partition.bpsmdp import point_model, theorem_4_5_bound
-from adpart.partition.partition import Partition, block_all
+from adpart.partition.partition import Partition, block_all, row_codes
 
 __all__ = [
     "MODES",
@@ -240,6 +242,25 @@ def flat_lower_bound(mdp: FiniteMDP, horizon: int) -> float:
     return r_min / (1.0 - mdp.gamma) if mdp.gamma < 1.0 else r_min * horizon
 
 
+def _offer(partition: Partition, columns: np.ndarray, admissible: np.ndarray) -> Partition:
+    """``partition`` with ``columns`` offered in every block where all its states may start them:
+    blocks are split by where the columns may start (children keep their parent's options), not
+    refined to delta-stability for them - a layer that offers primitive actions would then split
+    into lines, as one firing of the ``block`` rule does."""
+    split = partition.refine_by(row_codes(admissible[:, columns]))
+    adm = split.admissible.copy()
+    adm[:, columns] = block_all(split.labels, split.n_blocks, admissible[:, columns])
+    return split.with_admissible(adm)
+
+
+def _with_empty_columns(partition: Partition, n: int) -> Partition:
+    """``partition`` with ``n`` more option columns, offered nowhere (yet)."""
+    if n == 0 or not isinstance(partition, Partition):
+        return partition
+    return partition.with_admissible(
+        np.pad(partition.admissible, ((0, 0), (0, n)), constant_values=False))
+
+
 def _pad_partition(partition: Partition, n_prim: int, n_total: int, model: SMDPModel
                    ) -> Partition:
     """The partition over the learner's columns (primitives first), checked against the model."""
@@ -315,7 +336,8 @@ def hierarchical_learning(
         options: the (subgoal) options of the decision layer.
         partition: the decision layer, over ``options`` (``(B, len(options))`` admissibility) or
             over the primitives then the options; built by :func:`decision_layer` when omitted.
-            Must be omitted in the ``reward-variation`` modes (they build their own).
+            In the ``reward-variation`` modes a given layer is offered the reward-state options
+            (module docstring); without one they build their own.
         mode: ``inconsistency``, ``action-refinement``, ``reward-variation`` or
             ``reward-variation+inconsistency`` (module docstring).
         delta, epsilon: thresholds of eqs. 4.6-4.7 for building and refining blocks
@@ -373,11 +395,6 @@ def hierarchical_learning(
 
     extra: list[Option] = []
     if mode.startswith("reward-variation"):
-        if partition is not None:
-            raise TaskError(
-                "reward-variation builds its own decision layer from the options plus the "
-                "reward states as subgoals (section 4.3.1); do not pass a partition"
-            )
         extra = reward_options(mdp)
         if models is not None:
             models = list(models) + option_models(mdp, extra, duration=False)
@@ -387,10 +404,12 @@ def hierarchical_learning(
                                            models=models)
     else:
         full, smdp = option_set(mdp, options, include_primitives=True, models=models)
-        part0 = partition
+        part0 = _with_empty_columns(partition, len(extra))
     part0 = _pad_partition(part0, A, len(full), smdp)
     refiner = refinement_model(mdp, smdp)
     prims = np.arange(A)
+    if extra and partition is not None:  # the given layer, offered the reward-state options
+        part0 = _offer(part0, np.arange(len(full) - len(extra), len(full)), smdp.admissible)
     if mode == "action-refinement":
         for s in np.flatnonzero(reward_states(mdp)):  # few reward states, each one block
             b = int(part0.labels[s])

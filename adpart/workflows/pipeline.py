@@ -14,7 +14,7 @@
    reward become subgoals too (4.3.1; the task's rewards are known, as phase 3 already uses
    them), the learner builds its layer from the discovered and these options, and the
    inconsistency test (4.3.3) refines it where a primitive beats every offered option. With
-   ``hierarchy=NAME`` the built layer is learned in ``inconsistency`` mode.
+   ``hierarchy=NAME`` the built layer's blocks are offered those options instead.
 
 Two outcomes end the abstraction and are reported, not raised: the detector finds **no
 subgoals** (stage ``no-subgoals``), and the knowledge base **predicts that abstraction will not
@@ -119,10 +119,6 @@ class PipelineConfig:
                 "--hierarchy builds each layer from the flat (primitive-action) Q values of the "
                 "earlier tasks, which the flat baseline provides; drop --no-baseline"
             )
-        mode = str(self.hierarchical_params.get("mode", ""))
-        if self.hierarchy is not None and mode.startswith("reward-variation"):
-            raise TaskError(f"--hier-opt mode={mode} builds its own decision layer, so it cannot "
-                            "learn on the --hierarchy layer; drop one of the two")
 
 
 @dataclass
@@ -417,10 +413,10 @@ def run_pipeline(
     flat = {**learner_defaults(config.flat_learner, defaults), **config.flat_params}
     # a firing refines its block with the thresholds the layer was built with (eqs. 4.6-4.7)
     hierarchical = {**defaults, "delta": config.delta, "partition-epsilon": config.epsilon,
-                    "mode": "inconsistency" if config.hierarchy else DEFAULT_MODE,
-                    **config.hierarchical_params}
-    # the reward-variation modes build their layer from the options plus the task's reward states
-    own_layer = str(hierarchical["mode"]).startswith("reward-variation")
+                    "mode": DEFAULT_MODE, **config.hierarchical_params}
+    # without --hierarchy, the reward-variation modes build their layer from the options plus the
+    # task's reward states; on a --hierarchy layer they offer those options in its blocks
+    own_layer = str(hierarchical["mode"]).startswith("reward-variation") and not config.hierarchy
 
     def learn_flat(task: str, episodes: int, stage: str = "learn-flat") -> tuple[dict, Any]:
         req = LearnRequest(env=config.env, task=task, learner=config.flat_learner,
@@ -561,6 +557,9 @@ def run_pipeline(
         if own_layer:
             label = (f"{hierarchical['mode']} ({int(hier_curve.metadata['initial_blocks'])} "
                      f"blocks)")
+        elif "initial_blocks" in hier_curve.metadata:  # the layer and the options it was offered
+            label = label.replace(f"({layer.blocks} blocks)",
+                                  f"({int(hier_curve.metadata['initial_blocks'])} blocks)")
         after = hier_curve.metadata.get("final_blocks")
         if after:
             label = label.replace(" blocks)", f" blocks before refinement, median "

@@ -222,8 +222,25 @@ def test_alternatives_action_refinement_and_reward_variation(setup):
     goal = int(np.flatnonzero(mdp.terminal)[0])
     assert sorted(var.parameters["extra_subgoals"]) == sorted([goal, *goal_near.tolist()])
     assert final_gap(var).mean() < 0.5 * var.v_star_start
-    with pytest.raises(TaskError, match="reward-variation"):
-        hierarchical_learning(mdp, opts, part, mode="reward-variation", runs=1, episodes=1)
+
+
+def test_reward_variation_on_a_given_layer_offers_the_reward_options_in_every_block(setup):
+    """A given layer (as Algorithm 3 builds one) keeps its blocks' splits and options; each block
+    is offered the reward-state options where all its states may start them (split by that)."""
+    mdp, opts, part, _ = setup
+    res = hierarchical_learning(mdp, opts, part, mode="reward-variation",
+                                **dict(SETTINGS, runs=2, alpha=1.0))
+    layer = res.partitions[0]
+    n_given = mdp.n_actions + len(opts)
+    assert layer.n_options == n_given + len(res.parameters["extra_subgoals"])
+    parent = layer.parent_map(part)
+    assert parent is not None  # a refinement of the given layer
+    np.testing.assert_array_equal(layer.admissible[:, :n_given], part.admissible[parent])
+    goal = int(np.flatnonzero(mdp.terminal)[0])
+    goal_column = n_given + res.parameters["extra_subgoals"].index(goal)
+    live = ~mdp.terminal
+    assert layer.admissible[layer.labels[live], goal_column].all()  # offered everywhere it may start
+    assert (final_gap(res) <= 0.05 * res.v_star_start).all()
 
 
 def test_default_threshold_is_half_the_success_tolerance(setup):
