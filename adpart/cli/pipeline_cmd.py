@@ -241,9 +241,9 @@ def pipeline_cmd(
     every option it offers (4.3.3); --hier-opt mode=inconsistency learns on the stored partition
     with refinement alone. With --hierarchy NAME each later task starts from the layer that
     estimator builds from the tasks learned before it in the sequence (section 4.4) instead of
-    the multi-phase partition, its blocks offered the reward-state options. Every step is stored in the knowledge
-    base and reused when the same step is asked again, so a second run (or one resumed after a
-    crash) recomputes nothing it already has. When the detector finds no subgoals, or the
+    the multi-phase partition, its blocks offered the reward-state options. Every step is
+    stored in the knowledge base and reused when the same step is asked again, so a second run
+    (or one resumed after a crash) recomputes nothing it already has. When the detector finds no subgoals, or the
     knowledge base predicts that abstraction will not pay for a task (its expected learning time
     on the best layer is not below flat's, or no earlier task was learned to the bound), that
     task is learned with the flat learner and the stage says why (--no-fallback: always use the

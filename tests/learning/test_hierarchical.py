@@ -239,7 +239,7 @@ def test_reward_variation_on_a_given_layer_offers_the_reward_options_in_every_bl
     goal = int(np.flatnonzero(mdp.terminal)[0])
     goal_column = n_given + res.parameters["extra_subgoals"].index(goal)
     live = ~mdp.terminal
-    assert layer.admissible[layer.labels[live], goal_column].all()  # offered everywhere it may start
+    assert layer.admissible[layer.labels[live], goal_column].all()  # where it may start: all
     assert (final_gap(res) <= 0.05 * res.v_star_start).all()
 
 
