@@ -243,14 +243,13 @@ def pipeline_cmd(
     estimator builds from the tasks learned before it in the sequence (section 4.4) instead of
     the multi-phase partition, its blocks offered the reward-state options. Every step is
     stored in the knowledge base and reused when the same step is asked again, so a second run
-    (or one resumed after a crash) recomputes nothing it already has. When the detector finds no subgoals, or the
-    knowledge base predicts that abstraction will not pay for a task (its expected learning time
-    on the best layer is not below flat's, or no earlier task was learned to the bound), that
-    task is learned with the flat learner and the stage says why (--no-fallback: always use the
-    layer).
-    Ends with a table (runs within the bound, median episodes to reach it, final value gap), the
-    layer's median episodes over flat's with a 95% bootstrap CI, and one figure per task comparing
-    the decision layer with flat learning.
+    (or one resumed after a crash) recomputes nothing it already has. When the detector finds
+    no subgoals, or the knowledge base predicts that abstraction will not pay for a task (its
+    expected learning time on the best layer is not below flat's, or no earlier task was
+    learned to the bound), that task is learned with the flat learner and the stage says why
+    (--no-fallback: always use the layer). Ends with a table (runs within the bound, median
+    episodes to reach it, final value gap), the layer's median episodes over flat's with a 95%
+    bootstrap CI, and one figure per task comparing the decision layer with flat learning.
     """
     from adpart.store import KnowledgeBase
     from adpart.workflows.pipeline import PipelineConfig, run_pipeline
