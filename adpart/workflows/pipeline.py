@@ -573,6 +573,7 @@ def run_pipeline(
                 config.gap_fraction,
                 {"initial_blocks": int(hier_curve.metadata.get("initial_blocks", layer.blocks)),
                  "partition": None if own_layer else layer.ref,
+                 "partition_blocks": None if own_layer else layer.blocks,
                  "mode": hierarchical["mode"]},
             )
         )
