@@ -95,11 +95,11 @@ class LearnOutcome:
         them last, named ``reward-subgoal:S``.
         """
         cols = self.Q.shape[2]
-        if not self.option_ids:
-            return None
         names = [f"option:{i}" for i in self.option_ids]
         extra = [f"reward-subgoal:{s}" for s in self.curve.metadata.get("extra_subgoals") or ()]
-        if cols == len(names):
+        if not names and not extra:
+            return None
+        if names and cols == len(names):
             return names
         if cols == self.n_actions + len(names) + len(extra):
             return [*action_names, *names, *extra]

@@ -320,6 +320,25 @@ def hierarchy_layer(
                  [f"option:{i}" for i in rec.option_ids], reused and kept, detail)
 
 
+def _task_layer(kb: Any, config: PipelineConfig, subgoal_ref: str, task: str, learned: list[int],
+                option_ids: list[int], report: PipelineReport,
+                say: Callable[[str], object]) -> Layer:
+    """The layer ``task`` starts from: the multi-phase partition, or with ``config.hierarchy``
+    the layer that estimator builds from the tasks ``learned`` before it (stage ``hierarchy``)."""
+    if config.hierarchy is None:
+        say(f"partitioning for {task} (delta {config.delta}, epsilon {config.epsilon})")
+        return _partition_layer(kb, config, subgoal_ref, task, report)
+    say(f"building the {config.hierarchy} layer for {task} from {len(learned)} tasks")
+    start = time.perf_counter()
+    layer = hierarchy_layer(kb, config.env, config.hierarchy, dict(config.hierarchy_params),
+                            list(learned), option_ids)
+    report.stages.append(
+        Stage("hierarchy", task, layer.ref, layer.reused, time.perf_counter() - start,
+              {**layer.detail, "built": layer.built, "final_blocks": layer.blocks})
+    )
+    return layer
+
+
 def _partition_layer(kb: Any, config: PipelineConfig, subgoal_ref: str, task: str,
                      report: PipelineReport) -> Layer:
     """The multi-phase partition over the subgoal options for ``task`` (phases 1-3)."""
@@ -455,7 +474,8 @@ def run_pipeline(
             {"subgoals": found.result.subgoals.tolist(), "threshold": found.result.threshold},
         )
     )
-    if found.result.subgoals.size == 0:
+    no_subgoals = found.result.subgoals.size == 0
+    if no_subgoals and not own_layer:
         reason = (f"{config.detector} found no subgoals in {policy.ref}: no options to build a "
                   "layer from, so the later tasks are learned flat")
         say(reason)
@@ -470,26 +490,34 @@ def run_pipeline(
                 report.rows.append(task_row(task, "flat", curve, config.gap_fraction, {}))
         _figures(kb, report, config, out)
         return report
-
-    say(f"learning options to {found.result.subgoals.size} subgoals")
-    start = time.perf_counter()
-    stored = options_for_subgoals(kb, found.record, initiation=config.initiation,
-                                  radius=config.radius)
-    report.stages.append(
-        Stage(
-            "options",
-            None,
-            ",".join(r.ref for r in stored.records),
-            stored.reused,
-            time.perf_counter() - start,
+    option_ids: list[int] = []
+    if no_subgoals:
+        reason = (f"{config.detector} found no subgoals in {policy.ref}: each later task is "
+                  f"learned on the layer of its reward-state options alone "
+                  f"({hierarchical['mode']})")
+        say(reason)
+        report.stages.append(Stage("no-subgoals", first, found.record.ref, found.reused, 0.0,
+                                   {"reason": reason}))
+    else:
+        say(f"learning options to {found.result.subgoals.size} subgoals")
+        start = time.perf_counter()
+        stored = options_for_subgoals(kb, found.record, initiation=config.initiation,
+                                      radius=config.radius)
+        report.stages.append(
+            Stage(
+                "options",
+                None,
+                ",".join(r.ref for r in stored.records),
+                stored.reused,
+                time.perf_counter() - start,
+            )
         )
-    )
+        option_ids = [r.id for r in stored.records]
 
     learned = [parse_ref(first_ids["task"], "task")]
     # tasks learned to the bound in some flat run: the estimator's evidence (section 4.4 builds
     # on learned tasks T_i = (pi_i, P_i, Q_i); an unlearned task's Q predicts nothing)
     evidence = list(learned) if report.rows[0]["runs_within_bound"] > 0 else []
-    option_ids = [r.id for r in stored.records]
     for task in later:
         if config.fallback:
             start = time.perf_counter()
@@ -502,6 +530,11 @@ def run_pipeline(
                           f"{verdict['estimate']:.4g} of the best layer ({verdict['blocks']} "
                           f"blocks) {'>=' if verdict['fallback'] else '<'} "
                           f"{verdict['flat_estimate']:.4g} flat")
+            elif own_layer:  # the layer is built from the task's own rewards, not from evidence
+                verdict = {"fallback": False}
+                reason = (f"no earlier task was learned to the bound in any run, so the knowledge "
+                          f"base holds no values to predict from; {hierarchical['mode']} builds "
+                          f"its layer from {task}'s own reward states, so {task} is learned on it")
             else:
                 verdict = {"fallback": True}
                 reason = (f"no earlier task was learned to the bound in any run, so the knowledge "
@@ -524,22 +557,11 @@ def run_pipeline(
                 if report.rows[-1]["runs_within_bound"] > 0 and tid not in evidence:
                     evidence.append(tid)
                 continue
-        if config.hierarchy is None:
-            say(f"partitioning for {task} (delta {config.delta}, epsilon {config.epsilon})")
-            layer = _partition_layer(kb, config, found.record.ref, task, report)
-            label = f"partition ({layer.blocks} blocks)"
-        else:
-            say(f"building the {config.hierarchy} layer for {task} from {len(learned)} tasks")
-            start = time.perf_counter()
-            layer = hierarchy_layer(kb, config.env, config.hierarchy,
-                                    dict(config.hierarchy_params), list(learned), option_ids)
-            report.stages.append(
-                Stage("hierarchy", task, layer.ref, layer.reused, time.perf_counter() - start,
-                      {**layer.detail, "built": layer.built, "final_blocks": layer.blocks})
-            )
-            label = f"{config.hierarchy} ({layer.blocks} blocks)"
+        # own_layer without subgoals learns on the layer of the reward-state options alone
+        layer = None if no_subgoals else _task_layer(kb, config, found.record.ref, task, learned,
+                                                     option_ids, report, say)
         say(f"learning {task} on the layer of the options and {task}'s reward states "
-            f"({hierarchical['mode']})" if own_layer else
+            f"({hierarchical['mode']})" if own_layer or layer is None else
             f"learning {task} on {layer.blocks} blocks (hierarchical)")
         hier_req = LearnRequest(
             env=config.env,
@@ -550,16 +572,15 @@ def run_pipeline(
             episodes=config.episodes,
             seed=config.seed,
             eval_every=config.eval_every,
-            partition=None if own_layer else layer.ref,
-            options=",".join(f"option:{i}" for i in option_ids) if own_layer else None,
+            partition=None if own_layer or layer is None else layer.ref,
+            options=(",".join(f"option:{i}" for i in option_ids) or None) if own_layer else None,
         )
         hier_ids, hier_curve = _learn(kb, hier_req, report, "learn-hierarchical")
-        if own_layer:
-            label = (f"{hierarchical['mode']} ({int(hier_curve.metadata['initial_blocks'])} "
-                     f"blocks)")
-        elif "initial_blocks" in hier_curve.metadata:  # the layer and the options it was offered
-            label = label.replace(f"({layer.blocks} blocks)",
-                                  f"({int(hier_curve.metadata['initial_blocks'])} blocks)")
+        start_blocks = int(hier_curve.metadata["initial_blocks"])
+        if own_layer or layer is None:
+            label = f"{hierarchical['mode']} ({start_blocks} blocks)"
+        else:  # the blocks it started from: the layer's, split where offered reward options
+            label = f"{config.hierarchy or 'partition'} ({start_blocks} blocks)"
         after = hier_curve.metadata.get("final_blocks")
         if after:
             label = label.replace(" blocks)", f" blocks before refinement, median "
@@ -571,9 +592,9 @@ def run_pipeline(
                 "hierarchical",
                 hier_curve,
                 config.gap_fraction,
-                {"initial_blocks": int(hier_curve.metadata.get("initial_blocks", layer.blocks)),
-                 "partition": None if own_layer else layer.ref,
-                 "partition_blocks": None if own_layer else layer.blocks,
+                {"initial_blocks": start_blocks,
+                 "partition": None if own_layer or layer is None else layer.ref,
+                 "partition_blocks": None if own_layer or layer is None else layer.blocks,
                  "mode": hierarchical["mode"]},
             )
         )
@@ -599,17 +620,17 @@ def _maps(kb: Any, report: PipelineReport, config: PipelineConfig, out: Path) ->
     from adpart.workflows.resolve import resolve_domain
 
     domain = resolve_domain(config.env)
-    for stage in report.stages:
-        try:
+    own = [r["task"] for r in report.rows
+           if r["learner"] == "hierarchical" and r.get("partition") is None]
+    try:
+        for stage in report.stages:
             if stage.stage == "discover" and stage.detail.get("subgoals"):
                 mask = np.zeros(domain.n_states, dtype=bool)
                 mask[stage.detail["subgoals"]] = True
                 path = out / f"subgoals_{folder_name(stage.task or config.env)}.png"
                 domain.render(str(path), marked=mask, task=stage.task, title=(
                     f"{config.env}: {int(mask.sum())} subgoals in the policy of {stage.task}"))
-            elif stage.stage == "partition" and _own_layer_row(report, stage.task):
-                path = _draw_own_layer(kb, report, config, domain, stage.task, out)
-            elif stage.stage in ("partition", "hierarchy"):
+            elif stage.stage in ("partition", "hierarchy") and stage.task not in own:
                 record = kb.get("partition", parse_ref(stage.result, "partition"))
                 labels = kb.load(record, "labels")
                 path = out / f"layer_{folder_name(stage.task or config.env)}.png"
@@ -618,15 +639,11 @@ def _maps(kb: Any, report: PipelineReport, config: PipelineConfig, out: Path) ->
                     f"{record.n_blocks} blocks before refinement"))
             else:
                 continue
-        except ModelError:
-            return  # a domain without a map (x, y features): nothing to draw
-        report.figures.append(str(path))
-
-
-def _own_layer_row(report: PipelineReport, task: str | None) -> bool:
-    """Whether ``task`` was learned on the layer the learner built itself (reward variation)."""
-    return any(r["task"] == task and r["learner"] == "hierarchical"
-               and str(r.get("mode", "")).startswith("reward-variation") for r in report.rows)
+            report.figures.append(str(path))
+        for task in own:  # the layers the reward-variation modes built themselves
+            report.figures.append(str(_draw_own_layer(kb, report, config, domain, task, out)))
+    except ModelError:
+        return  # a domain without a map (x, y features): nothing to draw
 
 
 def _draw_own_layer(kb: Any, report: PipelineReport, config: PipelineConfig, domain: Any,
@@ -636,9 +653,10 @@ def _draw_own_layer(kb: Any, report: PipelineReport, config: PipelineConfig, dom
     from adpart.learning.decision_layer import decision_layer, reward_options
     from adpart.workflows.options import load_options
 
-    stage = next(s for s in report.stages if s.stage == "options")
-    records = [kb.get("option", parse_ref(r, "option")) for r in stage.result.split(",")]
-    options, _ = load_options(kb, records)
+    stage = next((s for s in report.stages if s.stage == "options"), None)
+    records = [] if stage is None else [kb.get("option", parse_ref(r, "option"))
+                                        for r in stage.result.split(",")]
+    options = load_options(kb, records)[0] if records else []
     mdp = domain.mdp(task)
     extra = reward_options(mdp)
     layer, _, _ = decision_layer(mdp, options + extra, delta=config.delta,

@@ -187,8 +187,10 @@ def test_transfer_runs_the_last_step_alone(tmp_path):
 
 @pytest.mark.slow
 def test_no_subgoals_is_a_reported_outcome_and_the_flat_learner_is_a_choice(tmp_path):
-    """Taxi's learned policy has no subgoal for count-exhaustive: the pipeline learns the later
-    task flat and says why, instead of failing; the Gymnasium keyword arguments are stored."""
+    """Taxi's learned policy has no subgoal for count-exhaustive: instead of failing, the pipeline
+    says so and learns the later task on the layer of its reward-state options alone (the default
+    mode) or, in inconsistency mode, which needs subgoal options, flat; the Gymnasium keyword
+    arguments are stored."""
     args = ["pipeline", "gym:Taxi-v4[is_rainy=false]", "--tasks", "reward,reward", "--runs",
             "10", "--episodes", "20", "--first-episodes", "500", "--kb", str(tmp_path / "kb"),
             "--out", str(tmp_path / "o")]
@@ -196,7 +198,14 @@ def test_no_subgoals_is_a_reported_outcome_and_the_flat_learner_is_a_choice(tmp_
     assert res.exit_code == 0, res.output
     summary = json.loads(res.output)
     stage = next(s for s in summary["stages"] if s["stage"] == "no-subgoals")
-    assert "found no subgoals" in stage["detail"]["reason"]
+    assert "reward-state options alone" in stage["detail"]["reason"]
+    assert [r["learner"] for r in summary["tasks"]] == ["flat", "hierarchical", "flat"]
+    assert summary["tasks"][1]["initial_blocks"] > 1 and summary["tasks"][1]["partition"] is None
+    res = CliRunner().invoke(cli, [*args, "--json", "--hier-opt", "mode=inconsistency"])
+    assert res.exit_code == 0, res.output
+    summary = json.loads(res.output)
+    stage = next(s for s in summary["stages"] if s["stage"] == "no-subgoals")
+    assert "no options to build a layer from" in stage["detail"]["reason"]
     assert [r["learner"] for r in summary["tasks"]] == ["flat", "flat-fallback", "flat"]
     kb = KnowledgeBase.open(str(tmp_path / "kb"))
     try:

@@ -126,13 +126,14 @@ class HierarchicalLearner:
               partition: Partition | None = None) -> LearnResult:
         from adpart.learning.hierarchical import hierarchical_learning
 
-        if not options:
+        if not options and not self.mode.startswith("reward-variation"):
             raise TaskError(
                 "the hierarchical learner needs options (and optionally a partition); pass "
-                "--options ID (and --partition ID) from the knowledge base"
+                "--options ID (and --partition ID) from the knowledge base, or use a "
+                "reward-variation mode, which makes options to the task's reward states"
             )
         return hierarchical_learning(
-            mdp, list(options), partition, mode=self.mode, delta=self.delta,
+            mdp, list(options or []), partition, mode=self.mode, delta=self.delta,
             epsilon=self.partition_epsilon, threshold=self.threshold,
             threshold_scale=self.threshold_scale, min_visits=self.min_visits, lcb_z=self.lcb_z,
             flat_explore=self.flat_explore, reference=self.reference, runs=runs,
