@@ -34,7 +34,7 @@ from adpart.learning.decision_layer import reward_options
 from adpart.learning.hierarchical import decision_layer, hierarchical_learning
 from adpart.options import option_models, subgoal_options
 
-RUNS, EPISODES, REPEATS = 20, 300, 2
+RUNS, EPISODES, REPEATS = 20, 300, 3
 DOORWAYS = [187, 545, 843, 1262, 1495, 2146, 2508, 2846]
 RULES = {"defaults (state, until-reward)": {},
          "former (block, never)": {"refine": "block", "primitive_exploration": "never"},

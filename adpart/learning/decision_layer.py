@@ -37,10 +37,9 @@ from adpart.partition.partition import (
     Partition,
     block_all,
     canonical_labels,
-    combine_labels,
     row_codes,
 )
-from adpart.partition.refine import delta_refine, reward_split
+from adpart.partition.refine import delta_refine, regroup
 
 __all__ = [
     "DecisionLayer",
@@ -205,36 +204,53 @@ def refine_block(
     alone, the state whose evidence fired (the ``state`` rule of the module docstring): ``at``
     becomes a block of its own offering them, and the rest of ``block`` is refined to stability
     for its unchanged set.
+
+    Every block of ``partition`` must offer only columns all its states may start (every layer
+    the learner builds or accepts does); only the refined block's children are checked.
     """
     S = partition.n_states
     new_options = list(new_options)
+    labels = partition.labels
     adm_rows = partition.admissible.copy()
     adm_rows[block, new_options] = True
-    members = partition.labels == block
+    inside = np.flatnonzero(labels == block)  # only the block's states are split
+    if at is not None and labels[at] != block:
+        raise ModelError(f"state {at} is not in block {block}")
     sel = np.flatnonzero(adm_rows[block])
-    state_adm = np.zeros(model.admissible.shape, dtype=bool)
-    state_adm[:, sel] = model.admissible[:, sel] & members[:, None]
+    adm_in = model.admissible[inside][:, sel]  # (members, offered columns)
     if at is not None:
-        if not members[at]:
-            raise ModelError(f"state {at} is not in block {block}")
-        state_adm[:, new_options] &= (np.arange(S) == at)[:, None]
-    pattern = np.where(members, row_codes(state_adm[:, sel]) + 1, 0)
-    work = combine_labels(partition.labels, pattern)
-    inside = np.flatnonzero(members)  # only the block's states have rows to refine by
+        adm_in[:, np.searchsorted(sel, new_options)] &= (inside == at)[:, None]
+    # the block's split by where its columns may start, then by their rewards (eq. 4.7), on the
+    # members alone (the same groups reward_split forms on the whole labelling)
+    local = row_codes(adm_in)
     if epsilon is not None:
-        work = canonical_labels(reward_split(work, model.R, state_adm, sel, epsilon + atol,
-                                             states=inside))
+        every = np.arange(inside.size)
+        n_local = int(local.max()) + 1
+        for j, o in enumerate(sel):
+            values = np.where(adm_in[:, j], model.R[inside, o], 0.0)
+            if np.ptp(values) > epsilon + atol:  # else no group of the block can split
+                local, n_local, _ = regroup(local, n_local, every, values, epsilon + atol)
+    work = labels.copy()
+    work[inside] = partition.n_blocks + local
+    state_adm = np.zeros(model.admissible.shape, dtype=bool)
+    state_adm[np.ix_(inside, sel)] = adm_in
     F = masked_rows(model, sel, state_adm, states=inside)
-    work, _ = delta_refine(work, F, sel.size, delta, atol)
-    refined = partition.with_admissible(adm_rows).refine_by(canonical_labels(work))
-    allowed = block_all(refined.labels, refined.n_blocks, model.admissible)
-    if at is not None:  # the other children of the block keep its former option set
-        others = (refined.parent_map(partition) == block) & (
-            np.arange(refined.n_blocks) != refined.labels[at])
-        allowed[np.ix_(others, new_options)] = False
-    if refined.n_blocks > S:  # pragma: no cover - a partition never has more blocks than states
+    work, _ = delta_refine(canonical_labels(work), F, sel.size, delta, atol)
+    new = canonical_labels(work)  # refines the partition: only the block was split
+    n_new = int(new.max()) + 1
+    if n_new > S:  # pragma: no cover - a partition never has more blocks than states
         raise ModelError("refinement produced more blocks than states")
-    return refined.with_admissible(refined.admissible & allowed)
+    parent = np.empty(n_new, dtype=np.int64)
+    parent[new] = labels
+    # the other blocks are unchanged, and offer only columns all their states may start (every
+    # layer the learner builds or accepts does): only the block's children need the check
+    allowed = np.ones((n_new, model.admissible.shape[1]), dtype=bool)
+    children = np.unique(new[inside])
+    allowed[children] = block_all(new[inside], n_new, model.admissible[inside])[children]
+    if at is not None:  # the other children of the block keep its former option set
+        others = (parent == block) & (np.arange(n_new) != new[at])
+        allowed[np.ix_(others, new_options)] = False
+    return Partition(new, adm_rows[parent] & allowed)
 
 
 def offered_values(partition: Partition, smdp: SMDPModel, terminal: np.ndarray,

@@ -176,10 +176,14 @@ def _state_rows(F: sp.csr_array, S: int, options: np.ndarray, adm: np.ndarray,
     keep = adm[states][:, options].T  # (k, m)
     src = (options[:, None] * S + states[None, :])[keep]
     dst = (np.arange(options.size, dtype=np.int64)[:, None] * S + states[None, :])[keep]
-    rows = F[src]  # the source rows, in the destination's order
+    # the source rows' entries, in the destination's order (one gather, no sparse indexing)
+    starts = F.indptr[src].astype(np.int64)
+    lengths = F.indptr[src + 1] - starts
+    entries = np.repeat(starts - (np.cumsum(lengths) - lengths), lengths) + np.arange(
+        int(lengths.sum()), dtype=np.int64)
     counts = np.zeros(options.size * S, dtype=np.int64)
-    counts[dst] = np.diff(rows.indptr)
-    out = sp.csr_array((rows.data, rows.indices, np.r_[0, np.cumsum(counts)]),
+    counts[dst] = lengths
+    out = sp.csr_array((F.data[entries], F.indices[entries], np.r_[0, np.cumsum(counts)]),
                        shape=(options.size * S, F.shape[1]))
     out.eliminate_zeros()
     return out
