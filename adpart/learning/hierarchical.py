@@ -7,7 +7,8 @@ primitive step also updates a flat Q over (state, action) (section 4.3.3). The o
 the primitive actions' one-step options ``0..A-1`` followed by the given options, so a primitive
 action can join a block's options.
 
-Three modes (``mode=``), the alternatives of section 4.3 the seed compares in 5.1.3:
+The modes (``mode=``): the three alternatives of section 4.3 the seed compares in 5.1.3, and
+reward variation with the inconsistency test:
 
 * ``inconsistency`` (4.3.3, Fig. 4.6): at a decision point in state ``s`` of block ``b``, with
   ``a*`` the action of the highest *lower confidence bound* ``LCB(s, a)`` of the flat value
@@ -27,14 +28,15 @@ Three modes (``mode=``), the alternatives of section 4.3 the seed compares in 5.
   bound; :func:`child_values` says why plain inheritance fails). Partitions are per run: runs
   refine independently.
 * ``action-refinement`` (4.3.2): before learning, every block holding a state with a reward above
-  the minimum ``r_min = min R(s, a)`` gets all primitive actions and is refined for them; the other
-  blocks keep the options only. No test during learning.
-* ``reward-variation`` (4.3.1): before partitioning, every state with some ``R(s, a) > r_min``
-  becomes an extra subgoal (an option to it from every state that can reach it); the decision layer
-  is then built by the multi-phase partitioner from the extended option set. Given a layer (one
-  Algorithm 3 built), the extra options join each of its blocks where all its states may start
-  them instead (blocks split by where they may start; not refined to delta-stability, which splits
-  a block offering primitive actions into lines). No test during learning.
+  the step reward (:func:`~adpart.learning.decision_layer.reward_level`, the minimum ``r_min``
+  wherever every step pays the same) gets all primitive actions and is refined for them; the
+  other blocks keep the options only. No test during learning.
+* ``reward-variation`` (4.3.1): before partitioning, every such state becomes an extra subgoal
+  (an option to it from every state that can reach it); the decision layer is then built by the
+  multi-phase partitioner from the extended option set. Given a layer (one Algorithm 3 built),
+  the extra options join each of its blocks where all its states may start them instead (blocks
+  split by where they may start; not refined to delta-stability, which splits a block offering
+  primitive actions into lines). No test during learning.
 * ``reward-variation+inconsistency`` (the transfer pipeline's default): the layer of
   ``reward-variation``, learned with the test of ``inconsistency`` against the ``offered``
   reference (below), so a layer whose options cannot serve the task is still refined where the
