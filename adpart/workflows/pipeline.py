@@ -10,7 +10,7 @@
 5. learn every later task on that decision layer with the hierarchical learner (refinement
    where flat and abstract values disagree), and flat without transfer for comparison. The
    learner's mode is ``reward-variation+inconsistency`` unless ``--hier-opt mode=`` names
-   another (:data:`DEFAULT_MODE`): the states where the new task pays more than its minimum
+   another (:data:`DEFAULT_MODE`): the states where the new task pays more than its step
    reward become subgoals too (4.3.1; the task's rewards are known, as phase 3 already uses
    them), the learner builds its layer from the discovered and these options, and the
    inconsistency test (4.3.3) refines it where a primitive beats every offered option. With
