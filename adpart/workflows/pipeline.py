@@ -21,8 +21,10 @@ subgoals** (stage ``no-subgoals``), and the knowledge base **predicts that abstr
 pay** - the ``expected-learning-time`` estimate (section 4.4) of the best layer it can build from
 the tasks learned so far (to the bound, in some flat run) is not below that of the flat MDP, or no
 earlier task was learned at all (stage ``fallback``; otherwise stage ``predict`` records the
-comparison). The later tasks
-are then learned with the flat learner, and the row of the method says why (``fallback``).
+comparison). The later tasks are then learned with the flat learner, and the row of the method
+says why (``fallback``). The reward-variation modes (the default) build their layer from each
+later task's own reward states, so neither missing subgoals (the layer is then those options
+alone) nor an earlier task never learned to the bound (stage ``predict`` says so) ends it.
 
 Every step first looks in the knowledge base for a result of exactly the same request and reuses
 it, so a pipeline run again - or resumed after being killed - recomputes nothing it already has.
