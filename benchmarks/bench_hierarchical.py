@@ -2,8 +2,8 @@
 
 The workload is three-floor ``reach-top-west`` (-1 a step) on the decision layer of eight doorway
 options (δ = 0.3, ε = 10, the layer ``tests/learning/test_hierarchical.py`` measures soundness on),
-20 runs x 300 episodes, α = 1, step cap 5,800, seed 0. Each rule runs in its own timing, best of
-``REPEATS`` after one warm-up call that compiles the kernel:
+20 runs x 300 episodes, α = 1, step cap 5,800, seed 0, after one warm-up call per rule that
+compiles the kernel. The rules:
 
 * ``state`` + ``until-reward`` - the defaults: an added action joins the firing state alone,
   epsilon-exploration over the primitives until the first reward;
@@ -15,10 +15,12 @@ options (δ = 0.3, ε = 10, the layer ``tests/learning/test_hierarchical.py`` me
   set, exact models included) is timed alone too and taken out of its rates, since the other
   rules get their layer ready-made.
 
-Printed per rule: wall seconds (learning, refinements and the exact scoring every 50 episodes),
-primitive steps and decisions per second, firings, final blocks; then the ratios of the defaults
-to the former rule. Steps per second is the issue's throughput figure; a rule that needs fewer
-steps to learn may still take longer per step, since every firing re-partitions a block.
+The rules run interleaved, ``REPEATS`` rounds, so a change of load on a shared machine hits every
+rule of a round alike. Printed per rule: wall seconds of its best round (learning, refinements and
+the exact scoring every 50 episodes), primitive steps and decisions per second, firings, final
+blocks; then the ratios to the former rule per round, as median [min, max]. Steps per second is
+the issue's throughput figure; a rule that needs fewer steps to learn may still take longer per
+step, since every firing re-partitions a block.
 
 Run with ``python -m benchmarks hierarchical``.
 """
@@ -34,7 +36,7 @@ from adpart.learning.decision_layer import reward_options
 from adpart.learning.hierarchical import decision_layer, hierarchical_learning
 from adpart.options import option_models, subgoal_options
 
-RUNS, EPISODES, REPEATS = 20, 300, 3
+RUNS, EPISODES, REPEATS = 20, 300, 5
 DOORWAYS = [187, 545, 843, 1262, 1495, 2146, 2508, 2846]
 RULES = {"defaults (state, until-reward)": {},
          "former (block, never)": {"refine": "block", "primitive_exploration": "never"},
@@ -49,42 +51,60 @@ def workload():
     return mdp, opts, models, part
 
 
-def measure(mdp, opts, models, part, rule: dict, *, runs: int = RUNS,
-            episodes: int = EPISODES) -> dict[str, float]:
-    """Best-of-``REPEATS`` wall time of one learning call and its counts."""
-    kw = dict(models=models, delta=0.3, epsilon=10.0, runs=runs, episodes=episodes, seed=0,
-              eval_every=50, alpha=1.0, max_steps_per_episode=5800, **rule)
-    if rule.get("mode", "").startswith("reward-variation"):
-        part = None  # it builds its own layer (inside the timing, as the pipeline runs it)
-    hierarchical_learning(mdp, opts, part, **dict(kw, runs=1, episodes=2))  # compile
+def _layer_seconds(mdp, opts, models) -> float:
+    """Best-of-``REPEATS`` time of the reward-variation mode's own layer build."""
     best = np.inf
     for _ in range(REPEATS):
         t0 = time.perf_counter()
-        res = hierarchical_learning(mdp, opts, part, **kw)
+        extra = reward_options(mdp)
+        decision_layer(mdp, [*opts, *extra], delta=0.3, epsilon=10.0,
+                       models=[*models, *option_models(mdp, extra, duration=False)])
         best = min(best, time.perf_counter() - t0)
-    build = 0.0
-    if part is None:  # the reward-variation layer, built inside the call: timed alone
-        build = np.inf
-        for _ in range(REPEATS):
+    return best
+
+
+def measure(mdp, opts, models, part, rules: dict[str, dict], *, runs: int = RUNS,
+            episodes: int = EPISODES) -> dict[str, dict[str, object]]:
+    """Each rule's learning call timed ``REPEATS`` times, the rules interleaved (a load change
+    on the shared machine then hits every rule of a round alike), with its counts."""
+    calls = {}
+    for name, rule in rules.items():
+        kw = dict(models=models, delta=0.3, epsilon=10.0, runs=runs, episodes=episodes, seed=0,
+                  eval_every=50, alpha=1.0, max_steps_per_episode=5800, **rule)
+        # the reward-variation modes build their own layer, inside the call as the pipeline runs it
+        layer = None if rule.get("mode", "").startswith("reward-variation") else part
+        hierarchical_learning(mdp, opts, layer, **dict(kw, runs=1, episodes=2))  # compile
+        calls[name] = (layer, kw)
+    times: dict[str, list[float]] = {name: [] for name in rules}
+    results = {}
+    for _ in range(REPEATS):
+        for name, (layer, kw) in calls.items():
             t0 = time.perf_counter()
-            decision_layer(mdp, [*opts, *reward_options(mdp)], delta=0.3, epsilon=10.0,
-                           models=[*models, *option_models(mdp, reward_options(mdp),
-                                                           duration=False)])
-            build = min(build, time.perf_counter() - t0)
-    steps = float(res.curve.matrix("steps").sum())
-    decisions = float(res.curve.matrix("decisions").sum())
-    learn = best - build
-    return {"seconds": best, "layer_seconds": build, "steps_per_s": steps / learn,
-            "decisions_per_s": decisions / learn,
-            "firings": float(len(res.refinements)),
-            "final_blocks": float(np.median(res.blocks[:, -1]))}
+            results[name] = hierarchical_learning(mdp, opts, layer, **kw)
+            times[name].append(time.perf_counter() - t0)
+    build = _layer_seconds(mdp, opts, models)
+    rows = {}
+    for name, (layer, _) in calls.items():
+        res = results[name]
+        own = build if layer is None else 0.0  # taken out: the other rules get theirs ready-made
+        learn = np.asarray(times[name]) - own
+        steps = float(res.curve.matrix("steps").sum())
+        decisions = float(res.curve.matrix("decisions").sum())
+        rows[name] = {"seconds": min(times[name]), "layer_seconds": own,
+                      "steps_per_s": steps / learn.min(),
+                      "decisions_per_s": decisions / learn.min(),
+                      "round_steps_per_s": steps / learn,
+                      "round_decisions_per_s": decisions / learn,
+                      "firings": float(len(res.refinements)),
+                      "final_blocks": float(np.median(res.blocks[:, -1]))}
+    return rows
 
 
-def main() -> dict[str, dict[str, float]]:
+def main() -> dict[str, dict[str, object]]:
     mdp, opts, models, part = workload()
     print(f"three-floor reach-top-west, {part.n_blocks}-block doorway layer, {RUNS} runs x "
-          f"{EPISODES} episodes (best of {REPEATS})")
-    rows = {name: measure(mdp, opts, models, part, rule) for name, rule in RULES.items()}
+          f"{EPISODES} episodes ({REPEATS} interleaved rounds; rates of the best round)")
+    rows = measure(mdp, opts, models, part, RULES)
     for name, r in rows.items():
         print(f"{name:32s} {r['seconds']:7.2f} s  (layer {r['layer_seconds']:.2f} s)  "
               f"{r['steps_per_s'] / 1e6:6.2f} M steps/s  "
@@ -92,9 +112,12 @@ def main() -> dict[str, dict[str, float]]:
               f"{r['final_blocks']:6.0f} blocks (median)")
     new, old, pipeline = rows.values()
     for name, r in (("defaults", new), ("pipeline", pipeline)):
-        print(f"ratio {name} / former: steps/s {r['steps_per_s'] / old['steps_per_s']:.2f}, "
-              f"decisions/s {r['decisions_per_s'] / old['decisions_per_s']:.2f}, "
-              f"wall {r['seconds'] / old['seconds']:.2f}")
+        steps = r["round_steps_per_s"] / old["round_steps_per_s"]
+        decisions = r["round_decisions_per_s"] / old["round_decisions_per_s"]
+        print(f"ratio {name} / former, per round (median [min, max]): steps/s "
+              f"{np.median(steps):.2f} [{steps.min():.2f}, {steps.max():.2f}], decisions/s "
+              f"{np.median(decisions):.2f} [{decisions.min():.2f}, {decisions.max():.2f}], wall "
+              f"{r['seconds'] / old['seconds']:.2f} (best rounds)")
     return rows
 
 
