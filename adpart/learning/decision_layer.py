@@ -226,10 +226,10 @@ def refine_block(
     if epsilon is not None:
         every = np.arange(inside.size)
         n_local = int(local.max()) + 1
-        for j, o in enumerate(sel):
-            values = np.where(adm_in[:, j], model.R[inside, o], 0.0)
-            if np.ptp(values) > epsilon + atol:  # else no group of the block can split
-                local, n_local, _ = regroup(local, n_local, every, values, epsilon + atol)
+        values = np.where(adm_in, model.R[np.ix_(inside, sel)], 0.0)
+        # a column whose rewards span at most epsilon over the whole block splits no group of it
+        for j in np.flatnonzero(np.ptp(values, axis=0) > epsilon + atol):
+            local, n_local, _ = regroup(local, n_local, every, values[:, j], epsilon + atol)
     work = labels.copy()
     work[inside] = partition.n_blocks + local
     state_adm = np.zeros(model.admissible.shape, dtype=bool)
