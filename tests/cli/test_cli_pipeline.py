@@ -215,3 +215,25 @@ def test_no_subgoals_is_a_reported_outcome_and_the_flat_learner_is_a_choice(tmp_
         kb.close()
     bad = CliRunner().invoke(cli, [*args, "--flat-learner", "nope"])
     assert bad.exit_code == 2 and "--flat-learner" in bad.output
+
+
+def test_without_a_learned_first_task_only_the_reward_variation_modes_use_the_layer(tmp_path):
+    """One episode does not learn two-rooms' first task, so the knowledge base holds no values to
+    predict from: in inconsistency mode the later task is learned flat (stage ``fallback``); the
+    default mode builds its layer from the later task's own rewards and learns on it (stage
+    ``predict`` says why). Betweenness finds the doorway without a learned policy."""
+    args = ["pipeline", "two-rooms", "--tasks", "reach-goal,goal:x=9,y=5", "--detector",
+            "betweenness", "--runs", "3", "--episodes", "30", "--first-episodes", "1",
+            "--eval-every", "10", "--no-baseline", "--kb", str(tmp_path / "kb"), "--out",
+            str(tmp_path / "o"), "--json"]
+    default = json.loads(CliRunner().invoke(cli, args).output)
+    assert default["tasks"][0]["runs_within_bound"] == 0  # the first task is not learned
+    stage = next(s for s in default["stages"] if s["task"] == "goal:x=9,y=5")
+    assert stage["stage"] == "predict" and "holds no values to predict from" in (
+        stage["detail"]["reason"])
+    assert default["tasks"][1]["learner"] == "hierarchical"
+    alone = json.loads(CliRunner().invoke(cli, [*args, "--hier-opt",
+                                                "mode=inconsistency"]).output)
+    stage = next(s for s in alone["stages"] if s["task"] == "goal:x=9,y=5")
+    assert stage["stage"] == "fallback" and "is learned flat" in stage["detail"]["reason"]
+    assert alone["tasks"][1]["learner"] == "flat-fallback"
