@@ -30,7 +30,7 @@ from adpart.mdp.solvers import solve
 from adpart.options.models import OptionModel
 from adpart.options.option import Option
 from adpart.options.subgoal_options import subgoal_option
-from adpart.partition import DEFAULT_ATOL, masked_rows
+from adpart.partition import DEFAULT_ATOL, block_rows
 from adpart.partition.layer import decision_rewards, resolve_baseline, step_baseline
 from adpart.partition.multiphase import MultiPhasePartitioner, PhaseResult
 from adpart.partition.partition import (
@@ -232,9 +232,7 @@ def refine_block(
             local, n_local, _ = regroup(local, n_local, every, values[:, j], epsilon + atol)
     work = labels.copy()
     work[inside] = partition.n_blocks + local
-    state_adm = np.zeros(model.admissible.shape, dtype=bool)
-    state_adm[np.ix_(inside, sel)] = adm_in
-    F = masked_rows(model, sel, state_adm, states=inside)
+    F = block_rows(model, sel, inside, adm_in)
     work, _ = delta_refine(canonical_labels(work), F, sel.size, delta, atol)
     new = canonical_labels(work)  # refines the partition: only the block was split
     n_new = int(new.max()) + 1

@@ -8,11 +8,18 @@
 * :func:`reachable_states`, :func:`decision_rewards`, :func:`layer_counts` - partition hygiene
   (:mod:`adpart.partition.layer`: terminal block, unreachable states, eq. 4.7's rewards);
 * :class:`BPSMDP` - interval models, interval value iteration and a point model (3.2.1, 4.3.3);
-* :func:`check_delta`, :func:`check_epsilon`, :data:`DEFAULT_ATOL`, :func:`masked_rows` - the
-  argument checks and the row selection the algorithms share, for callers that prepare inputs.
+* :func:`check_delta`, :func:`check_epsilon`, :data:`DEFAULT_ATOL`, :func:`masked_rows`,
+  :func:`block_rows` - the argument checks and the row selection the algorithms share, for
+  callers that prepare inputs.
 """
 
-from adpart.partition._validate import DEFAULT_ATOL, check_delta, check_epsilon, masked_rows
+from adpart.partition._validate import (
+    DEFAULT_ATOL,
+    block_rows,
+    check_delta,
+    check_epsilon,
+    masked_rows,
+)
 from adpart.partition.bpsmdp import (
     BPSMDP,
     IntervalValues,
@@ -34,6 +41,7 @@ __all__ = [
     "MultiPhasePartitioner",
     "Partition",
     "StabilityReport",
+    "block_rows",
     "canonical_labels",
     "check_delta",
     "check_epsilon",

@@ -155,8 +155,9 @@ def masked_rows(model: SMDPModel, options: np.ndarray, adm: np.ndarray,
     """
     S, n_opt = model.n_states, model.n_actions
     if states is not None:
-        return _state_rows(sp.csr_array(model.F), S, np.asarray(options, dtype=np.int64),
-                           adm, np.asarray(states, dtype=np.int64))
+        states = np.unique(np.asarray(states, dtype=np.int64))
+        options = np.asarray(options, dtype=np.int64)
+        return block_rows(model, options, states, adm[states][:, options])
     F = sp.csr_array(model.F)
     if not np.array_equal(options, np.arange(n_opt)):
         F = sp.csr_array(sp.vstack([F[int(o) * S:(int(o) + 1) * S] for o in options], format="csr"))
@@ -168,12 +169,14 @@ def masked_rows(model: SMDPModel, options: np.ndarray, adm: np.ndarray,
     return F
 
 
-def _state_rows(F: sp.csr_array, S: int, options: np.ndarray, adm: np.ndarray,
-                states: np.ndarray) -> sp.csr_array:
-    """:func:`masked_rows` restricted to ``states``: row ``j*S + s`` is ``F[options[j]*S + s]``
-    for ``s`` in ``states`` where ``adm[s, options[j]]``, every other row is empty."""
-    states = np.unique(states)  # sorted, so the destination rows below are increasing
-    keep = adm[states][:, options].T  # (k, m)
+def block_rows(model: SMDPModel, options: np.ndarray, states: np.ndarray,
+               adm: np.ndarray) -> sp.csr_array:
+    """:func:`masked_rows` restricted to ``states`` (sorted, distinct): row ``j*S + s`` is
+    ``F[options[j]*S + s]`` for the ``i``-th of ``states`` where ``adm[i, j]`` (``(m, k)``, the
+    states' own admissibility), every other row is empty."""
+    F = model.F if isinstance(model.F, sp.csr_array) else sp.csr_array(model.F)
+    S = model.n_states
+    keep = np.asarray(adm, dtype=bool).T  # (k, m)
     src = (options[:, None] * S + states[None, :])[keep]
     dst = (np.arange(options.size, dtype=np.int64)[:, None] * S + states[None, :])[keep]
     # the source rows' entries, in the destination's order (one gather, no sparse indexing)
