@@ -42,7 +42,7 @@ import numpy as np
 
 from adpart.errors import TaskError
 from adpart.learning.comparison import ratio_of_medians_ci
-from adpart.learning.curves import LearningCurve, episodes_within, plot_curves
+from adpart.learning.curves import LearningCurve, episodes_within
 from adpart.options.subgoal_options import LOCAL_RADIUS
 from adpart.workflows.discovery import discover_subgoals
 from adpart.workflows.learning import (
@@ -54,8 +54,8 @@ from adpart.workflows.learning import (
 )
 from adpart.workflows.options import options_for_subgoals
 from adpart.workflows.partitioning import partition_environment
+from adpart.workflows.pipeline_figures import write_figures
 from adpart.workflows.refs import parse_ref
-from adpart.workflows.reports import folder_name
 
 #: The hierarchical learner's mode in the pipeline (module docstring; docs/pipeline.md).
 DEFAULT_MODE = "reward-variation+inconsistency"
@@ -490,7 +490,7 @@ def run_pipeline(
                                         {"fallback": reason}))
             if config.baseline:
                 report.rows.append(task_row(task, "flat", curve, config.gap_fraction, {}))
-        _figures(kb, report, config, out)
+        write_figures(kb, report, config, out)
         return report
     option_ids: list[int] = []
     if no_subgoals:
@@ -612,77 +612,5 @@ def run_pipeline(
                 evidence.append(task_id)
         if task_id not in learned:
             learned.append(task_id)
-    _figures(kb, report, config, out)
+    write_figures(kb, report, config, out)
     return report
-
-
-def _maps(kb: Any, report: PipelineReport, config: PipelineConfig, out: Path) -> None:
-    """The subgoals found and every decision layer used, drawn on the map (Figs. 4.2, 4.5)."""
-    from adpart.errors import ModelError
-    from adpart.workflows.resolve import resolve_domain
-
-    domain = resolve_domain(config.env)
-    own = [r["task"] for r in report.rows
-           if r["learner"] == "hierarchical" and r.get("partition") is None]
-    try:
-        for stage in report.stages:
-            if stage.stage == "discover" and stage.detail.get("subgoals"):
-                mask = np.zeros(domain.n_states, dtype=bool)
-                mask[stage.detail["subgoals"]] = True
-                path = out / f"subgoals_{folder_name(stage.task or config.env)}.png"
-                domain.render(str(path), marked=mask, task=stage.task, title=(
-                    f"{config.env}: {int(mask.sum())} subgoals in the policy of {stage.task}"))
-            elif stage.stage in ("partition", "hierarchy") and stage.task not in own:
-                record = kb.get("partition", parse_ref(stage.result, "partition"))
-                labels = kb.load(record, "labels")
-                path = out / f"layer_{folder_name(stage.task or config.env)}.png"
-                domain.render(str(path), labels=labels, task=stage.task, title=(
-                    f"{config.env}/{stage.task}: decision layer {record.ref}, "
-                    f"{record.n_blocks} blocks before refinement"))
-            else:
-                continue
-            report.figures.append(str(path))
-        for task in own:  # the layers the reward-variation modes built themselves
-            report.figures.append(str(_draw_own_layer(kb, report, config, domain, task, out)))
-    except ModelError:
-        return  # a domain without a map (x, y features): nothing to draw
-
-
-def _draw_own_layer(kb: Any, report: PipelineReport, config: PipelineConfig, domain: Any,
-                    task: str, out: Path) -> Path:
-    """The layer a reward-variation mode learns on: the multi-phase partition over the
-    discovered options plus the options to ``task``'s reward states (the learner's own call)."""
-    from adpart.learning.decision_layer import decision_layer, reward_options
-    from adpart.workflows.options import load_options
-
-    stage = next((s for s in report.stages if s.stage == "options"), None)
-    records = [] if stage is None else [kb.get("option", parse_ref(r, "option"))
-                                        for r in stage.result.split(",")]
-    options = load_options(kb, records)[0] if records else []
-    mdp = domain.mdp(task)
-    extra = reward_options(mdp)
-    layer, _, _ = decision_layer(mdp, options + extra, delta=config.delta,
-                                 epsilon=config.epsilon)
-    path = out / f"layer_{folder_name(task)}.png"
-    domain.render(str(path), labels=layer.labels, task=task, title=(
-        f"{config.env}/{task}: decision layer of {len(options)} subgoal and {len(extra)} "
-        f"reward-state options, {layer.n_blocks} blocks before refinement"))
-    return path
-
-
-def _figures(kb: Any, report: PipelineReport, config: PipelineConfig, out: Path | None) -> None:
-    if out is not None:
-        out.mkdir(parents=True, exist_ok=True)
-        for task, curves in report.curves.items():
-            path = out / f"{folder_name(task)}.png"
-            rows = [r for r in report.rows if r["task"] == task and np.isfinite(r["bound"])]
-            plot_curves(
-                curves,
-                path,
-                metric="value_gap",
-                title=f"{config.env}/{task}: value gap of the greedy policy",
-                bound=rows[0]["bound"] if rows else None,
-                bound_label=f"success bound ({config.gap_fraction:.0%} of |V*|)",
-            )
-            report.figures.append(str(path))
-        _maps(kb, report, config, out)
