@@ -160,6 +160,9 @@ def _taxi_pipeline(config: ExperimentConfig, s: dict[str, Any]) -> tuple[Any, di
                         episodes=s["pipe"], first_episodes=s["pipe_first"], seed=config.seed,
                         eval_every=s["eval_every"], baseline=False,
                         flat_params={"alpha": ALPHA, "epsilon": EPSILON},
+                        # chapter 6's partitioned learner: the layer with refinement alone, as
+                        # on Parr's maze (the pipeline's default adds the reward states' options)
+                        hierarchical_params={"mode": "inconsistency"},
                         fallback=False)  # the decision layer is what is compared
     with working_kb(config.kb, "maxq-taxi") as kb:
         rep = run_pipeline(kb, pc, progress=config.progress)

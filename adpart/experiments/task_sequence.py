@@ -49,28 +49,23 @@ def _settings(config: ExperimentConfig) -> dict[str, Any]:
 
 def _learn_on(kb: Any, ref: str, task: str, s: dict[str, Any], seed: int) -> Any:
     """Hierarchical learning of ``task`` on the stored layer ``ref`` (keeps the block counts)."""
-    from adpart.learning.hierarchical import hierarchical_learning
     from adpart.partition import Partition
+    from adpart.plugins import get_registry
     from adpart.workflows.options import resolve_option_set
+    from adpart.workflows.pipeline import DEFAULT_MODE, episode_defaults
     from adpart.workflows.refs import get_ref
     from adpart.workflows.resolve import resolve_domain
 
     rec = get_ref(kb, ref, "partition")
     opts = resolve_option_set(kb, ",".join(f"option:{i}" for i in rec.option_ids), ENV)
     layer = Partition(kb.load(rec, "labels"), kb.load(rec, "block_actions").astype(bool))
-    from adpart.plugins import get_registry
-    from adpart.workflows.pipeline import DEFAULT_MODE, episode_defaults
-
-    mdp = resolve_domain(ENV).mdp(task)
-    # the pipeline's settings, through the plugin's own parameter spelling
+    # the pipeline's learner, with its settings in the plugin's own spelling
     params = {**episode_defaults(ENV), "mode": DEFAULT_MODE, "delta": 0.3,
               "partition-epsilon": 10.0, **s["hierarchical"]}
     learner = get_registry().get("learner", "hierarchical").create(params)
-    return hierarchical_learning(
-        mdp, list(opts.options), layer, mode=learner.mode, delta=learner.delta,
-        epsilon=learner.partition_epsilon, min_visits=learner.min_visits,
-        alpha=learner.alpha, runs=s["runs"], episodes=s["episodes"], seed=seed,
-        eval_every=s["eval_every"], max_steps_per_episode=learner.max_steps)
+    return learner.learn(resolve_domain(ENV).mdp(task), runs=s["runs"], episodes=s["episodes"],
+                         seed=seed, eval_every=s["eval_every"], options=list(opts.options),
+                         partition=layer)
 
 
 def _plot(curves: dict[str, Any], path: Path, title: str, column: str = "value_gap") -> str:

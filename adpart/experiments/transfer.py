@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from adpart.experiments.base import ExperimentConfig, ExperimentReport, experiment
-from adpart.experiments.stats import compare, episodes_to_threshold
+from adpart.experiments.stats import compare
 
 DELTA = 0.3
 EPSILON = 10.0
@@ -62,18 +62,13 @@ class _Setup:
     eval_every: int = 10
 
 
-def _curve_rows(task: str, curves: dict[str, Any], episodes: int
+def _curve_rows(task: str, curves: dict[str, Any]
                 ) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
     """Pipeline-style rows per learner and per-run episodes to the bound (censored: N + 1)."""
-    from adpart.workflows.pipeline import task_row
+    from adpart.workflows.pipeline import episodes_to_bound, task_row
 
-    rows, reached = [], {}
-    for label, curve in curves.items():
-        row = task_row(task, label, curve, GAP_FRACTION, {})
-        rows.append(row)
-        r = episodes_to_threshold(curve.matrix("value_gap"), curve.evaluated_episodes(),
-                                  row["bound"])
-        reached[label] = np.where(np.isfinite(r), r, episodes + 1.0)
+    rows = [task_row(task, label, curve, GAP_FRACTION, {}) for label, curve in curves.items()]
+    reached = {label: episodes_to_bound(curve, GAP_FRACTION) for label, curve in curves.items()}
     return rows, reached
 
 
@@ -169,7 +164,7 @@ def _finish(config: ExperimentConfig, setup: _Setup, report: ExperimentReport,
     s = setup
     out = Path(config.out)
     pipe, results, curves = ctx["pipe"], ctx["results"], ctx["curves"]
-    rows, reached = _curve_rows(s.new, curves, s.episodes)
+    rows, reached = _curve_rows(s.new, curves)
     stage = {st.stage: st for st in pipe.stages}
     part = stage["partition"].detail
     refine = results["refinement"]

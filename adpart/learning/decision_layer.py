@@ -31,7 +31,12 @@ from adpart.options.models import OptionModel
 from adpart.options.option import Option
 from adpart.options.subgoal_options import subgoal_option
 from adpart.partition import DEFAULT_ATOL, block_rows
-from adpart.partition.layer import decision_rewards, resolve_baseline, step_baseline
+from adpart.partition.layer import (
+    decision_rewards,
+    reachable_states,
+    resolve_baseline,
+    step_baseline,
+)
 from adpart.partition.multiphase import MultiPhasePartitioner, PhaseResult
 from adpart.partition.partition import (
     Partition,
@@ -102,9 +107,13 @@ def reward_states(mdp: FiniteMDP, *, arrivals: bool = False) -> np.ndarray:
 
 def reward_options(mdp: FiniteMDP) -> list[Option]:
     """Section 4.3.1's extra subgoal options: one to each of :func:`reward_states` (with
-    arrivals), startable from every state that can reach it, named ``reward-S``."""
+    arrivals) that the task can reach from its start states, startable from every state that can
+    reach it, named ``reward-S``. A reward no episode can collect needs no option (fickle Taxi's
+    16 extra states pay a drop-off reward but no other state leads to them)."""
+    reachable = reachable_states(mdp.as_smdp(), start_distribution(mdp))
+    goals = np.flatnonzero(reward_states(mdp, arrivals=True) & reachable)
     return [subgoal_option(mdp, int(g), initiation="reachable", name=f"reward-{int(g)}")
-            for g in np.flatnonzero(reward_states(mdp, arrivals=True))]
+            for g in goals]
 
 
 @dataclass(frozen=True, eq=False)

@@ -170,7 +170,7 @@ def task_row(
     task: str, label: str, curve: LearningCurve, fraction: float, extra: dict[str, Any]
 ) -> dict[str, Any]:
     v_star = float(curve.metadata.get("v_star_start", np.nan))
-    bound = max(1e-9, fraction * abs(v_star)) if np.isfinite(v_star) else np.inf
+    bound = success_bound(curve, fraction)
     within = episodes_within(curve.matrix("value_gap"), curve.evaluated_episodes(), bound)
     to_bound = np.where(within < 0, np.inf, within)  # never within: inf (null in JSON)
     final = curve.matrix("value_gap")[:, -1]
@@ -190,12 +190,18 @@ def task_row(
     }
 
 
-def episodes_to_bound(curve: LearningCurve, fraction: float) -> np.ndarray:
-    """Per run, the episode after which the gap stays within ``fraction |V*(start)|``; a run
-    never within it counts as censored at the curve's episodes + 1."""
+def success_bound(curve: LearningCurve, fraction: float) -> float:
+    """The gap a run must stay within: ``fraction |V*(start)|`` (at least 1e-9; ``inf`` when the
+    curve carries no ``V*``)."""
     v_star = float(curve.metadata.get("v_star_start", np.nan))
-    bound = max(1e-9, fraction * abs(v_star)) if np.isfinite(v_star) else np.inf
-    within = episodes_within(curve.matrix("value_gap"), curve.evaluated_episodes(), bound)
+    return max(1e-9, fraction * abs(v_star)) if np.isfinite(v_star) else np.inf
+
+
+def episodes_to_bound(curve: LearningCurve, fraction: float) -> np.ndarray:
+    """Per run, the episode after which the gap stays within :func:`success_bound`; a run never
+    within it counts as censored at the curve's episodes + 1."""
+    within = episodes_within(curve.matrix("value_gap"), curve.evaluated_episodes(),
+                             success_bound(curve, fraction))
     episodes = int(curve.evaluated_episodes()[-1])
     return np.where(within < 0, episodes + 1.0, within.astype(np.float64))
 
