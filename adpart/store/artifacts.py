@@ -477,7 +477,10 @@ class ArtifactStore:
             rel_top = os.path.relpath(top, self.base)
             prefix = "" if rel_top == "." else rel_top.replace(os.sep, "/") + "/"
             for name in dirs + names:
-                st = os.lstat(os.path.join(top, name))
+                try:
+                    st = os.lstat(os.path.join(top, name))
+                except FileNotFoundError:  # a writer renamed its temporary file meanwhile
+                    continue
                 if stat.S_ISLNK(st.st_mode):
                     out.append((prefix + name, 0, st.st_mtime, True))
                 elif stat.S_ISREG(st.st_mode):
