@@ -33,7 +33,11 @@ import numpy as np
 
 from adpart.envs.registry import get_domain
 from adpart.learning.decision_layer import reward_options
-from adpart.learning.hierarchical import decision_layer, hierarchical_learning
+from adpart.learning.hierarchical import (
+    REWARD_OPTION_MODES,
+    decision_layer,
+    hierarchical_learning,
+)
 from adpart.options import option_models, subgoal_options
 
 RUNS, EPISODES, REPEATS = 20, 300, 5
@@ -72,7 +76,7 @@ def measure(mdp, opts, models, part, rules: dict[str, dict], *, runs: int = RUNS
         kw = dict(models=models, delta=0.3, epsilon=10.0, runs=runs, episodes=episodes, seed=0,
                   eval_every=50, alpha=1.0, max_steps_per_episode=5800, **rule)
         # the reward-variation modes build their own layer, inside the call as the pipeline runs it
-        layer = None if rule.get("mode", "").startswith("reward-variation") else part
+        layer = None if rule.get("mode") in REWARD_OPTION_MODES else part
         hierarchical_learning(mdp, opts, layer, **dict(kw, runs=1, episodes=2))  # compile
         calls[name] = (layer, kw)
     times: dict[str, list[float]] = {name: [] for name in rules}

@@ -114,6 +114,7 @@ from adpart.partition.partition import Partition, block_all, row_codes
 
 __all__ = [
     "MODES",
+    "REWARD_OPTION_MODES",
     "DecisionLayer",
     "HierarchicalResult",
     "build_decision_layer",
@@ -128,6 +129,9 @@ __all__ = [
 
 MODES = ("inconsistency", "action-refinement", "reward-variation",
          "reward-variation+inconsistency")
+#: The modes that add options to the task's reward states (4.3.1) and those that test (4.3.3).
+REWARD_OPTION_MODES = ("reward-variation", "reward-variation+inconsistency")
+TESTING_MODES = ("inconsistency", "reward-variation+inconsistency")
 #: What the grounded flat value must beat by L (module docstring).
 REFERENCES = ("model", "learned", "offered")
 #: Where an action added by a firing joins the layer (module docstring).
@@ -396,7 +400,7 @@ def hierarchical_learning(
     options = list(options)
 
     extra: list[Option] = []
-    if mode.startswith("reward-variation"):
+    if mode in REWARD_OPTION_MODES:
         extra = reward_options(mdp)
         if models is not None:
             models = list(models) + option_models(mdp, extra, duration=False)
@@ -417,7 +421,7 @@ def hierarchical_learning(
             b = int(part0.labels[s])
             if not part0.admissible[b, :A].all():
                 part0 = refine_block(part0, b, prims, refiner, delta=delta, epsilon=epsilon)
-    check = mode.endswith("inconsistency")
+    check = mode in TESTING_MODES
     if reference is None:
         reference = "offered" if mode == "reward-variation+inconsistency" else "learned"
     mu = start_distribution(mdp)

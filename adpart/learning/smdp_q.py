@@ -153,6 +153,19 @@ def kernel_function(kernel: str | None) -> tuple[str, Callable[[kernels.SMDPLock
     return name, kernels.KERNELS[name]
 
 
+def _reference_table(K: int, S: int, capacity: int, block_values: np.ndarray | None,
+                     state_values: np.ndarray | None) -> np.ndarray:
+    """The test's reference per run: ``(K, S)`` per state, ``(K, capacity)`` per block (padded
+    for the blocks refinement adds), zeros when the test reads the learned values."""
+    if state_values is not None:
+        return np.broadcast_to(state_values, (K, S)).astype(np.float64)
+    if block_values is not None:
+        B = block_values.shape[-1]
+        return np.pad(np.broadcast_to(block_values, (K, B)),
+                      ((0, 0), (0, capacity - B))).astype(np.float64)
+    return np.zeros((K, capacity))
+
+
 def make_state(
     mdp: FiniteMDP, options: Sequence[Option], labels: np.ndarray, block_adm: np.ndarray,
     *, episodes: int, horizon: int, alpha: Schedule, epsilon: Schedule, q_init: float,
@@ -216,11 +229,7 @@ def make_state(
         vr_G=np.zeros((K, O)),
         vr_g=np.ones((K, O)),
         ref_model=1 if block_values is not None else 2 if state_values is not None else 0,
-        Vref=(np.zeros((K, capacity)) if block_values is None and state_values is None
-              else np.broadcast_to(state_values, (K, S)).astype(np.float64)
-              if state_values is not None else np.pad(
-                  np.broadcast_to(block_values, (K, block_values.shape[-1])),
-                  ((0, 0), (0, capacity - block_values.shape[-1]))).astype(np.float64)),
+        Vref=_reference_table(K, S, capacity, block_values, state_values),
         Ql=np.broadcast_to(np.where(mdp.admissible, float(lower_bound), -np.inf)
                            if check else np.zeros((1, A)), flat_shape if check else (1, 1, A)
                            ).copy(),

@@ -441,9 +441,11 @@ def run_pipeline(
     # a firing refines its block with the thresholds the layer was built with (eqs. 4.6-4.7)
     hierarchical = {**defaults, "delta": config.delta, "partition-epsilon": config.epsilon,
                     "mode": DEFAULT_MODE, **config.hierarchical_params}
+    from adpart.learning.hierarchical import REWARD_OPTION_MODES
+
     # without --hierarchy, the reward-variation modes build their layer from the options plus the
     # task's reward states; on a --hierarchy layer they offer those options in its blocks
-    own_layer = str(hierarchical["mode"]).startswith("reward-variation") and not config.hierarchy
+    own_layer = hierarchical["mode"] in REWARD_OPTION_MODES and not config.hierarchy
 
     def learn_flat(task: str, episodes: int, stage: str = "learn-flat") -> tuple[dict, Any]:
         req = LearnRequest(env=config.env, task=task, learner=config.flat_learner,

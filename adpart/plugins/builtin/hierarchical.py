@@ -124,9 +124,9 @@ class HierarchicalLearner:
               progress: Callable[[int, int], object] | None = None,
               options: Sequence[Option] | None = None,
               partition: Partition | None = None) -> LearnResult:
-        from adpart.learning.hierarchical import hierarchical_learning
+        from adpart.learning.hierarchical import REWARD_OPTION_MODES, hierarchical_learning
 
-        if not options and not self.mode.startswith("reward-variation"):
+        if not options and self.mode not in REWARD_OPTION_MODES:
             raise TaskError(
                 "the hierarchical learner needs options (and optionally a partition); pass "
                 "--options ID (and --partition ID) from the knowledge base, or use a "
