@@ -30,7 +30,7 @@ from adpart.mdp.solvers import solve
 from adpart.options.models import OptionModel
 from adpart.options.option import Option
 from adpart.options.subgoal_options import subgoal_option
-from adpart.partition import DEFAULT_ATOL, block_rows
+from adpart.partition import DEFAULT_ATOL
 from adpart.partition.layer import (
     decision_rewards,
     reachable_states,
@@ -44,7 +44,7 @@ from adpart.partition.partition import (
     canonical_labels,
     row_codes,
 )
-from adpart.partition.refine import delta_refine, regroup
+from adpart.partition.refine import delta_refine_rows, regroup
 
 __all__ = [
     "DecisionLayer",
@@ -231,7 +231,7 @@ def refine_block(
         adm_in[:, np.searchsorted(sel, new_options)] &= (inside == at)[:, None]
     # the block's split by where its columns may start, then by their rewards (eq. 4.7), on the
     # members alone (the same groups reward_split forms on the whole labelling)
-    local = row_codes(adm_in)
+    local = row_codes(adm_in[:, ~adm_in.all(axis=0)])  # columns every member may start split none
     if epsilon is not None:
         every = np.arange(inside.size)
         n_local = int(local.max()) + 1
@@ -241,8 +241,7 @@ def refine_block(
             local, n_local, _ = regroup(local, n_local, every, values[:, j], epsilon + atol)
     work = labels.copy()
     work[inside] = partition.n_blocks + local
-    F = block_rows(model, sel, inside, adm_in)
-    work, _ = delta_refine(canonical_labels(work), F, sel.size, delta, atol)
+    work, _ = delta_refine_rows(canonical_labels(work), model, sel, inside, adm_in, delta, atol)
     new = canonical_labels(work)  # refines the partition: only the block was split
     n_new = int(new.max()) + 1
     if n_new > S:  # pragma: no cover - a partition never has more blocks than states
@@ -257,7 +256,7 @@ def refine_block(
     if at is not None:  # the other children of the block keep its former option set
         others = (parent == block) & (np.arange(n_new) != new[at])
         allowed[np.ix_(others, new_options)] = False
-    return Partition(new, adm_rows[parent] & allowed)
+    return Partition._canonical(new, adm_rows[parent] & allowed)  # canonical_labels made it
 
 
 def offered_values(partition: Partition, smdp: SMDPModel, terminal: np.ndarray,

@@ -186,7 +186,7 @@ class HierarchicalResult(LearnResult):
 
 def child_values(Q_old: np.ndarray, n_old: np.ndarray, old: Partition, new: Partition,
                  block: int, Q_low: np.ndarray, tried: np.ndarray, lower_bound: float,
-                 ) -> tuple[np.ndarray, np.ndarray]:
+                 parent: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Starting values and counts of the blocks of ``new``, ``old`` refined at ``block`` (4.3.3).
 
     Every block keeps its parent's values and counts, except the primitive columns ``0..A-1``
@@ -194,7 +194,7 @@ def child_values(Q_old: np.ndarray, n_old: np.ndarray, old: Partition, new: Part
     at the mean of ``Q_low(s, a)`` over the child's states where ``a`` was ``tried``, and at
     ``lower_bound`` where it was tried in none of them - new to the child or inherited alike:
     a child's primitive values come from its own states' evidence only. Columns the child does
-    not offer are ``-inf``.
+    not offer are ``-inf``. ``parent`` is ``new.parent_map(old)``, when the caller has it.
 
     Why not plain inheritance (the seed's "children inherit the values"): a parent's value of a
     primitive is learned in the states where the agent took it, and a child may hold only states
@@ -206,7 +206,8 @@ def child_values(Q_old: np.ndarray, n_old: np.ndarray, old: Partition, new: Part
     same way (docs/hierarchical-learning.md has the counts).
     """
     A = Q_low.shape[1]
-    parent = new.parent_map(old)
+    if parent is None:
+        parent = new.parent_map(old)
     Qn = Q_old[parent]
     n_new = n_old[parent]
     B = new.n_blocks
@@ -482,9 +483,10 @@ def hierarchical_learning(
                            at=s if refine == "state" else None)
         B_old, B_new = old.n_blocks, new.n_blocks
         grow(B_new)
-        parent = new.parent_map(old)
+        parent = np.empty(B_new, dtype=np.int64)
+        parent[new.labels] = old.labels  # new refines old (refine_block splits one block)
         Qn, n_on = child_values(st.Q[k, :B_old], st.n_o[k, :B_old], old, new, b, st.Ql[k],
-                                st.nf[k] > 0, lower)
+                                st.nf[k] > 0, lower, parent)
         st.Q[k, :B_new], st.Q[k, B_new:] = Qn, -np.inf
         st.n_o[k, :B_new], st.n_o[k, B_new:] = n_on, 0
         st.n_d[k, :B_new] = st.n_d[k, :B_old][parent]

@@ -302,6 +302,56 @@ def predecessors_by_option(n, n_act, indptr, indices, data):  # pragma: no cover
 
 
 @njit(cache=True)
+def predecessors_of_rows(n, indptr, indices, data, options, states, keep
+                         ):  # pragma: no cover - compiled
+    """:func:`predecessors_by_option` of the rows of ``states`` alone, read from the model.
+
+    The stacked matrix is ``F`` (``(O*n, n)`` CSR of every option); the ``j``-th option of the
+    result is column ``options[j]``, and its row for the ``i``-th of ``states`` (sorted, distinct)
+    is ``F[options[j]*n + states[i]]`` where ``keep[i, j]``, empty elsewhere. The lists are the
+    ones :func:`predecessors_by_option` builds from that masked matrix (same order: by option,
+    then increasing state), without forming it: the work is the selected rows' entries plus the
+    ``n * k`` list heads.
+    """
+    k = options.size
+    m_states = states.size
+    count = np.zeros(n + 1, dtype=np.int64)
+    for j in range(k):
+        base = options[j] * n
+        for i in range(m_states):
+            if keep[i, j]:
+                r = base + states[i]
+                for q in range(indptr[r], indptr[r + 1]):
+                    if data[q] != 0.0:
+                        count[indices[q] + 1] += 1
+    for t in range(n):
+        count[t + 1] += count[t]
+    m = count[n]
+    fill = count[:n].copy()
+    ptr = np.empty(n * k + 1, dtype=np.int64)
+    src = np.empty(m, dtype=indices.dtype)
+    val = np.empty(m, dtype=np.float64)
+    for j in range(k):
+        for t in range(n):
+            ptr[t * k + j] = fill[t]
+        base = options[j] * n
+        for i in range(m_states):
+            if keep[i, j]:
+                s = states[i]
+                r = base + s
+                for q in range(indptr[r], indptr[r + 1]):
+                    x = data[q]
+                    if x != 0.0:
+                        t = indices[q]
+                        f = fill[t]
+                        src[f] = s
+                        val[f] = x
+                        fill[t] = f + 1
+    ptr[n * k] = m
+    return ptr, src, val
+
+
+@njit(cache=True)
 def _stable_sort_by_key(keys, items, lo, hi):  # pragma: no cover - compiled
     """Sort ``keys[lo:hi]`` ascending and permute ``items[lo:hi]`` alike; stable.
 

@@ -134,6 +134,19 @@ class Partition:
 
     # ------------------------------------------------------------------ construction
     @classmethod
+    def _canonical(cls, labels: np.ndarray, admissible: np.ndarray) -> Partition:
+        """A partition from labels the caller computed canonically, unchecked (the learner's
+        per-firing refinement: the check would relabel every state once more)."""
+        part = object.__new__(cls)
+        labels = np.array(labels, dtype=np.int64)
+        labels.setflags(write=False)
+        adm = np.array(admissible, dtype=bool)
+        adm.setflags(write=False)
+        object.__setattr__(part, "labels", labels)
+        object.__setattr__(part, "admissible", adm)
+        return part
+
+    @classmethod
     def from_labels(cls, labels: object, state_admissible: object) -> Partition:
         """A partition from any labelling; block admissibility = AND of ``state_admissible``.
 

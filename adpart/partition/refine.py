@@ -40,10 +40,16 @@ import scipy.sparse as sp
 
 from adpart.errors import ModelError
 from adpart.mdp.model import SMDPModel
-from adpart.partition._kernels import delta_worklist, greedy_groups, predecessors_by_option
+from adpart.partition._kernels import (
+    delta_worklist,
+    greedy_groups,
+    predecessors_by_option,
+    predecessors_of_rows,
+)
 from adpart.partition._validate import (
     DEFAULT_ATOL,
     as_model,
+    block_rows,
     check_atol,
     check_delta,
     check_epsilon,
@@ -173,18 +179,46 @@ def delta_refine(
         from adpart.partition.lumping import lump_labels  # lumping imports this module
 
         return lump_labels(labels, F, k, atol), 0
-    S = labels.size
     F = sp.csr_array(F)
     # the model's arrays as they are (no int64 / float64 copies: at 10^6 states and 20 options
     # each copy of the entries is ~2 GB); the kernels compile for the index dtype given
-    ptr, src, val = predecessors_by_option(
-        S, k, F.indptr, F.indices, np.asarray(F.data, dtype=np.float64)
+    preds = predecessors_by_option(
+        labels.size, k, F.indptr, F.indices, np.asarray(F.data, dtype=np.float64)
     )
+    return _worklist(labels, preds, k, delta, atol, max_rounds)
+
+
+def delta_refine_rows(
+    labels: np.ndarray, model: SMDPModel, options: np.ndarray, states: np.ndarray,
+    keep: np.ndarray, delta: float, atol: float,
+) -> tuple[np.ndarray, int]:
+    """:func:`delta_refine` with only the rows of ``states`` filled: the matrix
+    :func:`adpart.partition._validate.block_rows` builds (option ``options[j]``'s row of the
+    ``i``-th state where ``keep[i, j]``), read straight from ``model.F``.
+
+    Only blocks holding ``states`` can be split (every other row is empty), so this refines one
+    block of a layer against all its blocks (section 4.3.3) at the cost of the block's rows.
+    """
+    labels = np.ascontiguousarray(labels, dtype=np.int64)
+    options = np.ascontiguousarray(options, dtype=np.int64)
+    states = np.ascontiguousarray(states, dtype=np.int64)
+    keep = np.ascontiguousarray(keep, dtype=bool)
+    if delta == 0.0:
+        return delta_refine(labels, block_rows(model, options, states, keep), options.size,
+                            delta, atol)
+    F = model.F if isinstance(model.F, sp.csr_array) else sp.csr_array(model.F)
+    preds = predecessors_of_rows(model.n_states, F.indptr, F.indices,
+                                 np.asarray(F.data, dtype=np.float64), options, states, keep)
+    return _worklist(labels, preds, options.size, delta, atol, None)
+
+
+def _worklist(labels: np.ndarray, preds: tuple[np.ndarray, np.ndarray, np.ndarray], k: int,
+              delta: float, atol: float, max_rounds: int | None) -> tuple[np.ndarray, int]:
+    ptr, src, val = preds
     out, _, pops = delta_worklist(
-        S, k, ptr, src, val, labels.copy(), int(labels.max()) + 1, float(delta + atol),
-        0 if max_rounds is None else int(max_rounds),
+        labels.size, k, ptr, src, val, labels.copy(), int(labels.max()) + 1,
+        float(delta + atol), 0 if max_rounds is None else int(max_rounds),
     )
-    del ptr, src, val
     if pops < 0:
         raise ModelError(f"delta refinement did not reach a fixpoint in {max_rounds} splitters")
     return out, int(pops)

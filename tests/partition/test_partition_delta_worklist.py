@@ -21,9 +21,14 @@ from hypothesis import strategies as st
 
 from adpart.mdp.model import SMDPModel
 from adpart.partition import Partition, check_stability, exact_lumping, refine
-from adpart.partition._kernels import delta_worklist, predecessors_by_option
+from adpart.partition._kernels import (
+    delta_worklist,
+    predecessors_by_option,
+    predecessors_of_rows,
+)
+from adpart.partition._validate import block_rows
 from adpart.partition.partition import canonical_labels
-from adpart.partition.refine import delta_refine
+from adpart.partition.refine import delta_refine, delta_refine_rows
 from tests.partition._delta_reference import delta_worklist_reference
 from tests.partition.test_partition_properties import (
     _initial,
@@ -154,6 +159,33 @@ def test_predecessor_lists_are_the_transpose_grouped_by_option(case):
             expect = np.flatnonzero(Fd[a * S:(a + 1) * S, t])
             assert np.array_equal(src[lo:hi], expect)
             assert np.array_equal(val[lo:hi], Fd[a * S + expect, t])
+
+
+@settings(max_examples=40, deadline=None)
+@given(random_smdps(), st.integers(0, 2**31 - 1))
+def test_rows_of_some_states_give_the_lists_and_the_refinement_of_their_masked_matrix(case, draw):
+    # the learner's one-block refinement reads the rows straight from the model; it must equal
+    # the transpose of the masked matrix block_rows builds, and refine alike from it
+    model, rng = case
+    S, n_opt = model.n_states, model.n_actions
+    pick = np.random.default_rng(draw)
+    states = np.flatnonzero(pick.random(S) < 0.5)
+    options = np.flatnonzero(pick.random(n_opt) < 0.7)
+    if states.size == 0 or options.size == 0:
+        return
+    keep = model.admissible[np.ix_(states, options)] & (pick.random((states.size, options.size))
+                                                         < 0.8)
+    F = sp.csr_array(model.F)
+    lists = predecessors_of_rows(S, F.indptr, F.indices, F.data, options, states, keep)
+    masked = block_rows(model, options, states, keep)
+    expect = predecessors_by_option(S, options.size, masked.indptr, masked.indices, masked.data)
+    for x, y in zip(lists, expect, strict=True):
+        assert np.array_equal(x, y)
+    labels = _initial(model, rng).labels
+    for delta in (0.0, 0.3):
+        assert np.array_equal(
+            delta_refine_rows(labels, model, options, states, keep, delta, ATOL)[0],
+            delta_refine(labels, masked, options.size, delta, ATOL)[0])
 
 
 def test_two_coarsest_delta_stable_refinements_exist():
