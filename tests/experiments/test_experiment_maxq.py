@@ -1,4 +1,5 @@
-"""Quick versions of ``maxq-taxi`` / ``maxq-parr`` and the statistics they rely on."""
+"""Quick versions of ``maxq-taxi`` / ``maxq-parr`` (mini and full maze) and the statistics they
+rely on."""
 
 from __future__ import annotations
 
@@ -49,7 +50,7 @@ def test_evaluated_schedule() -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["maxq-taxi", "maxq-parr"])
+@pytest.mark.parametrize("name", ["maxq-taxi", "maxq-parr", "maxq-parr-full"])
 def test_quick_experiment_writes_report(name: str, tmp_path) -> None:
     assert get_experiment(name).name == name
     report, _paths = run_experiment(name, ExperimentConfig(out=tmp_path, runs=2, quick=True))
@@ -68,11 +69,12 @@ def test_quick_experiment_writes_report(name: str, tmp_path) -> None:
     for fig in report.figures:
         assert (tmp_path / fig.split("/")[-1]).stat().st_size > 0
     assert "What we measured" in (tmp_path / "summary.md").read_text()
-    if name == "maxq-parr":
+    if name.startswith("maxq-parr"):
         first = summary["data"]["first_task"]
         assert first["samples"] > 0 and first["mu"] is not None
         assert any("seed's claims" in f for f in summary["findings"])
         settings = summary["data"]["settings"]
+        assert settings["maze"].startswith(f"parr-maze {'full' if name.endswith('full') else 'mini'}")
         assert settings["maxq_ceiling"] < settings["v_star_start"]  # graph ceiling below V*
         smdp = summary["data"]["smdp_q"]
         assert smdp["initiation"] == "basin" and smdp["q_init"] == pytest.approx(-100.0)
