@@ -74,7 +74,8 @@ def test_quick_experiment_writes_report(name: str, tmp_path) -> None:
         assert first["samples"] > 0 and first["mu"] is not None
         assert any("seed's claims" in f for f in summary["findings"])
         settings = summary["data"]["settings"]
-        assert settings["maze"].startswith(f"parr-maze {'full' if name.endswith('full') else 'mini'}")
+        maze = "full" if name.endswith("full") else "mini"
+        assert settings["maze"].startswith(f"parr-maze {maze}")
         assert settings["maxq_ceiling"] < settings["v_star_start"]  # graph ceiling below V*
         smdp = summary["data"]["smdp_q"]
         assert smdp["initiation"] == "basin" and smdp["q_init"] == pytest.approx(-100.0)
