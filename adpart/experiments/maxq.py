@@ -17,7 +17,8 @@ on a nearby but not identical scale, which the findings say.
 directly and no knowledge base is used), and **maxq-parr-full** the same on the full 3,710-state
 reconstruction (MAXQ-Q's learning and rollouts take about 1.7x the mini maze's time). A first
 task (reach the goal room's first cell from the start) is learned flat; subgoals are found in
-its greedy policy by Monte Carlo sampling of the count metric (:func:`adpart.subgoals.discover_monte_carlo`, section 4.1.1; samples, ratio mean/sd and mu
+its greedy policy by Monte Carlo sampling of the count metric
+(:func:`adpart.subgoals.discover_monte_carlo`, section 4.1.1; samples, ratio mean/sd and mu
 reported); options to them are computed (:func:`adpart.options.subgoal_options.subgoal_options`
 with exact models). The maze task is then learned by (a) MAXQ-Q on the ``parr-maze`` graph,
 (b) SMDP Q over the discovered options plus the primitives on the flat states (basin initiation
