@@ -277,33 +277,8 @@ def predecessors_by_option(n, n_act, indptr, indices, data):  # pragma: no cover
     ``F``; the option boundaries are recorded while the rows of each option are scattered.
     ``src`` holds states (not rows), in the dtype of ``indices``.
     """
-    nk = n * n_act
-    count = np.zeros(n + 1, dtype=np.int64)
-    for q in range(indptr[nk]):
-        if data[q] != 0.0:
-            count[indices[q] + 1] += 1
-    for t in range(n):
-        count[t + 1] += count[t]
-    m = count[n]
-    fill = count[:n].copy()
-    ptr = np.empty(nk + 1, dtype=np.int64)
-    src = np.empty(m, dtype=indices.dtype)
-    val = np.empty(m, dtype=np.float64)
-    for a in range(n_act):
-        for t in range(n):
-            ptr[t * n_act + a] = fill[t]
-        for s in range(n):
-            r = a * n + s
-            for q in range(indptr[r], indptr[r + 1]):
-                x = data[q]
-                if x != 0.0:
-                    t = indices[q]
-                    f = fill[t]
-                    src[f] = s
-                    val[f] = x
-                    fill[t] = f + 1
-    ptr[nk] = m
-    return ptr, src, val
+    return predecessors_of_rows(n, indptr, indices, data, np.arange(n_act, dtype=np.int64),
+                                np.arange(n, dtype=np.int64), np.ones((n, n_act), dtype=np.bool_))
 
 
 @njit(cache=True)
