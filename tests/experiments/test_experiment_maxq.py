@@ -125,6 +125,61 @@ def test_parr_graph_ceiling_is_below_v_star_by_more_than_the_tolerance() -> None
     assert ceiling == pytest.approx(-84.845, abs=0.01)
 
 
+def _parr_goal_states(maze, mdp):
+    """The experiment's first task, its Monte Carlo subgoals and the goal room's cell."""
+    from adpart.experiments.maxq import ALPHA, EPSILON, _first_task
+    from adpart.learning.qlearning import q_learning
+    from adpart.subgoals import discover_monte_carlo
+
+    first, _goal = _first_task(maze)
+    fr = q_learning(first, runs=1, episodes=3000, seed=0, alpha=ALPHA, epsilon=EPSILON,
+                    eval_every=300, max_steps_per_episode=5000)
+    found = discover_monte_carlo(first, fr.greedy_policies()[0], np.random.default_rng(0),
+                                 on_loop="truncate", horizon=5000, max_samples=5000)
+    entered = np.asarray(mdp.P[np.flatnonzero(np.tile(~mdp.terminal, mdp.n_actions))]
+                         .sum(axis=0)).ravel() > 0
+    goal_cell = np.flatnonzero(mdp.terminal & entered)[:1]
+    return np.unique(np.r_[found.subgoals[~mdp.terminal[found.subgoals]], goal_cell])
+
+
+@pytest.mark.slow
+def test_parr_layer_from_below_settles_at_its_ceiling_where_the_defaults_never_arrive() -> None:
+    """The layer learner (c) with the experiment's settings (values from below, primitives
+    explored only through the inconsistency test) reaches the goal and settles near the layer's
+    exact ceiling; with the learner's defaults its greedy policy never arrives (docs/maxq.md).
+
+    Oracles: the exact value of each run's final greedy policy, and the layer's ceiling (the
+    executed optimum of its point model, :func:`adpart.experiments.protocol.layer_ceiling`)."""
+    from adpart.envs.domains.parr_maze import ParrMaze
+    from adpart.experiments.maxq import ALPHA, EPSILON, LAYER_PRIMITIVE_EXPLORATION
+    from adpart.experiments.protocol import layer_ceiling
+    from adpart.learning.curves import start_distribution
+    from adpart.learning.hierarchical import decision_layer, hierarchical_learning
+    from adpart.options.models import option_models
+    from adpart.options.subgoal_options import subgoal_options
+
+    maze = ParrMaze(mini=True)
+    mdp = maze.mdp()
+    states = _parr_goal_states(maze, mdp)
+    options = subgoal_options(mdp, states, initiation="reachable")
+    models = option_models(mdp, options, duration=False)
+    layer, _full, smdp = decision_layer(mdp, options, delta=0.3, epsilon=10.0, models=models)
+    never = -1.0 / (1.0 - mdp.gamma)
+    common = {"models": models, "delta": 0.3, "epsilon": 10.0, "runs": 6, "episodes": 300,
+              "seed": 0, "alpha": ALPHA, "epsilon_greedy": EPSILON, "eval_every": 50,
+              "max_steps_per_episode": 5000}
+    tuned = hierarchical_learning(mdp, options, layer, q_init=never,
+                                  primitive_exploration=LAYER_PRIMITIVE_EXPLORATION, **common)
+    final = float(tuned.v_star_start) - tuned.curve.matrix("value_gap")[:, -1]
+    ceiling = np.array([layer_ceiling(p, smdp, start_distribution(mdp))
+                        for p in tuned.partitions])
+    assert np.all(final > never + 1.0), final
+    assert np.sum(ceiling - final <= 2.0) >= 4, (final, ceiling)
+    default = hierarchical_learning(mdp, options, layer, **common)
+    final = float(default.v_star_start) - default.curve.matrix("value_gap")[:, -1]
+    assert np.all(final < never + 1e-6), final
+
+
 @pytest.mark.slow
 def test_parr_smdp_q_from_below_over_basin_options_reaches_the_goal_in_every_run() -> None:
     """Issue: SMDP Q over the discovered options reaches the goal in every run on Parr's maze.
@@ -134,24 +189,14 @@ def test_parr_smdp_q_from_below_over_basin_options_reaches_the_goal_in_every_run
     reaches the goal from the start with positive probability. The optimistic local variant is
     the negative control the experiment's constant was chosen against (docs/maxq.md)."""
     from adpart.envs.domains.parr_maze import ParrMaze
-    from adpart.experiments.maxq import ALPHA, EPSILON, SMDP_INITIATION, _first_task
-    from adpart.learning.qlearning import q_learning
+    from adpart.experiments.maxq import ALPHA, EPSILON, SMDP_INITIATION
     from adpart.learning.smdp_q import smdp_q_learning
     from adpart.options.models import option_models
     from adpart.options.subgoal_options import subgoal_options
-    from adpart.subgoals import discover_monte_carlo
 
     maze = ParrMaze(mini=True)
     mdp = maze.mdp()
-    first, _goal = _first_task(maze)
-    fr = q_learning(first, runs=1, episodes=3000, seed=0, alpha=ALPHA, epsilon=EPSILON,
-                    eval_every=300, max_steps_per_episode=5000)
-    found = discover_monte_carlo(first, fr.greedy_policies()[0], np.random.default_rng(0),
-                                 on_loop="truncate", horizon=5000, max_samples=5000)
-    entered = np.asarray(mdp.P[np.flatnonzero(np.tile(~mdp.terminal, mdp.n_actions))]
-                         .sum(axis=0)).ravel() > 0
-    goal_cell = np.flatnonzero(mdp.terminal & entered)[:1]
-    states = np.unique(np.r_[found.subgoals[~mdp.terminal[found.subgoals]], goal_cell])
+    states = _parr_goal_states(maze, mdp)
     common = {"include_primitives": True, "runs": 6, "episodes": 200, "seed": 0,
               "alpha": ALPHA, "epsilon": EPSILON, "eval_every": 50,
               "max_steps_per_episode": 5000}
