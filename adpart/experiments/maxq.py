@@ -606,8 +606,8 @@ def _parr(config: ExperimentConfig, *, mini: bool) -> ExperimentReport:
     report.data["rows"] = rows
     report.findings.append(
         f"maze task on the {which.upper()} maze ({mdp.n_states:,} states, gamma {mdp.gamma:g}), "
-        f"{s['runs']} runs x "
-        f"{s['episodes']} episodes (reduced from the seed's length to fit about 10 minutes), "
+        f"{s['runs']} runs x {s['episodes']} episodes (reduced from the seed's length: MAXQ-Q's "
+        "rollouts make 20 runs take 20-40 minutes on 2 cores), "
         f"tolerance {PARR_TOL} on the gap to V*(start) = {v_star:.2f} and to each learner's own "
         f"ceiling (MAXQ-Q: mean discounted return of {s['rollouts']} hierarchical greedy "
         f"rollouts cut at {s['horizon']} steps - a policy that never arrives is worth -100, "
