@@ -13,6 +13,23 @@ import numpy as np
 from numba import njit
 
 
+@njit(cache=True)
+def first_seen_labels(flat, n_labels):  # pragma: no cover - compiled
+    """Relabel ``flat`` (ints in ``0..n_labels-1``) ``0, 1, ...`` in the order each label is
+    first seen: the canonical form of a partition (one pass, no sort)."""
+    rank = np.full(n_labels, -1, dtype=np.int64)
+    out = np.empty(flat.size, dtype=np.int64)
+    nxt = 0
+    for i in range(flat.size):
+        r = rank[flat[i]]
+        if r < 0:
+            r = nxt
+            rank[flat[i]] = r
+            nxt += 1
+        out[i] = r
+    return out
+
+
 @njit(cache=True, inline="always")
 def add_masses(ptr, idx, val, row, w, marked, touched, nt):  # pragma: no cover - compiled
     """``w[idx[k]] += val[k]`` over the entries ``k`` of CSR row ``row``; a column touched for

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from adpart.errors import ModelError
+from adpart.partition._kernels import first_seen_labels
 
 
 def canonical_labels(labels: np.ndarray) -> np.ndarray:
@@ -36,15 +37,8 @@ def canonical_labels(labels: np.ndarray) -> np.ndarray:
         return np.zeros(0, dtype=np.int64)
     flat = labels.reshape(-1)
     if flat.dtype.kind in "iu" and flat.min() >= 0 and flat.max() < 4 * flat.size:
-        # small non-negative ints: first occurrences by one reversed scatter, no sort of S
-        n = flat.size
-        first = np.full(int(flat.max()) + 1, n, dtype=np.int64)
-        first[flat[::-1]] = np.arange(n - 1, -1, -1, dtype=np.int64)
-        used = np.flatnonzero(first < n)
-        rank = np.full(first.size, -1, dtype=np.int64)
-        rank[used[np.argsort(first[used], kind="stable")]] = np.arange(used.size,
-                                                                     dtype=np.int64)
-        return rank[flat]
+        # small non-negative ints: one compiled pass in state order, no sort of S
+        return first_seen_labels(flat, int(flat.max()) + 1)
     _, first, inverse = np.unique(labels, return_index=True, return_inverse=True)
     rank = np.empty(first.size, dtype=np.int64)
     rank[np.argsort(first, kind="stable")] = np.arange(first.size, dtype=np.int64)

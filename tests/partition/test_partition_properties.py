@@ -203,8 +203,8 @@ def test_worklist_and_round_based_refinement_are_both_stable(case, delta):
 @given(st.lists(st.integers(min_value=-3, max_value=40), min_size=1, max_size=60),
        st.sampled_from([np.int64, np.int32, np.int8]))
 def test_canonical_labels_numbers_blocks_by_their_first_state(values, dtype):
-    """Both paths of canonical_labels (the scatter for small non-negative ints, np.unique for the
-    rest) against a plain Python oracle: the block of state s is the count of distinct labels
+    """Both paths of canonical_labels (the compiled pass for small non-negative ints, np.unique
+    for the rest) against a plain Python oracle: the block of state s is the count of distinct labels
     first seen before s's label."""
     labels = np.array(values, dtype=dtype)
     order: dict[int, int] = {}
