@@ -204,8 +204,8 @@ def test_worklist_and_round_based_refinement_are_both_stable(case, delta):
        st.sampled_from([np.int64, np.int32, np.int8]))
 def test_canonical_labels_numbers_blocks_by_their_first_state(values, dtype):
     """Both paths of canonical_labels (the compiled pass for small non-negative ints, np.unique
-    for the rest) against a plain Python oracle: the block of state s is the count of distinct labels
-    first seen before s's label."""
+    for the rest) against a plain Python oracle: the block of state s is the count of distinct
+    labels first seen before s's label."""
     labels = np.array(values, dtype=dtype)
     order: dict[int, int] = {}
     expected = [order.setdefault(int(v), len(order)) for v in labels]
