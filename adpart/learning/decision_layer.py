@@ -235,9 +235,9 @@ def refine_block(
     if epsilon is not None:
         every = np.arange(inside.size)
         n_local = int(local.max()) + 1
-        values = np.where(adm_in, model.R[np.ix_(inside, sel)], 0.0)
+        values = np.where(adm_in, model.R[inside][:, sel], 0.0)
         # a column whose rewards span at most epsilon over the whole block splits no group of it
-        for j in np.flatnonzero(np.ptp(values, axis=0) > epsilon + atol):
+        for j in np.flatnonzero(values.max(axis=0) - values.min(axis=0) > epsilon + atol):
             local, n_local, _ = regroup(local, n_local, every, values[:, j], epsilon + atol)
     work = labels.copy()
     work[inside] = partition.n_blocks + local
@@ -250,9 +250,10 @@ def refine_block(
     parent[new] = labels
     # the other blocks are unchanged, and offer only columns all their states may start (every
     # layer the learner builds or accepts does): only the block's children need the check
+    # (block_all is vacuously true on the blocks with no member in the block; the children's
+    # columns outside ``sel`` are not offered, whatever they allow)
     allowed = np.ones((n_new, model.admissible.shape[1]), dtype=bool)
-    children = np.unique(new[inside])
-    allowed[children] = block_all(new[inside], n_new, model.admissible[inside])[children]
+    allowed[:, sel] = block_all(new[inside], n_new, adm_in)
     if at is not None:  # the other children of the block keep its former option set
         others = (parent == block) & (np.arange(n_new) != new[at])
         allowed[np.ix_(others, new_options)] = False
