@@ -289,12 +289,20 @@ class RayExecutor(Executor):
 
     @staticmethod
     def _cancel(refs: list[Any]) -> None:
+        """Cancel the tasks of ``refs`` that have not finished.
+
+        Without force: a running task gets a KeyboardInterrupt where it next runs Python code,
+        a queued one never starts. Force-killing a task whose reply is arriving aborts the
+        driver in Ray 2.60 ("Check failed: ... Tried to complete task that was not pending",
+        seen once in this project's CI when a task of ``map`` failed), so finished tasks are
+        left alone and the worker processes are not killed."""
         if not refs:
             return
         ray = import_ray()
-        for ref in refs:
+        _, pending = ray.wait(list(refs), num_returns=len(refs), timeout=0)
+        for ref in pending:
             try:
-                ray.cancel(ref, force=True)
+                ray.cancel(ref)
             except (ValueError, TypeError, ray.exceptions.RayError):
                 continue  # finished meanwhile, or already cancelled
 
