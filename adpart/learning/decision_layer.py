@@ -257,7 +257,7 @@ def refine_block(
     if at is not None:  # the other children of the block keep its former option set
         others = (parent == block) & (np.arange(n_new) != new[at])
         allowed[np.ix_(others, new_options)] = False
-    return Partition._canonical(new, adm_rows[parent] & allowed)  # canonical_labels made it
+    return Partition.from_canonical(new, adm_rows[parent] & allowed)  # canonical_labels made it
 
 
 def offered_values(partition: Partition, smdp: SMDPModel, terminal: np.ndarray,

@@ -128,7 +128,7 @@ class Partition:
 
     # ------------------------------------------------------------------ construction
     @classmethod
-    def _canonical(cls, labels: np.ndarray, admissible: np.ndarray) -> Partition:
+    def from_canonical(cls, labels: np.ndarray, admissible: np.ndarray) -> Partition:
         """A partition from labels the caller computed canonically, unchecked (the learner's
         per-firing refinement: the check would relabel every state once more)."""
         part = object.__new__(cls)

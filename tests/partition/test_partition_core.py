@@ -32,6 +32,15 @@ def test_from_labels_is_canonical_and_equal_partitions_compare_equal():
     assert p.members(1).tolist() == [1, 4]
 
 
+def test_from_canonical_equals_the_checked_constructor_and_is_read_only():
+    labels = np.array([0, 1, 0, 2, 1, 2], dtype=np.int32)
+    adm = np.array([[True, False], [True, True], [False, True]])
+    p = Partition.from_canonical(labels, adm)
+    assert p == Partition(labels.astype(np.int64), adm) and p.labels.dtype == np.int64
+    labels[0] = 2  # the partition holds its own copies, frozen
+    assert p.labels[0] == 0 and not p.labels.flags.writeable and not p.admissible.flags.writeable
+
+
 def test_intersect_is_the_product_partition_and_refines_both():
     a = Partition.from_labels(np.array([0, 0, 0, 1, 1, 1]), ADM)
     b = Partition.from_labels(np.array([0, 1, 0, 1, 0, 1]), ADM)
