@@ -23,7 +23,9 @@ reported); options to them are computed (:func:`adpart.options.subgoal_options.s
 with exact models). The maze task is then learned by (a) MAXQ-Q on the ``parr-maze`` graph,
 (b) SMDP Q over the discovered options plus the primitives on the flat states (basin initiation
 sets, values learned from below: see :data:`SMDP_INITIATION`), (c) the
-hierarchical learner on the multi-phase partition over the same options. MAXQ-Q's call-time
+hierarchical learner on the multi-phase partition over the same options (values from below as
+well, primitives explored only through the inconsistency test: see
+:data:`LAYER_PRIMITIVE_EXPLORATION`). MAXQ-Q's call-time
 parameters make its policy non-Markov in the state, so it is scored by executing the
 hierarchical greedy policy (:func:`adpart.learning.maxq.hierarchical_rollouts`); (b) and (c)
 exactly.
