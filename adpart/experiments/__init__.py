@@ -22,6 +22,7 @@ EXPERIMENT_MODULES: tuple[str, ...] = (
     "adpart.experiments.task_sequence",
     "adpart.experiments.transfer",
     "adpart.experiments.maxq",
+    "adpart.experiments.maxq_parr",
 )
 
 

@@ -112,7 +112,7 @@ def test_taxi_settling_against_dietterich() -> None:
 @pytest.mark.slow
 def test_parr_graph_ceiling_is_below_v_star_by_more_than_the_tolerance() -> None:
     from adpart.envs.domains.parr_maze import ParrMaze
-    from adpart.experiments.maxq import PARR_TOL
+    from adpart.experiments.maxq_parr import PARR_TOL
     from adpart.learning.curves import optimal_start_value, start_distribution
     from adpart.learning.maxq import get_graph, recursively_optimal
 
@@ -127,7 +127,7 @@ def test_parr_graph_ceiling_is_below_v_star_by_more_than_the_tolerance() -> None
 
 def _parr_goal_states(maze, mdp):
     """The experiment's first task, its Monte Carlo subgoals and the goal room's cell."""
-    from adpart.experiments.maxq import ALPHA, EPSILON, _first_task
+    from adpart.experiments.maxq_parr import ALPHA, EPSILON, _first_task
     from adpart.learning.qlearning import q_learning
     from adpart.subgoals import discover_monte_carlo
 
@@ -151,7 +151,7 @@ def test_parr_layer_from_below_settles_at_its_ceiling_where_the_defaults_never_a
     Oracles: the exact value of each run's final greedy policy, and the layer's ceiling (the
     executed optimum of its point model, :func:`adpart.experiments.protocol.layer_ceiling`)."""
     from adpart.envs.domains.parr_maze import ParrMaze
-    from adpart.experiments.maxq import ALPHA, EPSILON, LAYER_PRIMITIVE_EXPLORATION
+    from adpart.experiments.maxq_parr import ALPHA, EPSILON, LAYER_PRIMITIVE_EXPLORATION
     from adpart.experiments.protocol import layer_ceiling
     from adpart.learning.curves import start_distribution
     from adpart.learning.hierarchical import decision_layer, hierarchical_learning
@@ -189,7 +189,7 @@ def test_parr_smdp_q_from_below_over_basin_options_reaches_the_goal_in_every_run
     reaches the goal from the start with positive probability. The optimistic local variant is
     the negative control the experiment's constant was chosen against (docs/maxq.md)."""
     from adpart.envs.domains.parr_maze import ParrMaze
-    from adpart.experiments.maxq import ALPHA, EPSILON, SMDP_INITIATION
+    from adpart.experiments.maxq_parr import ALPHA, EPSILON, SMDP_INITIATION
     from adpart.learning.smdp_q import smdp_q_learning
     from adpart.options.models import option_models
     from adpart.options.subgoal_options import subgoal_options
