@@ -83,6 +83,14 @@ def _parr_settings(config: ExperimentConfig) -> dict[str, Any]:
             "rollouts": 10, "horizon": 5000, "max_samples": 5000}
 
 
+def goal_room_cell(mdp: Any) -> np.ndarray:
+    """``(1,)`` the maze task's goal room as one more subgoal (section 4.3.1: high-reward
+    states): its first cell that a non-goal state can enter in one step stands for the room."""
+    entered = np.asarray(mdp.P[np.flatnonzero(np.tile(~mdp.terminal, mdp.n_actions))]
+                         .sum(axis=0)).ravel() > 0
+    return np.flatnonzero(mdp.terminal & entered)[:1]
+
+
 def _first_task(maze: Any) -> Any:
     """Reach the goal room's first cell from the start (the seed's "particular goal point")."""
     from adpart.envs.base import GoalSpec
@@ -190,12 +198,7 @@ def _parr(config: ExperimentConfig, *, mini: bool) -> ExperimentReport:
                                  np.random.default_rng(config.seed), on_loop="truncate",
                                  horizon=s["horizon"], max_samples=s["max_samples"])
     sub = found.subgoals[~mdp.terminal[found.subgoals]]
-    # the new task's goal room is one more subgoal (section 4.3.1: high-reward states): its
-    # first cell that a non-goal state can enter in one step stands for the room
-    entered = np.asarray(mdp.P[np.flatnonzero(np.tile(~mdp.terminal, mdp.n_actions))]
-                         .sum(axis=0)).ravel() > 0
-    goal_cells = np.flatnonzero(mdp.terminal & entered)
-    states = np.unique(np.r_[sub, goal_cells[:1]])
+    states = np.unique(np.r_[sub, goal_room_cell(mdp)])
     config.progress(f"{sub.size} subgoals; options and models")
     # SMDP Q (primitives everywhere) gets the basin options (SMDP_INITIATION); the decision
     # layer needs every state covered, so it gets local options plus each far state's nearest

@@ -483,8 +483,7 @@ def hierarchical_learning(
                            at=s if refine == "state" else None)
         B_old, B_new = old.n_blocks, new.n_blocks
         grow(B_new)
-        parent = np.empty(B_new, dtype=np.int64)
-        parent[new.labels] = old.labels  # new refines old (refine_block splits one block)
+        parent = new.parent_map(old)
         Qn, n_on = child_values(st.Q[k, :B_old], st.n_o[k, :B_old], old, new, b, st.Ql[k],
                                 st.nf[k] > 0, lower, parent)
         st.Q[k, :B_new], st.Q[k, B_new:] = Qn, -np.inf

@@ -127,7 +127,7 @@ def test_parr_graph_ceiling_is_below_v_star_by_more_than_the_tolerance() -> None
 
 def _parr_goal_states(maze, mdp):
     """The experiment's first task, its Monte Carlo subgoals and the goal room's cell."""
-    from adpart.experiments.maxq_parr import ALPHA, EPSILON, _first_task
+    from adpart.experiments.maxq_parr import ALPHA, EPSILON, _first_task, goal_room_cell
     from adpart.learning.qlearning import q_learning
     from adpart.subgoals import discover_monte_carlo
 
@@ -136,10 +136,7 @@ def _parr_goal_states(maze, mdp):
                     eval_every=300, max_steps_per_episode=5000)
     found = discover_monte_carlo(first, fr.greedy_policies()[0], np.random.default_rng(0),
                                  on_loop="truncate", horizon=5000, max_samples=5000)
-    entered = np.asarray(mdp.P[np.flatnonzero(np.tile(~mdp.terminal, mdp.n_actions))]
-                         .sum(axis=0)).ravel() > 0
-    goal_cell = np.flatnonzero(mdp.terminal & entered)[:1]
-    return np.unique(np.r_[found.subgoals[~mdp.terminal[found.subgoals]], goal_cell])
+    return np.unique(np.r_[found.subgoals[~mdp.terminal[found.subgoals]], goal_room_cell(mdp)])
 
 
 @pytest.mark.slow
