@@ -344,6 +344,7 @@ def transfer_cmd(
     kb_artifacts: str | None,
 ) -> None:
     """Learn TASK of ENV on a stored decision layer with the hierarchical learner (last step)."""
+    from adpart.learning.comparison import task_row
     from adpart.learning.curves import plot_curves
     from adpart.store import KnowledgeBase
     from adpart.workflows.learning import (
@@ -353,7 +354,6 @@ def transfer_cmd(
         record_learning,
         run_learning,
     )
-    from adpart.workflows.pipeline import task_row
     from adpart.workflows.refs import parse_ref
 
     hier_params = _key_values(hier_opt, "--hier-opt")

@@ -21,7 +21,7 @@ refinement and with reward variation.
 
 **Bound.** A run has learned a task once the exact value gap of its greedy policy at the start
 distribution stays at or below ``5 % |V*(start)|`` (the pipeline's bound,
-:func:`adpart.workflows.pipeline.task_row`); episodes to that bound are compared pairwise with
+:func:`adpart.learning.comparison.task_row`); episodes to that bound are compared pairwise with
 :func:`adpart.experiments.stats.compare` (censored runs count as ``episodes + 1``). The final gap
 is also set against theorem 4.5's bound ``2 (1 + gamma/(1-gamma) max(eps, delta))``.
 """
@@ -65,7 +65,7 @@ class _Setup:
 def _curve_rows(task: str, curves: dict[str, Any]
                 ) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
     """Pipeline-style rows per learner and per-run episodes to the bound (censored: N + 1)."""
-    from adpart.workflows.pipeline import episodes_to_bound, task_row
+    from adpart.learning.comparison import episodes_to_bound, task_row
 
     rows = [task_row(task, label, curve, GAP_FRACTION, {}) for label, curve in curves.items()]
     reached = {label: episodes_to_bound(curve, GAP_FRACTION) for label, curve in curves.items()}

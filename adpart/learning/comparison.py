@@ -1,4 +1,5 @@
-"""A method against its baseline over runs: the ratio of median episodes with a bootstrap CI.
+"""A method against its baseline over runs: episodes to the success bound, and the ratio of
+median episodes with a bootstrap CI.
 
 The claims of the pipeline and of the experiments ("the layer learns in a third of flat's
 episodes") compare per-run episodes to the success bound of two learners run in the same
@@ -7,9 +8,14 @@ process; a run that never gets there counts as censored (the budget plus one, or
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
-__all__ = ["ratio_of_medians_ci"]
+from adpart.learning.curves import LearningCurve, episodes_within
+
+__all__ = ["episodes_to_bound", "ratio_of_medians_ci", "ratio_to_flat", "success_bound",
+           "task_row"]
 
 
 def ratio_of_medians_ci(a: np.ndarray, b: np.ndarray, *, level: float = 0.95,
@@ -31,3 +37,54 @@ def ratio_of_medians_ci(a: np.ndarray, b: np.ndarray, *, level: float = 0.95,
     est = np.inf if np.isnan(est) else est
     lo, hi = np.quantile(r, [0.5 - level / 2, 0.5 + level / 2], method="inverted_cdf")
     return float(est), float(lo), float(hi)
+
+
+def task_row(
+    task: str, label: str, curve: LearningCurve, fraction: float, extra: dict[str, Any]
+) -> dict[str, Any]:
+    """One learner's summary row for a task: runs within the bound, median episodes to it
+    (``inf`` when never within), final gaps, mean steps and decisions, then ``extra``."""
+    v_star = float(curve.metadata.get("v_star_start", np.nan))
+    bound = success_bound(curve, fraction)
+    within = episodes_within(curve.matrix("value_gap"), curve.evaluated_episodes(), bound)
+    to_bound = np.where(within < 0, np.inf, within)  # never within: inf (null in JSON)
+    final = curve.matrix("value_gap")[:, -1]
+    return {
+        "task": task,
+        "learner": label,
+        "runs": curve.n_runs,
+        "v_star_start": v_star,
+        "bound": bound,
+        "final_gap_mean": float(np.mean(final)),
+        "final_gap_max": float(np.max(final)),
+        "runs_within_bound": int(np.sum(final <= bound)),
+        "episodes_to_bound_median": float(np.median(to_bound)),
+        "steps_total_mean": float(curve.matrix("steps").sum(axis=1).mean()),
+        "decisions_total_mean": float(curve.matrix("decisions").sum(axis=1).mean()),
+        **extra,
+    }
+
+
+def success_bound(curve: LearningCurve, fraction: float) -> float:
+    """The gap a run must stay within: ``fraction |V*(start)|`` (at least 1e-9; ``inf`` when the
+    curve carries no ``V*``)."""
+    v_star = float(curve.metadata.get("v_star_start", np.nan))
+    return max(1e-9, fraction * abs(v_star)) if np.isfinite(v_star) else np.inf
+
+
+def episodes_to_bound(curve: LearningCurve, fraction: float) -> np.ndarray:
+    """Per run, the episode after which the gap stays within :func:`success_bound`; a run never
+    within it counts as censored at the curve's episodes + 1."""
+    within = episodes_within(curve.matrix("value_gap"), curve.evaluated_episodes(),
+                             success_bound(curve, fraction))
+    episodes = int(curve.evaluated_episodes()[-1])
+    return np.where(within < 0, episodes + 1.0, within.astype(np.float64))
+
+
+def ratio_to_flat(method: LearningCurve, flat: LearningCurve, fraction: float, seed: int
+                  ) -> dict[str, Any]:
+    """The method's median episodes to the bound over flat's, with a 95 % bootstrap CI."""
+    est, lo, hi = ratio_of_medians_ci(episodes_to_bound(method, fraction),
+                                      episodes_to_bound(flat, fraction), seed=seed)
+    return {"ratio": est, "ci95": [lo, hi], "censored_at": int(
+        method.evaluated_episodes()[-1]) + 1}

@@ -41,8 +41,8 @@ from typing import Any
 import numpy as np
 
 from adpart.errors import TaskError
-from adpart.learning.comparison import ratio_of_medians_ci
-from adpart.learning.curves import LearningCurve, episodes_within
+from adpart.learning.comparison import ratio_to_flat, task_row
+from adpart.learning.curves import LearningCurve
 from adpart.options.subgoal_options import LOCAL_RADIUS
 from adpart.workflows.discovery import discover_subgoals
 from adpart.workflows.learning import (
@@ -164,55 +164,6 @@ def _learn(kb: Any, request: LearnRequest, report: PipelineReport, stage: str) -
         Stage(stage, request.task, ids["run"], reused, time.perf_counter() - start)
     )
     return ids, curve
-
-
-def task_row(
-    task: str, label: str, curve: LearningCurve, fraction: float, extra: dict[str, Any]
-) -> dict[str, Any]:
-    v_star = float(curve.metadata.get("v_star_start", np.nan))
-    bound = success_bound(curve, fraction)
-    within = episodes_within(curve.matrix("value_gap"), curve.evaluated_episodes(), bound)
-    to_bound = np.where(within < 0, np.inf, within)  # never within: inf (null in JSON)
-    final = curve.matrix("value_gap")[:, -1]
-    return {
-        "task": task,
-        "learner": label,
-        "runs": curve.n_runs,
-        "v_star_start": v_star,
-        "bound": bound,
-        "final_gap_mean": float(np.mean(final)),
-        "final_gap_max": float(np.max(final)),
-        "runs_within_bound": int(np.sum(final <= bound)),
-        "episodes_to_bound_median": float(np.median(to_bound)),
-        "steps_total_mean": float(curve.matrix("steps").sum(axis=1).mean()),
-        "decisions_total_mean": float(curve.matrix("decisions").sum(axis=1).mean()),
-        **extra,
-    }
-
-
-def success_bound(curve: LearningCurve, fraction: float) -> float:
-    """The gap a run must stay within: ``fraction |V*(start)|`` (at least 1e-9; ``inf`` when the
-    curve carries no ``V*``)."""
-    v_star = float(curve.metadata.get("v_star_start", np.nan))
-    return max(1e-9, fraction * abs(v_star)) if np.isfinite(v_star) else np.inf
-
-
-def episodes_to_bound(curve: LearningCurve, fraction: float) -> np.ndarray:
-    """Per run, the episode after which the gap stays within :func:`success_bound`; a run never
-    within it counts as censored at the curve's episodes + 1."""
-    within = episodes_within(curve.matrix("value_gap"), curve.evaluated_episodes(),
-                             success_bound(curve, fraction))
-    episodes = int(curve.evaluated_episodes()[-1])
-    return np.where(within < 0, episodes + 1.0, within.astype(np.float64))
-
-
-def ratio_to_flat(method: LearningCurve, flat: LearningCurve, fraction: float, seed: int
-                  ) -> dict[str, Any]:
-    """The method's median episodes to the bound over flat's, with a 95 % bootstrap CI."""
-    est, lo, hi = ratio_of_medians_ci(episodes_to_bound(method, fraction),
-                                      episodes_to_bound(flat, fraction), seed=seed)
-    return {"ratio": est, "ci95": [lo, hi], "censored_at": int(
-        method.evaluated_episodes()[-1]) + 1}
 
 
 # --------------------------------------------------------------------------- hierarchy layers
