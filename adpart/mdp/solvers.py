@@ -24,10 +24,10 @@ so carries the same guarantee, whatever the evaluation did. On a 10^6-state grid
 epsilon-optimal policy about 5x faster than pymdptoolbox's value iteration
 (``benchmarks/bench_value_iteration.py``). ``gauss_seidel_value_iteration`` sweeps in place in
 the order of a backward search from the terminal states, from a lower bound, and stops by the
-same test on a certifying Jacobi backup; ``solve()`` picks it for models with terminal states
-(goal-directed: 0.2x pymdptoolbox's time on a 10^6-state rooms grid) and MPI otherwise
-(:func:`choose_method`). ``gauss_seidel_then_mpi`` (``method="gs-mpi"``, by name only) hands
-over from Gauss-Seidel to MPI after :data:`GS_SWEEP_BUDGET` sweeps.
+same test on a certifying Jacobi backup (goal-directed: 0.2x pymdptoolbox's time on a
+10^6-state rooms grid). ``gauss_seidel_then_mpi`` (``method="gs-mpi"``) hands over from
+Gauss-Seidel to MPI after :data:`GS_SWEEP_BUDGET` sweeps; ``solve()`` picks it for models with
+terminal states and MPI otherwise (:func:`choose_method`).
 """
 
 from __future__ import annotations
@@ -696,8 +696,8 @@ def gauss_seidel_then_mpi(
     V0: np.ndarray | None = None,
 ) -> Solution:
     """Gauss-Seidel value iteration for at most ``gs_sweeps`` sweeps, then, if its stopping test
-    has not passed, modified policy iteration from its values (``solve(method="gs-mpi")``; not
-    what ``"auto"`` picks).
+    has not passed, modified policy iteration from its values (``solve(method="gs-mpi")``, and
+    what ``"auto"`` picks for a model with sinks).
 
     Gauss-Seidel from the sinks carries value out of the goals in a few sweeps, which is all a
     deterministic goal-directed model needs (65 sweeps on the 10^6-state rooms grid); where
@@ -730,20 +730,20 @@ METHODS = ("auto", "gs", "mpi", "vi", "gs-mpi")
 def choose_method(model: HasSMDP) -> str:
     """The fastest method for ``model``, by the rule measured in bench_value_iteration.py.
 
-    ``"gs"`` (Gauss-Seidel value iteration from the sinks, :func:`gauss_seidel_value_iteration`)
-    when the model has sinks (terminal states) and numba is present: value then flows out of
-    the goal, which one ordered sweep carries across the state space; ``"mpi"`` otherwise (no
-    sinks - discounted everywhere, every state's value shaped by its own rewards - where cheap
-    policy evaluations pay off). ``"gs-mpi"`` (:func:`gauss_seidel_then_mpi`) is faster on
-    slippery goal models but is only chosen by name: its policy breaks exactly tied optimal
-    actions differently, which moves the subgoals discovered from it (docs/solvers.md).
+    ``"gs-mpi"`` (:func:`gauss_seidel_then_mpi`: Gauss-Seidel value iteration from the sinks,
+    handing over to MPI where slip keeps it sweeping) when the model has sinks (terminal states)
+    and numba is present: value then flows out of the goal, which one ordered sweep carries
+    across the state space; ``"mpi"`` otherwise (no sinks - discounted everywhere, every state's
+    value shaped by its own rewards - where cheap policy evaluations pay off). Pure ``"gs"`` is
+    chosen by name; where the hand-over runs its policy can break exactly tied optimal actions
+    differently (docs/solvers.md).
     """
     smdp = model.as_smdp()
     if not _kernels.numba_available():
         return "mpi"
     mass = smdp.row_discounts.T
     has_sinks = bool(np.any(~np.any(smdp.admissible & (mass > 0.0), axis=1)))
-    return "gs" if has_sinks else "mpi"
+    return "gs-mpi" if has_sinks else "mpi"
 
 
 def solve(model: HasSMDP, epsilon: float = 1e-6, *, method: str = "auto", **kwargs: object) -> (
