@@ -81,6 +81,13 @@ def test_quick_experiment_writes_report(name: str, tmp_path) -> None:
         assert smdp["initiation"] == "basin" and smdp["q_init"] == pytest.approx(-100.0)
         assert 0 <= smdp["greedy_reaches_goal"] <= 2
         assert any("(b) SMDP Q over the discovered options" in f for f in summary["findings"])
+        settle = summary["data"]["maxq_settling"]
+        assert settle["episodes"] > summary["data"]["settings"]["episodes"]
+        gaps = np.array(settle["gap_to_ceiling"])
+        assert gaps.shape == (settle["runs"], len(settle["evaluated"]))
+        done = [e for e in settle["episodes_to_settle"] if e is not None]
+        assert settle["settled_runs"] == len(done)
+        assert any("past the comparison's budget" in f for f in summary["findings"])
     else:
         assert any("Dietterich's ~40,000" in f for f in summary["findings"])
         assert summary["data"]["settings"]["absorbed_unreachable"] == 100
