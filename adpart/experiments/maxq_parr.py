@@ -17,7 +17,8 @@ well, primitives explored only through the inconsistency test: see
 :data:`LAYER_PRIMITIVE_EXPLORATION`). MAXQ-Q's call-time
 parameters make its policy non-Markov in the state, so it is scored by executing the
 hierarchical greedy policy (:func:`adpart.learning.maxq.hierarchical_rollouts`); (b) and (c)
-exactly.
+exactly. MAXQ-Q, the slowest to settle, is then run on past the comparisons' budget
+(:data:`SETTLE`) to measure where and when it settles against its own ceiling.
 """
 
 from __future__ import annotations
