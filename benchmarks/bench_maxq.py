@@ -41,7 +41,8 @@ from adpart.learning.maxq import get_graph, hierarchical_rollouts, maxq_q, taxi_
 from adpart.learning.maxq.maxq_q import _Run
 from adpart.learning.qlearning import q_learning
 from adpart.learning.schedules import parse_schedule
-from adpart.mdp.solvers import policy_evaluation, solve
+from adpart.mdp.evaluation import policy_evaluation
+from adpart.mdp.solvers import solve
 
 #: Value-gap tolerance on fickle Taxi (reward units, averaged over the start states).
 GAP = 0.5

@@ -107,7 +107,7 @@ class _BeforeStyle:
 
     def __enter__(self):
         from adpart.learning import curves
-        from adpart.mdp.solvers import greedy_policy
+        from adpart.mdp.evaluation import greedy_policy
 
         q = self.q
         self.saved = q._initial_state, q.StartValues
@@ -143,7 +143,8 @@ def end_to_end(n_states: int = 100_000, runs: int = 50, agent_steps: int = 1_000
     machine is shared), today's evaluation step and the before-style one (:class:`_BeforeStyle`)
     alternating call by call."""
     from adpart.learning import curves, qlearning
-    from adpart.mdp.solvers import policy_evaluation, solve
+    from adpart.mdp.evaluation import policy_evaluation
+    from adpart.mdp.solvers import solve
     from benchmarks._models import rooms_grid_mdp
 
     mdp = rooms_grid_mdp(n_states, slip=0.2)  # 0.8 intended move, 0.1 to each side

@@ -36,15 +36,10 @@ import scipy.sparse as sp
 from mdptoolbox.mdp import ValueIteration
 
 from adpart.mdp import _kernels
+from adpart.mdp.evaluation import policy_evaluation
 from adpart.mdp.generate import random_grid_mdp
 from adpart.mdp.model import FiniteMDP
-from adpart.mdp.solvers import (
-    _Backup,
-    default_kernel,
-    modified_policy_iteration,
-    policy_evaluation,
-    value_iteration,
-)
+from adpart.mdp.solvers import _Backup, default_kernel, modified_policy_iteration, value_iteration
 
 SIZES = (10_000, 100_000, 1_000_000)
 GAMMA = 0.95

@@ -35,14 +35,8 @@ def structure() -> None:
     import numpy as np
 
     from adpart.envs.registry import get_domain
-    from adpart.mdp.solvers import (
-        GREEDY_COMPILED_ROWS,
-        greedy_policy,
-        modified_policy_iteration,
-        policy_evaluation,
-        solve,
-        value_iteration,
-    )
+    from adpart.mdp.evaluation import GREEDY_COMPILED_ROWS, greedy_policy, policy_evaluation
+    from adpart.mdp.solvers import modified_policy_iteration, solve, value_iteration
     from adpart.options import doorway_options, option_models
     from adpart.partition import Partition, exact_lumping, refine
     from adpart.subgoals import discover_exhaustive, discover_monte_carlo, sample_arrivals

@@ -53,7 +53,8 @@ def layer_ceiling(partition: Any, smdp: Any, mu: np.ndarray) -> float:
     """``sum_s mu(s) V^pi(s)`` of the decision layer's point-model optimal policy, executed on
     the true options (section 4.3.3): solve the point model, give every state its block's
     option, evaluate exactly. The best a learner on this layer can settle at."""
-    from adpart.mdp.solvers import policy_evaluation, solve
+    from adpart.mdp.evaluation import policy_evaluation
+    from adpart.mdp.solvers import solve
     from adpart.partition import point_model
 
     pm = point_model(partition, smdp)

@@ -37,7 +37,7 @@ One agent-step (Watkins' Q-learning, dissertation eq. 2.4) consumes exactly four
    of steps taken.
 
 Beside the rule, the kernel keeps the *evaluated* greedy policy current: ``policy[k, s]`` is the
-lowest-index ``argmax_a Q(s, a)`` of every row (:func:`adpart.mdp.solvers.greedy_policy`; the
+lowest-index ``argmax_a Q(s, a)`` of every row (:func:`adpart.mdp.evaluation.greedy_policy`; the
 driver fills it from the initial Q), and ``changed[k]`` is set whenever an update moves one of
 run ``k``'s greedy actions. Only the updated entry can move it: if ``a`` was the greedy action and
 its value fell, the row's maximiser is searched again (``A`` reads of a row in cache); otherwise

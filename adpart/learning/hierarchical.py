@@ -105,8 +105,9 @@ from adpart.learning.result import LearnResult
 from adpart.learning.schedules import Schedule, constant, visit_count
 from adpart.learning.settings import count, run_settings
 from adpart.learning.smdp_q import drive, kernel_function, make_state, option_set
+from adpart.mdp.evaluation import greedy_policy
 from adpart.mdp.model import FiniteMDP, SMDPModel
-from adpart.mdp.solvers import greedy_policy, solve
+from adpart.mdp.solvers import solve
 from adpart.options.models import OptionModel, option_models
 from adpart.options.option import Option
 from adpart.partition.bpsmdp import point_model, theorem_4_5_bound

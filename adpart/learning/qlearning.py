@@ -25,7 +25,7 @@ Design choices (documented in ``docs/learning.md``):
 * **Exploration** is epsilon-greedy over the *admissible* actions; greedy ties during learning
   are broken uniformly at random (so an untrained agent does not always bump into the same
   wall); the *evaluated* greedy policy breaks ties by the lowest action index
-  (:func:`adpart.mdp.solvers.greedy_policy`), so it is a deterministic function of Q.
+  (:func:`adpart.mdp.evaluation.greedy_policy`), so it is a deterministic function of Q.
 * **Step limit.** An episode also ends after ``max_steps_per_episode`` steps; the last update
   still bootstraps from ``s'`` (the cut is a property of the experiment, not of the task).
 """
@@ -47,8 +47,8 @@ from adpart.learning.curves import (
 from adpart.learning.result import LearnResult
 from adpart.learning.schedules import Schedule, constant, visit_count
 from adpart.learning.settings import run_settings
+from adpart.mdp.evaluation import greedy_policy
 from adpart.mdp.model import FiniteMDP
-from adpart.mdp.solvers import greedy_policy
 
 __all__ = ["QLearningResult", "default_kernel", "q_learning"]
 

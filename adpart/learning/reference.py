@@ -19,8 +19,9 @@ from adpart.learning.curves import (
     start_values,
 )
 from adpart.learning.result import LearnResult
+from adpart.mdp.evaluation import greedy_policy
 from adpart.mdp.model import FiniteMDP
-from adpart.mdp.solvers import greedy_policy, q_from_v
+from adpart.mdp.solvers import q_from_v
 
 
 @dataclass(frozen=True, eq=False)

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from adpart.learning.curves import LearningCurve
-from adpart.mdp.solvers import greedy_policy
+from adpart.mdp.evaluation import greedy_policy
 
 __all__ = ["LearnResult"]
 

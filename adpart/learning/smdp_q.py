@@ -54,8 +54,8 @@ from adpart.learning.qlearning import BLOCK_ROWS
 from adpart.learning.result import LearnResult
 from adpart.learning.schedules import Schedule, constant, visit_count
 from adpart.learning.settings import run_settings
+from adpart.mdp.evaluation import greedy_policy
 from adpart.mdp.model import FiniteMDP, SMDPModel
-from adpart.mdp.solvers import greedy_policy
 from adpart.options.models import OptionModel, option_models
 from adpart.options.option import Option, primitive_options
 from adpart.options.smdp import stack_models

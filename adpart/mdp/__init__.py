@@ -1,12 +1,11 @@
 """Finite MDP / SMDP models and their exact solvers."""
 
+from adpart.mdp.evaluation import greedy_policy, policy_evaluation
 from adpart.mdp.model import FiniteMDP, SMDPModel
 from adpart.mdp.solvers import (
     Solution,
     gauss_seidel_value_iteration,
-    greedy_policy,
     modified_policy_iteration,
-    policy_evaluation,
     q_from_v,
     solve,
     value_iteration,

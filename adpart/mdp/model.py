@@ -18,6 +18,7 @@ import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
+from typing import Protocol
 
 import numpy as np
 import scipy.sparse as sp
@@ -398,3 +399,9 @@ class FiniteMDP:
             action_names=self.action_names,
             name=self.name if name is None else name,
         )
+
+
+class HasSMDP(Protocol):
+    """Anything the solvers and evaluation accept: it can present itself as an SMDP model."""
+
+    def as_smdp(self) -> SMDPModel: ...

@@ -18,7 +18,8 @@ from gymnasium import spaces
 from adpart.envs.gym_adapter import GymDomain
 from adpart.envs.registry import get_domain
 from adpart.errors import ModelError, TaskError, UnknownNameError
-from adpart.mdp.solvers import policy_evaluation, solve
+from adpart.mdp.evaluation import policy_evaluation
+from adpart.mdp.solvers import solve
 
 GAMMA = 0.99
 

@@ -19,7 +19,8 @@ from adpart.envs.domains.taxi import (
 )
 from adpart.envs.registry import get_domain
 from adpart.errors import TaskError
-from adpart.mdp.solvers import policy_evaluation, solve
+from adpart.mdp.evaluation import policy_evaluation
+from adpart.mdp.solvers import solve
 
 S, A = 500, 6
 

@@ -182,7 +182,7 @@ def test_blocks_the_estimate_calls_consistent_lose_nothing(four_rooms_kb, estima
     from adpart.hierarchy.estimator import expected_time as estimate
     from adpart.learning.curves import start_distribution
     from adpart.learning.smdp_q import option_set
-    from adpart.mdp.solvers import policy_evaluation
+    from adpart.mdp.evaluation import policy_evaluation
 
     kb, data = four_rooms_kb
     res = build_hierarchy(kb, "four-rooms", store=False)

@@ -8,8 +8,8 @@ from hypothesis import strategies as st
 from adpart.errors import TaskError
 from adpart.learning import LearningCurve, plot_curves, q_learning
 from adpart.learning.curves import COLUMNS, distinct_rows, start_values
+from adpart.mdp.evaluation import policy_evaluation
 from adpart.mdp.model import FiniteMDP
-from adpart.mdp.solvers import policy_evaluation
 
 from .conftest import slippery_grid
 

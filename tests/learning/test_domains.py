@@ -56,7 +56,8 @@ def test_four_rooms_near_ties_carry_more_than_1e6_of_the_start_value():
     needs every such pair ordered correctly, i.e. Q errors below ~1.5e-5 there.
     """
     from adpart.learning.curves import start_distribution
-    from adpart.mdp.solvers import policy_evaluation, solve
+    from adpart.mdp.evaluation import policy_evaluation
+    from adpart.mdp.solvers import solve
 
     mdp = _mdp("four-rooms")
     V = solve(mdp, 1e-12).V

@@ -15,8 +15,9 @@ from adpart.envs.domains.taxi import Taxi
 from adpart.errors import TaskError
 from adpart.learning.maxq import Subtask, TaskGraph, decomposed_values, maxq_q, taxi_graph
 from adpart.learning.maxq.maxq_q import root_q
+from adpart.mdp.evaluation import policy_evaluation
 from adpart.mdp.model import FiniteMDP
-from adpart.mdp.solvers import policy_evaluation, solve
+from adpart.mdp.solvers import solve
 from adpart.plugins.builtin.maxq import MaxQLearner
 
 # ----------------------------------------------------------------------------- tiny domain

@@ -7,9 +7,10 @@ import pytest
 
 from adpart.errors import ModelError, TaskError, UnknownNameError
 from adpart.learning import constant, exponential, q_learning, visit_count
+from adpart.mdp.evaluation import policy_evaluation
 from adpart.mdp.generate import random_mdp
 from adpart.mdp.model import FiniteMDP
-from adpart.mdp.solvers import policy_evaluation, solve
+from adpart.mdp.solvers import solve
 
 from .conftest import corridor, slippery_grid
 
@@ -224,7 +225,7 @@ def test_kernel_keeps_the_greedy_policy_of_all_of_q(kernel, q_init):
     from adpart.learning import _kernels
     from adpart.learning.curves import start_distribution
     from adpart.learning.qlearning import BLOCK_ROWS, _initial_state
-    from adpart.mdp.solvers import greedy_policy
+    from adpart.mdp.evaluation import greedy_policy
 
     for mdp, alpha in ((slippery_grid(side=3, slip=0.3, gamma=0.9), constant(0.5)),
                        (slippery_grid(side=3, slip=0.0, gamma=1.0), constant(1.0))):

@@ -10,7 +10,8 @@ from adpart.errors import ModelError, UnknownNameError
 from adpart.learning import q_learning
 from adpart.learning.curves import start_distribution, start_values
 from adpart.learning.smdp_q import compile_options, option_set, smdp_q_learning
-from adpart.mdp.solvers import policy_evaluation, solve
+from adpart.mdp.evaluation import policy_evaluation
+from adpart.mdp.solvers import solve
 from adpart.options import Option, hallway_options, primitive_options
 from tests.learning.conftest import corridor, slippery_grid
 

@@ -8,8 +8,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from adpart.errors import ModelError
+from adpart.mdp.evaluation import policy_evaluation
 from adpart.mdp.generate import grid_shape, random_grid_mdp, random_mdp
-from adpart.mdp.solvers import modified_policy_iteration, policy_evaluation, value_iteration
+from adpart.mdp.solvers import modified_policy_iteration, value_iteration
 
 
 def oracle_grid_row(n: int, s: int, a: int, slip: float) -> dict[int, float]:

@@ -14,15 +14,10 @@ from hypothesis import strategies as st
 
 from adpart.errors import ModelError
 from adpart.mdp import _kernels
+from adpart.mdp.evaluation import policy_evaluation
 from adpart.mdp.generate import random_grid_mdp
 from adpart.mdp.model import FiniteMDP, SMDPModel
-from adpart.mdp.solvers import (
-    _Backup,
-    default_kernel,
-    modified_policy_iteration,
-    policy_evaluation,
-    value_iteration,
-)
+from adpart.mdp.solvers import _Backup, default_kernel, modified_policy_iteration, value_iteration
 
 needs_numba = pytest.mark.skipif(not _kernels.numba_available(), reason="numba not installed")
 

@@ -9,14 +9,9 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from adpart.errors import ModelError
+from adpart.mdp.evaluation import greedy_policy, policy_evaluation
 from adpart.mdp.model import FiniteMDP, SMDPModel
-from adpart.mdp.solvers import (
-    greedy_policy,
-    policy_evaluation,
-    q_from_v,
-    solve,
-    value_iteration,
-)
+from adpart.mdp.solvers import q_from_v, solve, value_iteration
 
 
 def random_dense(seed: int, S: int, A: int, density: float):
@@ -180,7 +175,7 @@ def test_improper_policy_with_gamma_one_is_reported():
 
 
 def test_greedy_policy_compiled_path_matches_argmax():
-    from adpart.mdp.solvers import GREEDY_COMPILED_ROWS
+    from adpart.mdp.evaluation import GREEDY_COMPILED_ROWS
 
     rng = np.random.default_rng(0)
     Q = rng.integers(0, 3, size=(GREEDY_COMPILED_ROWS, 4)).astype(np.float64)  # many ties

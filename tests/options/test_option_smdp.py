@@ -8,8 +8,9 @@ import pytest
 
 from adpart.envs.registry import get_domain
 from adpart.errors import ModelError
+from adpart.mdp.evaluation import policy_evaluation
 from adpart.mdp.generate import random_mdp
-from adpart.mdp.solvers import policy_evaluation, solve
+from adpart.mdp.solvers import solve
 from adpart.options import (
     Option,
     doorway_options,

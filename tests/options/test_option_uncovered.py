@@ -7,7 +7,8 @@ import pytest
 
 from adpart.envs.registry import get_domain
 from adpart.errors import ModelError
-from adpart.mdp.solvers import policy_evaluation, solve
+from adpart.mdp.evaluation import policy_evaluation
+from adpart.mdp.solvers import solve
 from adpart.options.models import option_models
 from adpart.options.smdp import stack_models
 from adpart.options.subgoal_options import subgoal_options

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from adpart.learning import LearnResult
 from adpart.learning.curves import start_distribution
+from adpart.mdp.evaluation import policy_evaluation
 from adpart.mdp.model import FiniteMDP
-from adpart.mdp.solvers import policy_evaluation
 from adpart.testing import check_learner
 
 from adpart_plugin_example import SarsaLearner, ThreeRoomsLine, sarsa

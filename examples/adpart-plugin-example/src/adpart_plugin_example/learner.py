@@ -34,8 +34,8 @@ import numpy as np
 from adpart.errors import TaskError
 from adpart.learning import LearningCurve, LearnResult, parse_schedule
 from adpart.learning.curves import optimal_start_value, start_distribution, start_values
+from adpart.mdp.evaluation import greedy_policy
 from adpart.mdp.model import FiniteMDP
-from adpart.mdp.solvers import greedy_policy
 from adpart.params import Param
 from adpart.plugins import hookimpl
 
