@@ -14,8 +14,13 @@ import numpy as np
 
 from adpart.learning.curves import LearningCurve, episodes_within
 
-__all__ = ["episodes_to_bound", "ratio_of_medians_ci", "ratio_to_flat", "success_bound",
-           "task_row"]
+__all__ = ["TIE_TOLERANCE", "best_final_run", "episodes_to_bound", "ratio_of_medians_ci",
+           "ratio_to_flat", "success_bound", "task_row"]
+
+#: Final gaps closer than this fraction of the value scale (``max(1, |V*(start)|)``) are a tie:
+#: exact evaluations of equally good policies differ by rounding (1.8e-15 on three-floor), and
+#: how they round depends on the machine and the linear-algebra libraries.
+TIE_TOLERANCE = 1e-9
 
 
 def ratio_of_medians_ci(a: np.ndarray, b: np.ndarray, *, level: float = 0.95,
@@ -70,6 +75,19 @@ def success_bound(curve: LearningCurve, fraction: float) -> float:
     curve carries no ``V*``)."""
     v_star = float(curve.metadata.get("v_star_start", np.nan))
     return max(1e-9, fraction * abs(v_star)) if np.isfinite(v_star) else np.inf
+
+
+def best_final_run(curve: LearningCurve) -> int:
+    """The run whose final greedy policy has the smallest value gap, the lowest run index among
+    those within :data:`TIE_TOLERANCE` of it (so the choice does not hang on rounding); runs
+    whose final value is undefined (NaN) are passed over, and run 0 is taken when all are."""
+    final = curve.matrix("value_gap")[:, -1]
+    if not np.any(np.isfinite(final)):
+        return 0
+    v_star = float(curve.metadata.get("v_star_start", np.nan))
+    scale = max(1.0, abs(v_star)) if np.isfinite(v_star) else 1.0
+    best = float(np.nanmin(final))
+    return int(np.flatnonzero(final <= best + TIE_TOLERANCE * scale)[0])
 
 
 def episodes_to_bound(curve: LearningCurve, fraction: float) -> np.ndarray:

@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 
 from adpart.errors import TaskError
-from adpart.learning.comparison import ratio_to_flat, task_row
+from adpart.learning.comparison import best_final_run, ratio_to_flat, task_row
 from adpart.learning.curves import LearningCurve
 from adpart.options.subgoal_options import LOCAL_RADIUS
 from adpart.workflows.discovery import discover_subgoals
@@ -419,7 +419,7 @@ def run_pipeline(
     report.curves[first] = {"flat": first_curve}
     report.rows.append(task_row(first, "flat", first_curve, config.gap_fraction, {}))
 
-    best = int(np.argmin(first_curve.matrix("value_gap")[:, -1]))
+    best = best_final_run(first_curve)
     policy = kb.get("policy", parse_ref(first_ids["policies"][best], "policy"))
     say(f"discovering subgoals in {policy.ref} with {config.detector}")
     found = discover_subgoals(
