@@ -84,7 +84,7 @@ LAYER_PRIMITIVE_EXPLORATION = "never"
 #: per run.
 #: The settling run has levelled off when its mean gap over the last third of the evaluations
 #: differs from the mean over the third before by less than this (single evaluations are noisy:
-#: one rollout batch in 40 reads 10-13 above its neighbours on the mini maze).
+#: in the mini maze's settling run one of 120 read 12.5 above its run's neighbours).
 PLATEAU = 0.5
 SETTLE = {"mini": (4, 30_000, 1_000, 30), "full": (4, 20_000, 1_000, 30)}
 
