@@ -108,8 +108,9 @@ def _plot_blocks(blocks: dict[str, np.ndarray], path: Path) -> str:
 )
 def task_sequence(config: ExperimentConfig) -> ExperimentReport:
     """Five urban tasks on automatically built layers vs flat; task five vs all-subgoals."""
+    from adpart.workflows.hierarchy import hierarchy_layer
     from adpart.workflows.knowledge import working_kb
-    from adpart.workflows.pipeline import PipelineConfig, hierarchy_layer, run_pipeline
+    from adpart.workflows.pipeline import PipelineConfig, run_pipeline
     from adpart.workflows.refs import parse_ref
 
     out = Path(config.out)

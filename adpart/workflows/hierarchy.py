@@ -4,7 +4,10 @@
 policy's Q) and the options stored for it into :class:`~adpart.hierarchy.layers.HierarchyInputs`;
 :func:`build_hierarchy` builds a layer from them through a ``hierarchy-estimator`` plugin and
 stores it as a ``hierarchy`` partition whose parents are the partitions the used tasks were
-learned on (:func:`finish`, shared by the estimator plugins).
+learned on (:func:`finish`, shared by the estimator plugins). :func:`hierarchy_layer` is the
+get-or-build the pipeline uses: the layer an estimator built from exactly these tasks' current
+policies is reused when stored, and a layer that offers no option is stored again over the
+pipeline's options, so the learner's refinement has options to add.
 
 Interpretations (docs/hierarchy.md): a task is learned when it has a stored policy; its newest
 policy stands for it.
@@ -14,6 +17,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -57,14 +61,21 @@ def _task_mdp(kb: KnowledgeBase, domain: Any, task: Any) -> FiniteMDP:
     )
 
 
-def _select_tasks(
-    kb: KnowledgeBase, env: Any, tasks: Sequence[str | int] | None
-) -> list[tuple[Any, Any]]:
-    """``(task record, newest policy)`` of the chosen (default: all learned) tasks."""
+def _newest_policies(kb: KnowledgeBase, env: Any) -> dict[int, Any]:
+    """Per learned task id, the policy that stands for it: its newest stored policy with a Q
+    table over the environment's actions (a decision layer's Q over options does not count)."""
     policies: dict[int, Any] = {}
     for pol in kb.records("policy", environment=env):
         if pol.q is not None and not pol.provenance.parameters.get("q_columns"):
             policies[pol.task_id] = pol  # ascending ids: the newest wins
+    return policies
+
+
+def _select_tasks(
+    kb: KnowledgeBase, env: Any, tasks: Sequence[str | int] | None
+) -> list[tuple[Any, Any]]:
+    """``(task record, newest policy)`` of the chosen (default: all learned) tasks."""
+    policies = _newest_policies(kb, env)
     records = [t for t in kb.records("task", environment=env) if t.id in policies]
     if tasks is not None:
         chosen = []
@@ -240,3 +251,107 @@ def finish(
     seconds = {**seconds, "store": time.perf_counter() - t0}
     return HierarchyResult(estimator, pruned, option_ids, names, list(trace), estimate,
                            list(steps), task_ids, pid, seconds, dict(parameters), flat, fallback)
+
+
+# --------------------------------------------------------------------------- reuse
+
+
+@dataclass(frozen=True)
+class Layer:
+    """A decision layer the hierarchical learner can start from.
+
+    Attributes:
+        ref: the stored partition the learner loads (``partition:N``).
+        blocks: its number of blocks.
+        built: the partition the estimator stored (``ref`` differs when options were added).
+        options: option refs the estimator's layer offers somewhere.
+        reused: whether the layer came from the knowledge base.
+        detail: the estimator's summary (trace, estimate, tasks) when it was built here.
+    """
+
+    ref: str
+    blocks: int
+    built: str
+    options: list[str]
+    reused: bool
+    detail: dict[str, Any] = field(default_factory=dict)
+
+
+def _stored_hierarchy(
+    kb: Any, env: Any, estimator: str, params: dict[str, Any], task_ids: list[int]
+) -> Any:
+    """A ``hierarchy`` partition built by ``estimator`` with ``params`` from exactly these
+    tasks' current policies, or None - so a pipeline run again does not build it again."""
+    newest = _newest_policies(kb, env)
+    policies = [newest[t].id for t in task_ids if t in newest]
+    wanted = {k.replace("-", "_"): v for k, v in params.items()}
+    for rec in reversed(kb.records("partition", environment=env)):
+        prov = rec.provenance
+        if rec.kind != "hierarchy" or prov.plugin != estimator:
+            continue
+        got = prov.parameters
+        if sorted(got.get("tasks", [])) != sorted(task_ids):
+            continue
+        if sorted(got.get("policies", [])) != sorted(policies):
+            continue
+        if all(got.get(k) == v for k, v in wanted.items()):
+            return rec
+    return None
+
+
+def _with_options(kb: Any, env: Any, rec: Any, option_ids: list[int]) -> tuple[Any, bool]:
+    """``rec`` itself when it offers options; otherwise the same blocks over ``option_ids``.
+
+    The hierarchical learner needs at least one option (its refinement may add any of them,
+    section 4.3); a layer that offers only primitive actions is stored again over the
+    pipeline's options with every option column off, child of ``rec``. Returns
+    ``(record, reused)``.
+    """
+    if rec.option_ids or not option_ids:
+        return rec, True
+    for cand in kb.records("partition", environment=env):
+        if (cand.kind == "hierarchy" and tuple(cand.parent_ids) == (rec.id,)
+                and list(cand.option_ids) == list(option_ids)
+                and cand.provenance.plugin == "adpart.workflows.pipeline"):
+            return cand, True
+    labels = kb.load(rec, "labels")
+    adm = kb.load(rec, "block_actions").astype(bool)
+    adm = np.concatenate([adm, np.zeros((adm.shape[0], len(option_ids)), dtype=bool)], axis=1)
+    padded = kb.put_partition(
+        env, "hierarchy", labels, options=list(option_ids), includes_primitives=True,
+        block_actions=adm, parents=[rec.id], plugin="adpart.workflows.pipeline",
+        parameters={"from": rec.ref, "reason": "options offered in no block, for refinement"},
+    )
+    return padded, False
+
+
+def hierarchy_layer(
+    kb: Any, env_name: str, estimator: str, params: dict[str, Any], task_ids: list[int],
+    option_ids: list[int],
+) -> Layer:
+    """The layer ``estimator`` builds from the learned tasks ``task_ids`` (reused when stored).
+
+    ``option_ids`` are the options the learner may fall back on when the layer offers none
+    (:func:`_with_options`).
+    """
+    from adpart.plugins import get_registry
+
+    resolved = get_registry().get("hierarchy-estimator", estimator).resolve_params(params)
+    env = kb.find_environment(env_name)
+    rec = _stored_hierarchy(kb, env, estimator, resolved, task_ids)
+    detail: dict[str, Any] = {}
+    reused = rec is not None
+    if rec is None:
+        result = build_hierarchy(kb, env_name, estimator=estimator, tasks=task_ids,
+                                 params=params)
+        rec = kb.get("partition", int(result.partition_id))
+        detail = result.summary()
+    else:
+        got = rec.provenance.parameters
+        detail = {"estimator": estimator, "partition": rec.ref, "blocks": rec.n_blocks,
+                  "options": [f"option:{i}" for i in rec.option_ids],
+                  "tasks": [f"task:{i}" for i in got.get("tasks", [])],
+                  "estimate": got.get("estimate"), "steps": got.get("steps")}
+    learnable, kept = _with_options(kb, env, rec, option_ids)
+    return Layer(learnable.ref, int(rec.n_blocks), rec.ref,
+                 [f"option:{i}" for i in rec.option_ids], reused and kept, detail)

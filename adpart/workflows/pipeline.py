@@ -45,6 +45,7 @@ from adpart.learning.comparison import best_final_run, ratio_to_flat, task_row
 from adpart.learning.curves import LearningCurve
 from adpart.options.subgoal_options import LOCAL_RADIUS
 from adpart.workflows.discovery import discover_subgoals
+from adpart.workflows.hierarchy import Layer, hierarchy_layer
 from adpart.workflows.learning import (
     LearnRequest,
     find_learning,
@@ -167,116 +168,6 @@ def _learn(kb: Any, request: LearnRequest, report: PipelineReport, stage: str) -
 
 
 # --------------------------------------------------------------------------- hierarchy layers
-
-
-@dataclass(frozen=True)
-class Layer:
-    """A decision layer the hierarchical learner can start from.
-
-    Attributes:
-        ref: the stored partition the learner loads (``partition:N``).
-        blocks: its number of blocks.
-        built: the partition the estimator stored (``ref`` differs when options were added).
-        options: option refs the estimator's layer offers somewhere.
-        reused: whether the layer came from the knowledge base.
-        detail: the estimator's summary (trace, estimate, tasks) when it was built here.
-    """
-
-    ref: str
-    blocks: int
-    built: str
-    options: list[str]
-    reused: bool
-    detail: dict[str, Any] = field(default_factory=dict)
-
-
-def _newest_policies(kb: Any, env: Any, task_ids: list[int]) -> list[int]:
-    """The policy standing for each task in ``build_hierarchy`` (its newest with Q)."""
-    newest: dict[int, int] = {}
-    for pol in kb.records("policy", environment=env):
-        if pol.q is not None and pol.task_id in task_ids:
-            newest[pol.task_id] = max(pol.id, newest.get(pol.task_id, -1))
-    return [newest[t] for t in task_ids if t in newest]
-
-
-def _stored_hierarchy(
-    kb: Any, env: Any, estimator: str, params: dict[str, Any], task_ids: list[int]
-) -> Any:
-    """A ``hierarchy`` partition built by ``estimator`` with ``params`` from exactly these
-    tasks' current policies, or None - so a pipeline run again does not build it again."""
-    policies = _newest_policies(kb, env, task_ids)
-    wanted = {k.replace("-", "_"): v for k, v in params.items()}
-    for rec in reversed(kb.records("partition", environment=env)):
-        prov = rec.provenance
-        if rec.kind != "hierarchy" or prov.plugin != estimator:
-            continue
-        got = prov.parameters
-        if sorted(got.get("tasks", [])) != sorted(task_ids):
-            continue
-        if sorted(got.get("policies", [])) != sorted(policies):
-            continue
-        if all(got.get(k) == v for k, v in wanted.items()):
-            return rec
-    return None
-
-
-def _with_options(kb: Any, env: Any, rec: Any, option_ids: list[int]) -> tuple[Any, bool]:
-    """``rec`` itself when it offers options; otherwise the same blocks over ``option_ids``.
-
-    The hierarchical learner needs at least one option (its refinement may add any of them,
-    section 4.3); a layer that offers only primitive actions is stored again over the
-    pipeline's options with every option column off, child of ``rec``. Returns
-    ``(record, reused)``.
-    """
-    if rec.option_ids or not option_ids:
-        return rec, True
-    for cand in kb.records("partition", environment=env):
-        if (cand.kind == "hierarchy" and tuple(cand.parent_ids) == (rec.id,)
-                and list(cand.option_ids) == list(option_ids)
-                and cand.provenance.plugin == "adpart.workflows.pipeline"):
-            return cand, True
-    labels = kb.load(rec, "labels")
-    adm = kb.load(rec, "block_actions").astype(bool)
-    adm = np.concatenate([adm, np.zeros((adm.shape[0], len(option_ids)), dtype=bool)], axis=1)
-    padded = kb.put_partition(
-        env, "hierarchy", labels, options=list(option_ids), includes_primitives=True,
-        block_actions=adm, parents=[rec.id], plugin="adpart.workflows.pipeline",
-        parameters={"from": rec.ref, "reason": "options offered in no block, for refinement"},
-    )
-    return padded, False
-
-
-def hierarchy_layer(
-    kb: Any, env_name: str, estimator: str, params: dict[str, Any], task_ids: list[int],
-    option_ids: list[int],
-) -> Layer:
-    """The layer ``estimator`` builds from the learned tasks ``task_ids`` (reused when stored).
-
-    ``option_ids`` are the options the learner may fall back on when the layer offers none
-    (:func:`_with_options`).
-    """
-    from adpart.plugins import get_registry
-    from adpart.workflows.hierarchy import build_hierarchy
-
-    resolved = get_registry().get("hierarchy-estimator", estimator).resolve_params(params)
-    env = kb.find_environment(env_name)
-    rec = _stored_hierarchy(kb, env, estimator, resolved, task_ids)
-    detail: dict[str, Any] = {}
-    reused = rec is not None
-    if rec is None:
-        result = build_hierarchy(kb, env_name, estimator=estimator, tasks=task_ids,
-                                 params=params)
-        rec = kb.get("partition", int(result.partition_id))
-        detail = result.summary()
-    else:
-        got = rec.provenance.parameters
-        detail = {"estimator": estimator, "partition": rec.ref, "blocks": rec.n_blocks,
-                  "options": [f"option:{i}" for i in rec.option_ids],
-                  "tasks": [f"task:{i}" for i in got.get("tasks", [])],
-                  "estimate": got.get("estimate"), "steps": got.get("steps")}
-    learnable, kept = _with_options(kb, env, rec, option_ids)
-    return Layer(learnable.ref, int(rec.n_blocks), rec.ref,
-                 [f"option:{i}" for i in rec.option_ids], reused and kept, detail)
 
 
 def _task_layer(kb: Any, config: PipelineConfig, subgoal_ref: str, task: str, learned: list[int],
