@@ -72,3 +72,30 @@ def test_the_readme_first_session_runs_as_written(tmp_path, monkeypatch):
 @pytest.mark.parametrize("make_target", ["demo", "test"])
 def test_the_readme_names_the_two_make_commands(make_target):
     assert f"make {make_target}" in README.read_text()
+
+
+@pytest.mark.slow
+def test_make_demos_pipeline_shows_what_the_readme_says(tmp_path) -> None:
+    """The demo's pipeline (the Makefile's command, on a fresh knowledge base) gives the figures
+    the README's "What the demo shows" states; they once drifted with the machine's rounding."""
+    import json
+
+    text = README.read_text()
+    said = re.search(r"What the demo shows:.*?a (\d+)-block layer.*?by episode (\d+), against "
+                     r"flat Q-learning's median of (\d+) \(ratio ([\d.]+)\)", text, re.DOTALL)
+    blocks, layer_median, flat_median, ratio = said.groups()
+    make = (README.parent / "Makefile").read_text()
+    line = re.search(r"\$\(ADPART\) (pipeline three-floor .*?)--out", make, re.DOTALL).group(1)
+    args = shlex.split(line.replace("\\\n", " "))
+    res = CliRunner().invoke(cli, [*args, "--kb", str(tmp_path / "kb"), "--out",
+                                   str(tmp_path / "out"), "--json"])
+    assert res.exit_code == 0, res.output
+    rows = {r["learner"]: r for r in json.loads(res.output)["tasks"]
+            if r["task"] == "reach-top-west"}
+    layer, flat = rows["hierarchical"], rows["flat"]
+    assert layer["initial_blocks"] == int(blocks)
+    assert layer["runs_within_bound"] == layer["runs"] == 20
+    assert layer["episodes_to_bound_median"] == int(layer_median)
+    assert flat["episodes_to_bound_median"] == int(flat_median)
+    assert round(layer["episodes_to_bound_median"] / flat["episodes_to_bound_median"],
+                 3) == float(ratio)
