@@ -85,13 +85,18 @@ def censored_at_total(to_tol: np.ndarray, total: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(to_tol), to_tol, total)
 
 
-def _plot(series: dict[str, tuple[np.ndarray, np.ndarray]], path: Path, xlabel: str,
-          ylabel: str, title: str, log: bool = False) -> str:
+def line_plot(series: dict[str, tuple[np.ndarray, np.ndarray]], path: Path, xlabel: str,
+              ylabel: str, title: str, log: bool = False,
+              reference: tuple[float, str] | None = None) -> str:
+    """One line per series, with a dashed horizontal ``reference`` line ``(y, label)`` if given;
+    saved to ``path``."""
     from adpart.plotting import new_figure
 
     fig, ax = new_figure((7, 4.2))
     for name, (x, y) in series.items():
         ax.plot(x, y, label=name)
+    if reference is not None:
+        ax.axhline(reference[0], color="k", ls="--", lw=1, label=reference[1])
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     if log:
@@ -114,10 +119,10 @@ def curve_plots(out: Path, prefix: str, steps: dict[str, np.ndarray],
             gg = np.where(np.isnan(g), np.inf, g)
         by_steps[k] = (cum, np.quantile(gg, 0.5, axis=0, method="inverted_cdf"))
     return [
-        _plot(by_ep, out / f"{prefix}_steps.png", "episode", "primitive steps per episode (mean)",
-              f"{title}: steps per episode", log=True),
-        _plot(by_steps, out / f"{prefix}_gap.png", "primitive steps (mean cumulative)",
-              "median value gap (inf = never finishes)", f"{title}: value gap", log=True),
+        line_plot(by_ep, out / f"{prefix}_steps.png", "episode",
+                  "primitive steps per episode (mean)", f"{title}: steps per episode", log=True),
+        line_plot(by_steps, out / f"{prefix}_gap.png", "primitive steps (mean cumulative)",
+                  "median value gap (inf = never finishes)", f"{title}: value gap", log=True),
     ]
 
 

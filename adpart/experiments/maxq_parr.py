@@ -36,6 +36,7 @@ from adpart.experiments.maxq import (
     claim,
     curve_plots,
     evaluated,
+    line_plot,
     pair_auc,
     verdict_of,
 )
@@ -120,16 +121,15 @@ def _first_task(maze: Any) -> Any:
     return maze.mdp(GoalSpec(goal=goal, goal_reward=0.0, gamma=GAMMA, name="reach-cell")), goal
 
 
-def _maxq_parr(mdp: Any, s: dict[str, Any], seed: int, v_star: float
+def _maxq_parr(mdp: Any, g: Any, s: dict[str, Any], seed: int, v_star: float
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """MAXQ-Q on the parr-maze graph scored by hierarchical greedy rollouts: ``(steps, gaps,
     evaluated episodes, fraction of rollouts that reached the goal)``."""
     from adpart.learning.curves import start_distribution
-    from adpart.learning.maxq import get_graph, hierarchical_rollouts
+    from adpart.learning.maxq import hierarchical_rollouts
     from adpart.learning.maxq.maxq_q import AgentRun
     from adpart.learning.schedules import parse_schedule
 
-    g = get_graph("parr-maze").compile(mdp)
     K, N, M = s["runs"], s["episodes"], s["eval_every"]
     ev = evaluated(N, M)
     cdf = np.cumsum(start_distribution(mdp))
@@ -155,16 +155,15 @@ def _maxq_parr(mdp: Any, s: dict[str, Any], seed: int, v_star: float
     return steps, gaps, ev, finished
 
 
-def _settling(mdp: Any, s: dict[str, Any], seed: int, v_star: float, ceiling_gap: float,
+def _settling(mdp: Any, g: Any, s: dict[str, Any], seed: int, v_star: float, ceiling_gap: float,
               out: Path, which: str) -> tuple[dict[str, Any], str]:
     """MAXQ-Q, the slowest learner, run past the comparison's budget (``s["settle"]``): does
     its hierarchical greedy policy settle within :data:`PARR_TOL` of its own ceiling, and
     after how many episodes? Returns the record and the figure (gap to the ceiling per run)."""
     from adpart.experiments.protocol import steps_to
-    from adpart.plotting import new_figure
 
     cfg = {**s, **s["settle"]}
-    steps, gaps, ev, done = _maxq_parr(mdp, cfg, seed + 1, v_star)
+    steps, gaps, ev, done = _maxq_parr(mdp, g, cfg, seed + 1, v_star)
     own = gaps[:, ev - 1] - ceiling_gap
     _steps, episodes = steps_to(gaps - ceiling_gap, steps, ev, PARR_TOL)
     tail = max(1, ev.size // 3)
@@ -179,18 +178,12 @@ def _settling(mdp: Any, s: dict[str, Any], seed: int, v_star: float, ceiling_gap
               "last_third_gap_to_ceiling": level,
               "last_third_change": change,
               "rollouts_finished_final": float(np.mean(done[:, ev[-1] - 1]))}
-    fig, ax = new_figure((7, 4.2))
-    for k in range(own.shape[0]):
-        ax.plot(ev, own[k], lw=1, alpha=0.8, label=f"run {k + 1}")
-    ax.axhline(PARR_TOL, color="k", ls="--", lw=1, label=f"tolerance {PARR_TOL:g}")
-    ax.set_xlabel("episode")
-    ax.set_ylabel("gap to its own ceiling (rollouts)")
-    ax.set_title(f"Parr {which} maze: MAXQ-Q past the comparison's budget")
-    ax.legend(fontsize=7)
-    fig.tight_layout()
-    path = out / "parr_maxq_settling.png"
-    fig.savefig(path, dpi=110)
-    return record, str(path)
+    figure = line_plot({f"run {k + 1}": (ev, own[k]) for k in range(own.shape[0])},
+                       out / "parr_maxq_settling.png", "episode",
+                       "gap to its own ceiling (rollouts)",
+                       f"Parr {which} maze: MAXQ-Q past the comparison's budget",
+                       reference=(PARR_TOL, f"tolerance {PARR_TOL:g}"))
+    return record, figure
 
 
 def _settling_sentence(r: dict[str, Any], ceiling_gap: float, budget: int) -> str:
@@ -336,13 +329,13 @@ def _parr(config: ExperimentConfig, *, mini: bool) -> ExperimentReport:
                                  epsilon=10.0, epsilon_greedy=EPSILON, q_init=from_below,
                                  primitive_exploration=LAYER_PRIMITIVE_EXPLORATION, **common)
     config.progress("maze task: MAXQ-Q (hierarchical greedy rollouts)")
-    m_steps, m_gaps, m_ev, m_done = _maxq_parr(mdp, s, config.seed, v_star)
-    config.progress("ceilings: the parr graph's recursively optimal value, the layers' optima")
     g = get_graph("parr-maze").compile(mdp)
+    m_steps, m_gaps, m_ev, m_done = _maxq_parr(mdp, g, s, config.seed, v_star)
+    config.progress("ceilings: the parr graph's recursively optimal value, the layers' optima")
     maxq_ceiling = float(mu @ recursively_optimal(mdp, g).V[g.root])
     config.progress(f"MAXQ-Q past the budget: {s['settle']['runs']} runs x "
                     f"{s['settle']['episodes']:,} episodes")
-    settling, settle_figure = _settling(mdp, s, config.seed, v_star, v_star - maxq_ceiling, out,
+    settling, settle_figure = _settling(mdp, g, s, config.seed, v_star, v_star - maxq_ceiling, out,
                                         which)
     report.data["maxq_settling"] = settling
     layer_ceilings = np.array([layer_ceiling(p, layer_smdp, mu) for p in hier.partitions])
