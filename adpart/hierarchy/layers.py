@@ -31,6 +31,8 @@ from adpart.partition.partition import Partition, block_all
 
 #: Default estimator threshold L as a fraction of each task's value range (module docstring).
 DEFAULT_THRESHOLD_SCALE = 0.01
+#: Default delta of eq. 4.6 for both layers: the all-subgoals partition and Algorithm 3's splits.
+DEFAULT_DELTA = 0.3
 
 
 @dataclass(frozen=True, eq=False)
@@ -145,14 +147,48 @@ def prune_unused_options(partition: Partition, n_primitives: int) -> tuple[Parti
     return partition.with_admissible(partition.admissible[:, cols]), used
 
 
+def stable_option_splits(inputs: HierarchyInputs, *, delta: float) -> np.ndarray:
+    """``(A+O, S)`` split labels: each option's own delta-stable partition (phases 1-2).
+
+    "``B_j`` refined with ``o``" (Algorithm 3) is ``B_j`` refined by eq. 4.6 until it is stable
+    for ``o``, as 4.3.3 refines a block for a new action: here ``B_j`` intersected with the
+    partition of ``S`` that phase 1 of ``o`` (its termination states, the rest of its initiation
+    set, the states outside it) refined to delta-stability for ``o`` alone gives. A subgoal
+    option ends in its subgoal, so the split groups ``B_j``'s states by the discounted
+    probability ``E[gamma^tau]`` of getting there, in bands of about ``delta`` - the same
+    criterion and ``delta`` the ``all-subgoals`` layer applies to every option at once. Primitive
+    columns (never candidates) keep phase 1's labels.
+    """
+    from adpart.learning.smdp_q import option_set
+    from adpart.partition import MultiPhasePartitioner, refine
+
+    splits = column_splits(inputs.admissible, inputs.termination).astype(np.int64)
+    if not inputs.options:
+        return splits
+    _, smdp = option_set(inputs.mdp, inputs.options, include_primitives=True)
+    partitioner = MultiPhasePartitioner(smdp, inputs.termination, delta=delta)
+    for o in range(inputs.mdp.n_actions, smdp.n_actions):
+        own = refine(partitioner.phase1(o), smdp, options=[o], delta=delta, epsilon=None,
+                     require_admissible=False)
+        splits[o] = own.labels
+    return splits
+
+
 def expected_time_layer(
-    inputs: HierarchyInputs, *, c: float = 1.0, max_steps: int | None = None
+    inputs: HierarchyInputs, *, delta: float | None = DEFAULT_DELTA, c: float = 1.0,
+    max_steps: int | None = None,
 ) -> tuple[Partition, list[float], list[Step], float]:
-    """Algorithm 3 over ``inputs``; returns ``(filled layer, trace, steps, its estimate)``."""
+    """Algorithm 3 over ``inputs``; returns ``(filled layer, trace, steps, its estimate)``.
+
+    ``delta``: a block refined with an option is split by that option's delta-stable partition
+    (:func:`stable_option_splits`); None splits by phase 1's initial blocks alone.
+    """
     A = inputs.mdp.n_actions
+    splits = (column_splits(inputs.admissible, inputs.termination) if delta is None
+              else stable_option_splits(inputs, delta=delta))
     result = greedy_hierarchy(
-        inputs.tasks, inputs.admissible, n_primitives=A,
-        splits=column_splits(inputs.admissible, inputs.termination), c=c, max_steps=max_steps,
+        inputs.tasks, inputs.admissible, n_primitives=A, splits=splits, c=c,
+        max_steps=max_steps,
     )
     filled = fill_empty_blocks(result.partition, inputs.admissible, A)
     est = expected_time(inputs.tasks, filled, n_primitives=A, c=c).total
@@ -165,7 +201,7 @@ def flat_estimate(inputs: HierarchyInputs, *, c: float = 1.0) -> float:
 
 
 def all_subgoals_layer(
-    inputs: HierarchyInputs, *, delta: float = 0.0, c: float = 1.0
+    inputs: HierarchyInputs, *, delta: float = DEFAULT_DELTA, c: float = 1.0
 ) -> tuple[Partition, float]:
     """The seed's heuristic: multi-phase partition (phases 1-2) over every subgoal option.
 

@@ -7,9 +7,12 @@ import pytest
 
 from adpart.errors import TaskError
 from adpart.hierarchy import discounted_occupancy, expected_time, option_values
+from adpart.hierarchy.greedy import column_splits
+from adpart.hierarchy.layers import expected_time_layer, stable_option_splits
+from adpart.learning.smdp_q import option_set
 from adpart.mdp.solvers import q_from_v, solve
 from adpart.options import doorway_options, option_model
-from adpart.partition import Partition
+from adpart.partition import Partition, check_stability
 from adpart.partition.partition import block_all
 from adpart.store import KnowledgeBase
 from adpart.workflows.hierarchy import build_hierarchy, load_inputs
@@ -113,6 +116,29 @@ def test_all_subgoals_layer_and_comparison(four_rooms_kb, estimator_registry):
     # so the heuristic layer may score better; both are compared with the flat MDP
     assert auto.flat_estimate == pytest.approx(104 * 104 * 4) and not auto.fallback
     assert auto.estimate < auto.flat_estimate and subgoals.estimate < auto.flat_estimate
+
+
+def test_refined_with_an_option_means_its_own_delta_stable_partition(four_rooms_kb):
+    kb, _ = four_rooms_kb
+    inputs = load_inputs(kb, "four-rooms")
+    A = inputs.mdp.n_actions
+    _, smdp = option_set(inputs.mdp, inputs.options, include_primitives=True)
+    splits = stable_option_splits(inputs, delta=0.3)
+    phase1 = column_splits(inputs.admissible, inputs.termination)
+    for o in range(A, smdp.n_actions):
+        own = Partition.from_labels(splits[o], smdp.admissible)
+        only_o = np.zeros_like(own.admissible)
+        only_o[:, [o]] = block_all(own.labels, own.n_blocks, smdp.admissible[:, [o]])
+        report = check_stability(own.with_admissible(only_o), smdp, options=[o], delta=0.3)
+        assert report.ok, report.violations[:3]
+        # a refinement of phase 1's blocks: each own block lies in one phase-1 block
+        assert all(len(np.unique(phase1[o][splits[o] == b])) == 1 for b in range(own.n_blocks))
+    layer, _, steps, _ = expected_time_layer(inputs, delta=0.3)
+    assert steps
+    for b, row in enumerate(layer.admissible):  # every offered option's split went through b
+        members = layer.labels == b
+        for o in np.flatnonzero(row[A:]) + A:
+            assert len(np.unique(splits[o][members])) == 1
 
 
 def test_task_selection_weights_and_errors(four_rooms_kb, estimator_registry):

@@ -16,12 +16,14 @@ from collections.abc import Sequence
 from typing import Any
 
 from adpart.hierarchy.layers import (
+    DEFAULT_DELTA,
     DEFAULT_THRESHOLD_SCALE,
     HierarchyResult,
     all_subgoals_layer,
     expected_time_layer,
     flat_estimate,
 )
+from adpart.errors import PluginError
 from adpart.params import Param
 from adpart.plugins.hookspecs import hookimpl
 from adpart.plugins.registry import Registrar
@@ -36,21 +38,32 @@ _COMMON = (
 )
 
 
+def _delta_at_most_one(value: float) -> float:
+    """Definition 4.4 bounds delta, a difference of transition masses, by 1."""
+    if value > 1:
+        raise PluginError(f"delta = {value} is above 1; it bounds a difference of probabilities")
+    return value
+
+
 class ExpectedLearningTime:
     """Algorithm 3: greedy (block, option) refinements minimising E[t_learn | P], or flat."""
 
     name = "expected-learning-time"
     description = "greedy layer minimising the expected learning time over learned tasks (4.4)"
     params = (*_COMMON,
+              Param("delta", "float", DEFAULT_DELTA,
+                    "delta of eq. 4.6: a block refined with an option is split by the option's "
+                    "delta-stable partition; < 0 = by its initiation and termination alone",
+                    check=_delta_at_most_one),
               Param("max-steps", "int", 0, "cap on accepted refinements (0 = no cap)", min=0),
               Param("flat", "bool", True,
                     "compare with the flat MDP ('no abstraction'); fall back when it is cheaper"))
 
     def __init__(self, c: float = 1.0, threshold: float = -1.0,
-                 threshold_scale: float = DEFAULT_THRESHOLD_SCALE, max_steps: int = 0,
-                 flat: bool = True) -> None:
+                 threshold_scale: float = DEFAULT_THRESHOLD_SCALE, delta: float = DEFAULT_DELTA,
+                 max_steps: int = 0, flat: bool = True) -> None:
         self.c, self.threshold, self.threshold_scale = c, threshold, threshold_scale
-        self.max_steps, self.flat = max_steps, flat
+        self.delta, self.max_steps, self.flat = delta, max_steps, flat
 
     def build(self, knowledge_base: Any, environment: str, *,
               tasks: Sequence[str | int] | None = None, store: bool = True) -> HierarchyResult:
@@ -60,11 +73,12 @@ class ExpectedLearningTime:
                              threshold_scale=self.threshold_scale)
         t1 = time.perf_counter()
         layer, trace, steps, estimate = expected_time_layer(
-            inputs, c=self.c, max_steps=self.max_steps or None)
+            inputs, delta=None if self.delta < 0 else self.delta, c=self.c,
+            max_steps=self.max_steps or None)
         t2 = time.perf_counter()
         params = {"c": self.c, "threshold": self.threshold,
-                  "threshold_scale": self.threshold_scale, "max_steps": self.max_steps,
-                  "flat": self.flat}
+                  "threshold_scale": self.threshold_scale, "delta": self.delta,
+                  "max_steps": self.max_steps, "flat": self.flat}
         return finish(knowledge_base, inputs, layer, estimator=self.name, trace=trace,
                       steps=steps, estimate=estimate, parameters=params, store=store,
                       seconds={"inputs": t1 - t0, "construction": t2 - t1},
@@ -77,11 +91,13 @@ class AllSubgoals:
     name = "all-subgoals"
     description = "every stored subgoal option in every block where admissible (phases 1-2)"
     params = (*_COMMON,
-              Param("delta", "float", 0.3, "delta of eq. 4.6 for the multi-phase partition",
-                    min=0.0))
+              Param("delta", "float", DEFAULT_DELTA,
+                    "delta of eq. 4.6 for the multi-phase partition", min=0.0,
+                    check=_delta_at_most_one))
 
     def __init__(self, c: float = 1.0, threshold: float = -1.0,
-                 threshold_scale: float = DEFAULT_THRESHOLD_SCALE, delta: float = 0.3) -> None:
+                 threshold_scale: float = DEFAULT_THRESHOLD_SCALE,
+                 delta: float = DEFAULT_DELTA) -> None:
         self.c, self.threshold, self.threshold_scale = c, threshold, threshold_scale
         self.delta = delta
 
