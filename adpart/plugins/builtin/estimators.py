@@ -15,6 +15,7 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
+from adpart.errors import PluginError
 from adpart.hierarchy.layers import (
     DEFAULT_DELTA,
     DEFAULT_THRESHOLD_SCALE,
@@ -23,7 +24,6 @@ from adpart.hierarchy.layers import (
     expected_time_layer,
     flat_estimate,
 )
-from adpart.errors import PluginError
 from adpart.params import Param
 from adpart.plugins.hookspecs import hookimpl
 from adpart.plugins.registry import Registrar
