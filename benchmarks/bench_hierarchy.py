@@ -7,6 +7,9 @@ For every (tasks, options) cell of the grid the table prints:
 
 * ``inputs s`` - building the estimator's inputs: each task's occupancy plus the option values of
   the options used (each measured once per task and option, summed for the cell);
+* ``splits s`` - each option's own delta-stable partition (delta 0.3), how "refined with ``o``"
+  splits a block (:func:`adpart.hierarchy.layers.stable_option_splits`, measured once per
+  option on the first task's model, summed for the cell);
 * ``greedy s`` - Algorithm 3 itself (:func:`adpart.hierarchy.greedy_hierarchy`, best of 1);
 * ``blocks`` / ``steps`` / ``E0 / E`` - the layer and how far the estimate fell;
 * ``naive s`` and ``speed-up`` - the reference measured in the same run: one call of the
@@ -25,12 +28,12 @@ from adpart.envs.base import GoalSpec
 from adpart.envs.registry import get_domain
 from adpart.hierarchy import (
     LearnedTask,
-    column_splits,
     discounted_occupancy,
     expected_time,
     greedy_hierarchy,
     option_values,
 )
+from adpart.hierarchy.layers import DEFAULT_DELTA, stable_option_splits
 from adpart.mdp.solvers import q_from_v, solve
 from adpart.options import subgoal_options
 
@@ -87,7 +90,17 @@ def main(task_counts: tuple[int, ...] = (1, 5, 10, 20),
     adm_all = np.concatenate([first.admissible] + [o.initiation[:, None] for o in options], axis=1)
     term_all = np.concatenate([np.ones((S, A), dtype=bool)]
                               + [(o.beta >= 1.0)[:, None] for o in options], axis=1)
-    print(f"{'tasks':>5} {'options':>7} {'inputs s':>9} {'greedy s':>9} {'blocks':>7} "
+    splits = np.zeros((A + len(options), S), dtype=np.int64)
+    split_s = np.zeros(len(options))
+    for k, opt in enumerate(options):  # one option at a time, to time each
+        cols = [*range(A), A + k]
+        t = time.perf_counter()
+        one = stable_option_splits(first, [opt], adm_all[:, cols], term_all[:, cols],
+                                   delta=DEFAULT_DELTA)
+        split_s[k] = time.perf_counter() - t
+        splits[:A], splits[A + k] = one[:A], one[A]
+    print(f"{'tasks':>5} {'options':>7} {'inputs s':>9} {'splits s':>9} {'greedy s':>9} "
+          f"{'blocks':>7} "
           f"{'steps':>6} {'E0 / E':>9} {'candidates':>11} {'naive s':>9} {'speed-up':>9}")
     rows = []
     for T in task_counts:
@@ -95,22 +108,24 @@ def main(task_counts: tuple[int, ...] = (1, 5, 10, 20),
             K = A + n_opt
             tasks = [LearnedTask(f"t{i}", Qs[i][:, :K], occ[i], thresholds[i])
                      for i in range(T)]
-            adm, term = adm_all[:, :K], term_all[:, :K]
+            adm = adm_all[:, :K]
             inputs_s = float(sum(occ_s[:T]) + sum(opt_s[i][:n_opt].sum() for i in range(T)))
             t = time.perf_counter()
-            res = greedy_hierarchy(tasks, adm, splits=column_splits(adm, term), n_primitives=A)
+            res = greedy_hierarchy(tasks, adm, splits=splits[:K], n_primitives=A)
             greedy_s = time.perf_counter() - t
             t = time.perf_counter()
             expected_time(tasks, res.partition, n_primitives=A)
             one = time.perf_counter() - t
             naive = one * res.candidates_evaluated
-            row = {"tasks": T, "options": n_opt, "inputs_s": inputs_s, "greedy_s": greedy_s,
+            row = {"tasks": T, "options": n_opt, "inputs_s": inputs_s,
+                   "splits_s": float(split_s[:n_opt].sum()), "greedy_s": greedy_s,
                    "blocks": res.partition.n_blocks, "steps": len(res.steps),
                    "reduction": res.trace[0] / res.trace[-1],
                    "candidates": res.candidates_evaluated, "naive_s": naive,
                    "speedup": naive / greedy_s}
             rows.append(row)
-            print(f"{T:>5} {n_opt:>7} {inputs_s:>9.2f} {greedy_s:>9.2f} {row['blocks']:>7} "
+            print(f"{T:>5} {n_opt:>7} {inputs_s:>9.2f} {row['splits_s']:>9.2f} {greedy_s:>9.2f} "
+                  f"{row['blocks']:>7} "
                   f"{row['steps']:>6} {row['reduction']:>9.3g} {row['candidates']:>11,} "
                   f"{naive:>9.1f} {row['speedup']:>9.0f}")
     return rows

@@ -16,6 +16,7 @@ columns some block offers are kept with the layer.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -147,8 +148,12 @@ def prune_unused_options(partition: Partition, n_primitives: int) -> tuple[Parti
     return partition.with_admissible(partition.admissible[:, cols]), used
 
 
-def stable_option_splits(inputs: HierarchyInputs, *, delta: float) -> np.ndarray:
+def stable_option_splits(mdp: FiniteMDP, options: Sequence[Option], admissible: np.ndarray,
+                         termination: np.ndarray, *, delta: float) -> np.ndarray:
     """``(A+O, S)`` split labels: each option's own delta-stable partition (phases 1-2).
+
+    ``admissible`` and ``termination`` are ``(S, A+O)`` over the primitive actions, then
+    ``options`` (:class:`HierarchyInputs`' columns).
 
     "``B_j`` refined with ``o``" (Algorithm 3) is ``B_j`` refined by eq. 4.6 until it is stable
     for ``o``, as 4.3.3 refines a block for a new action: here ``B_j`` intersected with the
@@ -162,12 +167,12 @@ def stable_option_splits(inputs: HierarchyInputs, *, delta: float) -> np.ndarray
     from adpart.learning.smdp_q import option_set
     from adpart.partition import MultiPhasePartitioner, refine
 
-    splits = column_splits(inputs.admissible, inputs.termination).astype(np.int64)
-    if not inputs.options:
+    splits = column_splits(admissible, termination).astype(np.int64)
+    if not options:
         return splits
-    _, smdp = option_set(inputs.mdp, inputs.options, include_primitives=True)
-    partitioner = MultiPhasePartitioner(smdp, inputs.termination, delta=delta)
-    for o in range(inputs.mdp.n_actions, smdp.n_actions):
+    _, smdp = option_set(mdp, list(options), include_primitives=True)
+    partitioner = MultiPhasePartitioner(smdp, termination, delta=delta)
+    for o in range(mdp.n_actions, smdp.n_actions):
         own = refine(partitioner.phase1(o), smdp, options=[o], delta=delta, epsilon=None,
                      require_admissible=False)
         splits[o] = own.labels
@@ -185,7 +190,8 @@ def expected_time_layer(
     """
     A = inputs.mdp.n_actions
     splits = (column_splits(inputs.admissible, inputs.termination) if delta is None
-              else stable_option_splits(inputs, delta=delta))
+              else stable_option_splits(inputs.mdp, inputs.options, inputs.admissible,
+                                        inputs.termination, delta=delta))
     result = greedy_hierarchy(
         inputs.tasks, inputs.admissible, n_primitives=A, splits=splits, c=c,
         max_steps=max_steps,

@@ -123,7 +123,8 @@ def test_refined_with_an_option_means_its_own_delta_stable_partition(four_rooms_
     inputs = load_inputs(kb, "four-rooms")
     A = inputs.mdp.n_actions
     _, smdp = option_set(inputs.mdp, inputs.options, include_primitives=True)
-    splits = stable_option_splits(inputs, delta=0.3)
+    splits = stable_option_splits(inputs.mdp, inputs.options, inputs.admissible,
+                                  inputs.termination, delta=0.3)
     phase1 = column_splits(inputs.admissible, inputs.termination)
     for o in range(A, smdp.n_actions):
         own = Partition.from_labels(splits[o], smdp.admissible)
