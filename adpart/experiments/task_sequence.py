@@ -86,6 +86,24 @@ def _plot(curves: dict[str, Any], path: Path, title: str, column: str = "value_g
     return str(path)
 
 
+def layer_sizes_figure(tasks: list[str], built: list[int], offered: list[int]) -> Any:
+    """Fig. 5.19: the blocks of the layer built for each later task, as Algorithm 3 returned it
+    and once its blocks are offered the task's reward-state options (what the learner starts on).
+    """
+    from adpart.plotting import new_figure
+
+    fig, ax = new_figure((6, 3.6))
+    x = np.arange(len(tasks))
+    ax.bar(x - 0.2, built, width=0.4, label="built (Algorithm 3)", gid="built")
+    ax.bar(x + 0.2, offered, width=0.4, label="offered the reward options", gid="offered")
+    ax.set_xticks(x, tasks)
+    ax.set_ylabel("blocks")
+    ax.set_title(f"{ENV}: blocks of the layer built for each task (Fig. 5.19)")
+    ax.legend()
+    fig.tight_layout()
+    return fig
+
+
 def _plot_blocks(blocks: dict[str, np.ndarray], path: Path) -> str:
     from adpart.plotting import new_figure
 
@@ -201,4 +219,10 @@ def task_sequence(config: ExperimentConfig) -> ExperimentReport:
                                 f"{ENV} / {TASKS[-1]}: automatic layer vs all-subgoals"))
     report.figures.append(_plot_blocks({k: r.blocks for k, r in five.items()},
                                        out / "task5_blocks.png"))
+    started = {r["task"]: r["initial_blocks"] for r in pipe.rows if r["learner"] == "hierarchical"}
+    sizes = layer_sizes_figure([st.task for st in layers],
+                               [st.detail["final_blocks"] for st in layers],
+                               [started[st.task] for st in layers])
+    sizes.savefig(out / "layer_blocks.png", dpi=110)
+    report.figures.append(str(out / "layer_blocks.png"))
     return report

@@ -49,6 +49,18 @@ def test_quick_run_builds_a_layer_per_task_and_compares_task_five(tmp_path):
         assert len(finals) == 2 and min(finals) >= initial  # refinement only adds blocks
     text = (tmp_path / "out" / "summary.md").read_text()
     assert "72" in text and "43" in text
-    assert len(report.figures) == 6
+    assert len(report.figures) == 7
     for fig in report.figures:
         assert (tmp_path / "out" / fig.split("/")[-1]).stat().st_size > 1000
+
+
+def test_the_layer_sizes_figure_draws_each_tasks_built_and_offered_blocks():
+    """Read back Fig. 5.19's bars: one pair per task, heights the given block counts."""
+    from adpart.experiments.task_sequence import layer_sizes_figure
+
+    fig = layer_sizes_figure(list(TASKS[1:]), [48, 57, 86, 47], [63, 84, 98, 58])
+    ax = fig.axes[0]
+    heights = {gid: [p.get_height() for p in ax.patches if p.get_gid() == gid]
+               for gid in ("built", "offered")}
+    assert heights == {"built": [48, 57, 86, 47], "offered": [63, 84, 98, 58]}
+    assert [t.get_text() for t in ax.get_xticklabels()] == list(TASKS[1:])
