@@ -122,6 +122,8 @@ def test_hierarchy_command_stores_the_layer_it_prints(pipeline_kb, tmp_path):
         (["--estimator", "no-such"], "no-such"),
         (["--tasks", "not-learned"], "not-learned"),
         (["--c", "-1"], "--c must be >= 0.0"),
+        (["--delta", "1.5"], "--delta '1.5': delta = 1.5 is above 1"),
+        (["--estimator", "all-subgoals", "--delta", "-0.1"], "--delta must be >= 0.0"),
         (["--estimator", "all-subgoals", "--max-steps", "3"],
          "--max-steps is not a parameter of hierarchy-estimator 'all-subgoals'"),
     ],

@@ -136,10 +136,12 @@ def test_refined_with_an_option_means_its_own_delta_stable_partition(four_rooms_
         assert all(len(np.unique(phase1[o][splits[o] == b])) == 1 for b in range(own.n_blocks))
     layer, _, steps, _ = expected_time_layer(inputs, delta=0.3)
     assert steps
-    for b, row in enumerate(layer.admissible):  # every offered option's split went through b
-        members = layer.labels == b
-        for o in np.flatnonzero(row[A:]) + A:
-            assert len(np.unique(splits[o][members])) == 1
+    former, _, _, _ = expected_time_layer(inputs, delta=None)  # `--delta -1`: phase 1 alone
+    for built, by in ((layer, splits), (former, phase1)):
+        for b, row in enumerate(built.admissible):  # every offered option's split went through b
+            members = built.labels == b
+            for o in np.flatnonzero(row[A:]) + A:
+                assert len(np.unique(by[o][members])) == 1
 
 
 def test_task_selection_weights_and_errors(four_rooms_kb, estimator_registry):
