@@ -14,10 +14,12 @@ refinement, which the refinement term of the estimate prices.
 
 "``B_j`` refined with ``o``" is, in adpart (docs/hierarchy.md):
 
-1. ``B_j`` is split by the column's *split labels* (default: phase 1's initial blocks of section
-   4.2.1.2 - the option's termination states, the rest of its initiation set, the states outside
-   it). Only ``B_j`` changes, the "splitting the blocks separately" variant the dissertation
-   calls the more nuanced one.
+1. ``B_j`` is split by the column's *split labels*: the estimator passes each option's own
+   delta-stable partition (:func:`adpart.hierarchy.layers.stable_option_splits`, eq. 4.6 for
+   that option alone); without ``splits``, phase 1's initial blocks of section 4.2.1.2 (the
+   option's termination states, the rest of its initiation set, the states outside it). Only
+   ``B_j`` changes, the "splitting the blocks separately" variant the dissertation calls the
+   more nuanced one.
 2. ``o`` joins the option set of every sub-block in which every state may start it (the
    algorithm's ``O_{n+1,B} = O_{n,B} u {o}`` restricted to initiation-consistent blocks, as the
    decision layer requires); the other sub-blocks keep ``O_{n,B_j}``.
