@@ -38,6 +38,12 @@ _COMMON = (
 )
 
 
+#: One text for both estimators' ``--delta`` (the command line shows one help per option).
+_DELTA_HELP = ("delta of eq. 4.6: expected-learning-time splits a block refined with an option by "
+               "the option's delta-stable partition (< 0: by its initiation and termination "
+               "alone); all-subgoals refines its multi-phase partition to it")
+
+
 def _delta_at_most_one(value: float) -> float:
     """Definition 4.4 bounds delta, a difference of transition masses, by 1."""
     if value > 1:
@@ -52,9 +58,7 @@ class ExpectedLearningTime:
     description = "greedy layer minimising the expected learning time over learned tasks (4.4)"
     params = (*_COMMON,
               Param("delta", "float", DEFAULT_DELTA,
-                    "delta of eq. 4.6: a block refined with an option is split by the option's "
-                    "delta-stable partition; < 0 = by its initiation and termination alone",
-                    check=_delta_at_most_one),
+                    _DELTA_HELP, check=_delta_at_most_one),
               Param("max-steps", "int", 0, "cap on accepted refinements (0 = no cap)", min=0),
               Param("flat", "bool", True,
                     "compare with the flat MDP ('no abstraction'); fall back when it is cheaper"))
@@ -92,8 +96,7 @@ class AllSubgoals:
     description = "every stored subgoal option in every block where admissible (phases 1-2)"
     params = (*_COMMON,
               Param("delta", "float", DEFAULT_DELTA,
-                    "delta of eq. 4.6 for the multi-phase partition", min=0.0,
-                    check=_delta_at_most_one))
+                    _DELTA_HELP, min=0.0, check=_delta_at_most_one))
 
     def __init__(self, c: float = 1.0, threshold: float = -1.0,
                  threshold_scale: float = DEFAULT_THRESHOLD_SCALE,
