@@ -164,19 +164,27 @@ def stable_option_splits(mdp: FiniteMDP, options: Sequence[Option], admissible: 
     criterion and ``delta`` the ``all-subgoals`` layer applies to every option at once. Primitive
     columns (never candidates) keep phase 1's labels.
     """
-    from adpart.learning.smdp_q import option_set
-    from adpart.partition import MultiPhasePartitioner, refine
+    from adpart.partition import refine
 
-    splits = column_splits(admissible, termination).astype(np.int64)
+    A = mdp.n_actions
+    prim = column_splits(admissible[:, :A], termination[:, :A]).astype(np.int64)
     if not options:
-        return splits
+        return prim
+    smdp, partitioner = _option_partitioner(mdp, options, termination, delta)
+    own = [refine(partitioner.phase1(o), smdp, options=[o], delta=delta, epsilon=None,
+                  require_admissible=False).labels for o in range(A, smdp.n_actions)]
+    return np.concatenate([prim, np.stack(own).astype(np.int64)])
+
+
+def _option_partitioner(mdp: FiniteMDP, options: Sequence[Option], termination: np.ndarray,
+                        delta: float) -> tuple[Any, Any]:
+    """The options' SMDP (primitive actions first) and a multi-phase partitioner over it: what
+    both layers split by."""
+    from adpart.learning.smdp_q import option_set
+    from adpart.partition import MultiPhasePartitioner
+
     _, smdp = option_set(mdp, list(options), include_primitives=True)
-    partitioner = MultiPhasePartitioner(smdp, termination, delta=delta)
-    for o in range(mdp.n_actions, smdp.n_actions):
-        own = refine(partitioner.phase1(o), smdp, options=[o], delta=delta, epsilon=None,
-                     require_admissible=False)
-        splits[o] = own.labels
-    return splits
+    return smdp, MultiPhasePartitioner(smdp, termination, delta=delta)
 
 
 def expected_time_layer(
@@ -215,8 +223,7 @@ def all_subgoals_layer(
     one get the primitive actions (:func:`fill_empty_blocks`). Returns the layer over the
     inputs' columns and its ``E[t_learn]``.
     """
-    from adpart.learning.smdp_q import option_set
-    from adpart.partition import MultiPhasePartitioner, refine
+    from adpart.partition import refine
     from adpart.partition.partition import combine_labels
 
     if not inputs.options:
@@ -224,9 +231,9 @@ def all_subgoals_layer(
             f"environment {inputs.environment.name!r} has no stored subgoal options; build them "
             "with `adpart options` first"
         )
-    _, smdp = option_set(inputs.mdp, inputs.options, include_primitives=True)
+    smdp, partitioner = _option_partitioner(inputs.mdp, inputs.options, inputs.termination,
+                                            delta)
     cols = np.arange(inputs.mdp.n_actions, smdp.n_actions)
-    partitioner = MultiPhasePartitioner(smdp, inputs.termination, delta=delta)
     start = combine_labels(*(partitioner.phase1(int(o)).labels for o in cols))
     # states no option may start (the subgoals themselves) stay in blocks of their own pattern;
     # they get the primitive actions below instead of failing the cover check of phase 2
