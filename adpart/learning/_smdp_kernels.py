@@ -62,6 +62,14 @@ then skipped if every one of its steps got such an update (they already chain it
 option that was not updated at some step (stochastic policy, or the missing target) keeps its
 step-6 update. The random streams are untouched, so ``intra=0`` is the rule above exactly.
 
+**Directed exploration** (``explore_m = m > 0``, hierarchical; :mod:`adpart.learning._rmax`):
+after step 4 the step is counted in the run's empirical model, R-max's optimistic plan ``Qx`` is
+re-planned when the pair becomes known (its ``m``-th try), and the grounded values ``Ql`` are
+re-planned on every sample in place of their Watkins update; the optimistic flat action a greedy
+decision may take is ``argmax Qx`` in place of ``argmax Q_flat``, and the test's lower confidence
+bound subtracts ``lcb_z`` standard errors of the successors' grounded values. With ``m = 0`` none of
+this runs and the rule is the one above exactly.
+
 ``intra`` is 0 (off), 1 (the one-step rule above: SMDP Q over states, where it is exact) or 2
 (a decision layer). On a block layer a multi-step option's one-step target is not its value: a step
 that stays inside the block gives ``Q(d, o) = r + gamma Q(d, o)``, which drives ``Q(d, o)`` to
@@ -89,6 +97,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from adpart.learning._kernels import ScheduledAgents, njit_lazily
+from adpart.learning._rmax import lower_sweep, model_spread, rmax_observe
 from adpart.mdp._sampling import compiled, first_above, successor
 
 #: Uniforms per agent-step in the main stream (explore?, which option, successor, next start).
@@ -184,6 +193,19 @@ class SMDPLockStepState(ScheduledAgents):
     vr_g: np.ndarray
     ref_model: int
     Vref: np.ndarray
+    explore_m: int
+    xc: np.ndarray
+    xm: np.ndarray
+    Qx: np.ndarray
+    Vx: np.ndarray
+    pred_ptr: np.ndarray
+    pred_idx: np.ndarray
+    xqueue: np.ndarray
+    xinq: np.ndarray
+    v_max: float
+    sweep_tol: float
+    Vl: np.ndarray
+    floor: float
     state: np.ndarray
     episode: np.ndarray
     target: np.ndarray
@@ -219,7 +241,9 @@ class SMDPLockStepState(ScheduledAgents):
             self.intra, self.chained, self.Ql, self.tsum, self.tsq, self.succ0, self.lcb_z,
             self.flat_explore, self.prim_eps, self.rewarded, self.r_min,
             self.vr_on, self.vr_b0, self.vr_G, self.vr_g, self.ref_model,
-            self.Vref, self.state,
+            self.Vref, self.explore_m, self.xc, self.xm, self.Qx, self.Vx, self.pred_ptr,
+            self.pred_idx, self.xqueue, self.xinq, self.v_max, self.sweep_tol, self.Vl, self.floor,
+            self.state,
             self.episode,
             self.target, self.t_ep, self.d_ep, self.ret, self.dret, self.gpow, self.cur, self.s0,
             self.b0, self.G, self.g, self.alpha_ep, self.eps_ep, self.U, self.W, self.cursor,
@@ -244,7 +268,8 @@ def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, h
              check_on, threshold, min_visits, prim_opt, prim_adm, fired, intra, chained,
              Ql, tsum, tsq, succ0, lcb_z, flat_explore, prim_eps, rewarded, r_min,
              vr_on, vr_b0, vr_G, vr_g, ref_model,
-             Vref, state,
+             Vref, explore_m, xc, xm, Qx, Vx, pred_ptr, pred_idx, xqueue, xinq, v_max, sweep_tol,
+             Vl, floor, state,
              episode, target,
              t_ep,
              d_ep, ret, dret, gpow, cur, s0, b0, G, g, alpha_ep, eps_ep, U, W, cursor,
@@ -281,7 +306,10 @@ def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, h
                         if not prim_adm[s, a] or n < min_visits or n == 0:
                             continue
                         lb = Ql[k, s, a]
-                        if succ0[k, s, a] == -2 and n > 1:  # more than one successor seen
+                        if explore_m > 0:
+                            lb -= lcb_z * model_spread(k, s, a, terminal, indptr, indices, nf,
+                                                       xc, Vl)
+                        elif succ0[k, s, a] == -2 and n > 1:  # more than one successor seen
                             mean = tsum[k, s, a] / n
                             var = max(0.0, (tsq[k, s, a] - n * mean * mean) / (n - 1))
                             lb -= lcb_z * math.sqrt(var / n)
@@ -348,8 +376,11 @@ def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, h
                     vf = neg_inf
                     af = -1
                     for a in range(A):
-                        if prim_adm[s, a] and Qf[k, s, a] > vf:
-                            vf = Qf[k, s, a]
+                        if not prim_adm[s, a]:
+                            continue
+                        qa = Qx[k, s, a] if explore_m > 0 else Qf[k, s, a]
+                        if qa > vf:
+                            vf = qa
                             af = a
                     if af >= 0 and vf > Q[k, d, o_sel]:
                         o_sel = af  # the optimistic flat action beats the block's best
@@ -385,7 +416,14 @@ def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, h
                 tdf = watkins_target(Qf, k, s2, r, gamma, done)
                 old = Qf[k, s, a]
                 Qf[k, s, a] = old + alpha * (tdf - old)
-                if check_on:
+                if explore_m > 0:
+                    rmax_observe(k, s, a, s2, explore_m, v_max, sweep_tol, gamma, R, terminal,
+                                 indptr, indices, prim_adm, nf, xc, xm, Qx, Vx, pred_ptr,
+                                 pred_idx, xqueue, xinq)
+                if check_on and explore_m > 0:
+                    lower_sweep(k, s, floor, sweep_tol, gamma, R, terminal, indptr, indices,
+                                prim_adm, nf, xc, Ql, Vl, pred_ptr, pred_idx, xqueue, xinq)
+                elif check_on:
                     tdl = watkins_target(Ql, k, s2, r, gamma, done)
                     old = Ql[k, s, a]
                     Ql[k, s, a] = old + alpha * (tdl - old)

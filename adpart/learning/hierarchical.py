@@ -65,6 +65,19 @@ rule): a random option carries the agent to a subgoal of the *earlier* task, and
 28-block three-floor layer such jumps delayed the first arrival at the new goal from episodes 10-24
 to 53-103. Once a reward is found the options are explored too, which the layer's values need.
 
+**Directed exploration** (``explore_known = m > 0``, :mod:`adpart.learning._rmax`). Neither
+the optimistic flat table nor epsilon-exploration ever reached three-floor-arm ``deliver``'s goal
+(docs/hierarchical-learning.md). With ``m`` the agent counts each flat pair's successors and
+explores by R-max: at a greedy decision it takes the action of the optimistic model's optimum
+(an unknown pair, tried fewer than ``m`` times, worth the value ceiling) where that beats the
+block's best. The test's grounded values then come from the same counts: ``Q_low(s, a)`` is the
+optimum of the empirical model in which an untried pair is worth the floor ``r_min / (1 -
+gamma)``, re-planned incrementally after every step, and its lower confidence bound subtracts
+``lcb_z`` standard errors of the successors' values. On a deterministic MDP every tried pair's
+model is exact and an untried one is at the floor, so ``Q_low <= Q*`` as before; the Q-learning
+bound it replaces rose too slowly to be read (on arm ``deliver``, after 800 episodes, it was
+still at the floor in most route states).
+
 **Threshold.** Theorem 4.5 bounds ``||V* - V*_P||`` by ``2 (1 + gamma/(1-gamma) max(eps, delta))``;
 the seed uses it as the inconsistency threshold. The bound mixes units: with the seed's own
 ``epsilon = 10-20`` and ``gamma >= 0.9`` it is 180-360, above the whole value range of its tasks, so
@@ -337,6 +350,7 @@ def hierarchical_learning(
     intra_option: bool = False,
     refine: str = "state",
     primitive_exploration: str = "until-reward",
+    explore_known: int = 0,
 ) -> HierarchicalResult:
     """Learn ``mdp`` on a decision layer over ``options`` (section 4.3; module docstring).
 
@@ -381,6 +395,9 @@ def hierarchical_learning(
         primitive_exploration: when epsilon-exploration draws among the primitive actions
             alone: ``"until-reward"`` (until the run first collects a reward above ``r_min``),
             ``"always"`` or ``"never"`` (``inconsistency`` mode only).
+        explore_known: R-max's ``m`` (0: off; ``inconsistency`` mode with ``flat_explore``):
+            the flat action explored is the optimistic model's, a pair known after ``m`` tries,
+            and the test reads the grounded values of the empirical model (module docstring).
 
     Returns:
         A :class:`HierarchicalResult`.
@@ -394,6 +411,7 @@ def hierarchical_learning(
     if mode not in MODES:
         raise TaskError(f"mode = {mode!r}; choose one of {list(MODES)}")
     V = count(min_visits, "min_visits") if min_visits != 0 else 0
+    m_known = count(explore_known, "explore_known") if explore_known != 0 else 0
     if threshold is not None and not (isinstance(threshold, (int, float)) and threshold >= 0):
         raise TaskError(
             f"threshold = {threshold!r} must be a number >= 0 (or None for the default)")
@@ -460,6 +478,7 @@ def hierarchical_learning(
         r_min=reward_floor(mdp),
         block_values=layer_values(part0) if check and reference == "model" else None,
         state_values=state_values(part0) if check and reference == "offered" else None,
+        explore_known=m_known,
     )
     parts = [part0] * K
     events: list[dict[str, int]] = []
@@ -523,6 +542,7 @@ def hierarchical_learning(
         "lcb_z": float(lcb_z), "flat_explore": bool(flat_explore and mode == "inconsistency"),
         "test_reference": reference, "refine": refine,
         "primitive_exploration": primitive_exploration if check else "never",
+        "explore_known": m_known if flat_explore and mode == "inconsistency" else 0,
         "flat_lower_bound": lower,
         "min_visits": V, "alpha": alpha_s.to_dict(), "epsilon_greedy": eps_s.to_dict(),
         "max_steps_per_episode": H, "eval_every": M, "q_init": float(q_init),

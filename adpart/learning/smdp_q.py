@@ -44,6 +44,7 @@ import numpy as np
 from adpart.errors import ModelError
 from adpart.learning import _smdp_kernels as kernels
 from adpart.learning._kernels import resolve_kernel
+from adpart.learning._rmax import SWEEP_TOL, predecessors, value_ceiling
 from adpart.learning.curves import (
     LearningCurve,
     optimal_start_value,
@@ -166,6 +167,28 @@ def _reference_table(K: int, S: int, capacity: int, block_values: np.ndarray | N
     return np.zeros((K, capacity))
 
 
+def _rmax_arrays(mdp: FiniteMDP, K: int, m: int, horizon: int) -> dict[str, object]:
+    """The kernel's R-max model for K runs, all pairs unknown (placeholders when ``m = 0``)."""
+    S, A = mdp.n_states, mdp.n_actions
+    if m == 0:
+        one = np.zeros((1, 1), dtype=np.int64)
+        return {"explore_m": 0, "xc": one, "xm": one, "Qx": np.zeros((1, 1, 1)),
+                "Vx": np.zeros((1, 1)),
+                "pred_ptr": np.zeros(1, dtype=np.int64), "pred_idx": np.zeros(1, dtype=np.int64),
+                "xqueue": one, "xinq": np.zeros((1, 1), dtype=bool), "v_max": 0.0,
+                "sweep_tol": 0.0}
+    v_max = value_ceiling(mdp, horizon)
+    ptr, idx = predecessors(mdp)
+    nnz = mdp.sampler_arrays[2].size
+    return {"explore_m": m, "xc": np.zeros((K, nnz), dtype=np.int64),
+            "xm": np.zeros((K, nnz), dtype=np.int64),
+            "Qx": np.broadcast_to(np.where(mdp.admissible, v_max, -np.inf), (K, S, A)).copy(),
+            "Vx": np.broadcast_to(np.where(mdp.terminal, 0.0, v_max), (K, S)).copy(),
+            "pred_ptr": ptr, "pred_idx": idx, "xqueue": np.zeros((K, S), dtype=np.int64),
+            "xinq": np.zeros((K, S), dtype=bool), "v_max": v_max,
+            "sweep_tol": SWEEP_TOL * max(1.0, v_max)}
+
+
 def make_state(
     mdp: FiniteMDP, options: Sequence[Option], labels: np.ndarray, block_adm: np.ndarray,
     *, episodes: int, horizon: int, alpha: Schedule, epsilon: Schedule, q_init: float,
@@ -174,11 +197,14 @@ def make_state(
     lower_bound: float = -np.inf, lcb_z: float = 0.0, flat_explore: bool = False,
     primitive_epsilon: int = 0, r_min: float = np.inf,
     block_values: np.ndarray | None = None, state_values: np.ndarray | None = None,
+    explore_known: int = 0,
 ) -> kernels.SMDPLockStepState:
     """Kernel state for K runs on decision layers ``labels`` (K, S) / ``block_adm`` (K, B, O).
 
     The inconsistency test compares with ``block_values`` (B,) per block or ``state_values`` (S,)
-    per state when one is given (at most one), else with the block's learned values.
+    per state when one is given (at most one), else with the block's learned values. With
+    ``explore_known`` m > 0 (and ``flat_explore``) the flat action explored is R-max's, a pair
+    known after m tries (:mod:`adpart.learning._rmax`), instead of the optimistic flat table's.
     """
     if block_values is not None and state_values is not None:
         raise ValueError("give block_values or state_values, not both")
@@ -191,6 +217,7 @@ def make_state(
     Q = np.where(adm, float(q_init), -np.inf)
     flat_shape = (K, S, A) if track_flat else (K, 1, A)
     check = bool(track_flat and np.isfinite(threshold))
+    m_known = int(explore_known) if flat_explore and track_flat else 0
     Qf = np.where(mdp.admissible, float(q_init), -np.inf) if track_flat else np.zeros((1, A))
     st = kernels.SMDPLockStepState(
         keys=mdp.sampler_arrays[0],
@@ -230,6 +257,10 @@ def make_state(
         vr_g=np.ones((K, O)),
         ref_model=1 if block_values is not None else 2 if state_values is not None else 0,
         Vref=_reference_table(K, S, capacity, block_values, state_values),
+        **_rmax_arrays(mdp, K, m_known, horizon),
+        Vl=np.broadcast_to(np.where(mdp.terminal, 0.0, float(lower_bound)), (K, S)).copy()
+        if m_known and check else np.zeros((1, 1)),
+        floor=float(lower_bound),
         Ql=np.broadcast_to(np.where(mdp.admissible, float(lower_bound), -np.inf)
                            if check else np.zeros((1, A)), flat_shape if check else (1, 1, A)
                            ).copy(),

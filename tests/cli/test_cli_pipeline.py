@@ -237,3 +237,29 @@ def test_without_a_learned_first_task_only_the_reward_variation_modes_use_the_la
     stage = next(s for s in alone["stages"] if s["task"] == "goal:x=9,y=5")
     assert stage["stage"] == "fallback" and "is learned flat" in stage["detail"]["reason"]
     assert alone["tasks"][1]["learner"] == "flat-fallback"
+
+
+def test_directed_exploration_is_a_learner_option_and_a_bad_count_is_refused(tmp_path):
+    """``--hier-opt explore-known=M`` turns on R-max exploration (docs/hierarchical-learning.md);
+    a negative count is refused before the knowledge base is opened."""
+    kb_dir = tmp_path / "kb"
+    rmax = [*PIPELINE, "--hier-opt", "mode=inconsistency", "--kb", str(kb_dir), "--out",
+            str(tmp_path / "o"), "--json"]
+    bad = CliRunner().invoke(cli, [*rmax, "--hier-opt", "explore-known=-1"])
+    assert bad.exit_code == 2
+    assert bad.output.strip() == ("Error: --hier-opt: learner 'hierarchical': --explore-known "
+                                  "must be >= 0; got -1")
+    assert not kb_dir.exists()
+    res = CliRunner().invoke(cli, [*rmax, "--hier-opt", "explore-known=1"])
+    assert res.exit_code == 0, res.output
+    summary = json.loads(res.output)
+    assert summary["config"]["hierarchical_params"]["explore-known"] == "1"
+    layer = next(r for r in summary["tasks"] if r["learner"] == "hierarchical")
+    assert layer["runs_within_bound"] == layer["runs"] == 3
+    kb = KnowledgeBase.open(str(kb_dir))
+    try:
+        stage = next(s for s in summary["stages"] if s["stage"] == "learn-hierarchical")
+        run = kb.get("run", int(stage["result"].split(":")[1]))
+        assert run.provenance.parameters["explore_known"] == 1
+    finally:
+        kb.close()

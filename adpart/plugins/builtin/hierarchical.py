@@ -96,6 +96,9 @@ class HierarchicalLearner:
         Param("primitive-exploration", "str", "until-reward",
               "when epsilon-exploration draws among the primitive actions alone",
               choices=("until-reward", "always", "never")),
+        Param("explore-known", "int", 0,
+              "R-max: explore by the optimistic model of the flat pairs, a pair known after "
+              "this many tries, and test against its grounded model values (0: off)", min=0),
         ALPHA,
         EPSILON,
         MAX_STEPS,
@@ -107,11 +110,12 @@ class HierarchicalLearner:
                  threshold_scale: float = 0.025, lcb_z: float = 2.0, flat_explore: bool = True,
                  reference: str = "auto",
                  min_visits: int = 2, intra_option: bool = False, refine: str = "state",
-                 primitive_exploration: str = "until-reward",
+                 primitive_exploration: str = "until-reward", explore_known: int = 0,
                  alpha: str = "1/n^0.8", epsilon: str = "0.1", max_steps: int = 1000,
                  kernel: str = "auto") -> None:
         self.intra_option = bool(intra_option)
         self.refine, self.primitive_exploration = refine, primitive_exploration
+        self.explore_known = explore_known
         self.lcb_z, self.flat_explore = lcb_z, bool(flat_explore)
         self.reference = None if reference == "auto" else reference
         self.mode, self.delta, self.partition_epsilon = mode, delta, partition_epsilon
@@ -140,7 +144,7 @@ class HierarchicalLearner:
             episodes=episodes, seed=seed, alpha=self.alpha, epsilon_greedy=self.epsilon,
             max_steps_per_episode=self.max_steps, eval_every=eval_every, progress=progress,
             kernel=self.kernel, intra_option=self.intra_option, refine=self.refine,
-            primitive_exploration=self.primitive_exploration,
+            primitive_exploration=self.primitive_exploration, explore_known=self.explore_known,
         )
 
 

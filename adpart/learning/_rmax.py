@@ -1,0 +1,181 @@
+"""Directed exploration by R-max: an optimistic model learned from counts, planned incrementally.
+
+R-max (Brafman & Tennenholtz 2002) treats a state-action pair as *known* once it has been tried
+``m`` times; its model is then frozen at those ``m`` samples (the empirical successor
+distribution; the reward is the one paid on each try, the task's rewards being deterministic).
+An unknown pair is worth ``v_max``, a value no return can exceed. The agent acts greedily on the
+optimum ``Q_x`` of that optimistic model, so it is drawn to the nearest unknown pairs until it
+knows every pair it can reach, and then follows the empirical model's optimum. This is what
+finds a goal that is no subgoal when no option and no one-step optimism does
+(docs/hierarchical-learning.md, three-floor-arm ``deliver``).
+
+Planning is incremental (prioritized sweeping without priorities, Moore & Atkeson 1993): the model
+changes only when a pair becomes known, and then :func:`rmax_sweep` re-backs-up that pair's
+state and, while a state's value moves by more than ``tol``, its predecessors, in FIFO order.
+The predecessor lists (:func:`predecessors`) are read from the task's transition support: they
+only say which states to back up again (a state whose known pairs never led to ``x`` gets the
+same value back), so a superset of the observed predecessors changes the work, not the values.
+
+Arrays, per run ``k``: ``xc[k, j]`` counts the samples of CSR entry ``j`` (successor
+``indices[j]`` of row ``a*S + s``), ``xm[k, j]`` those taken while the pair was unknown (R-max's
+frozen model); :func:`lower_sweep` plans on ``xc``, the grounded model of every sample;
+``Qx`` (K, S, A) and ``Vx`` (K, S) the optimistic model's values; ``Ql`` and ``Vl`` the grounded
+one's; ``queue`` (K, S) and ``inq`` (K, S) the sweeps' FIFO.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from adpart.mdp._sampling import compiled
+from adpart.mdp.model import FiniteMDP
+
+#: The sweep's tolerance, as a fraction of ``max(1, v_max)``: a value that moves by less is
+#: not propagated to its predecessors.
+SWEEP_TOL = 1e-7
+
+
+def value_ceiling(mdp: FiniteMDP, horizon: int) -> float:
+    """``v_max``: ``max(R, 0) / (1 - gamma)``, or ``max(R, 0) * horizon`` when ``gamma = 1``."""
+    top = max(float(np.max(np.where(mdp.admissible, mdp.R, -np.inf))), 0.0)
+    return top / (1.0 - mdp.gamma) if mdp.gamma < 1.0 else top * horizon
+
+
+def predecessors(mdp: FiniteMDP) -> tuple[np.ndarray, np.ndarray]:
+    """CSR ``(ptr, idx)`` of each state's predecessors in the transition support (sorted)."""
+    _, indptr, indices = mdp.sampler_arrays
+    S = mdp.n_states
+    rows = np.repeat(np.arange(indptr.size - 1), np.diff(indptr))
+    pairs = np.unique(indices.astype(np.int64) * S + rows % S)
+    dst, src = np.divmod(pairs, S)
+    ptr = np.zeros(S + 1, dtype=np.int64)
+    np.cumsum(np.bincount(dst, minlength=S), out=ptr[1:])
+    return ptr, src.astype(np.int64)
+
+
+@compiled
+def model_backup(k, x, a, n, gamma, R, terminal, indptr, indices, xc, V):  # pragma: no cover
+    """``R(x, a) + gamma sum_s' p^(s' | x, a) V[k, s']`` on run ``k``'s empirical model, whose
+    ``n`` samples of ``(x, a)`` are counted in ``xc[k]``."""
+    S = R.shape[0]
+    row = a * S + x
+    tot = 0.0
+    for j in range(indptr[row], indptr[row + 1]):
+        c = xc[k, j]
+        if c > 0 and not terminal[indices[j]]:
+            tot += c * V[k, indices[j]]
+    return R[x, a] + gamma * tot / n
+
+
+@compiled
+def model_spread(k, x, a, terminal, indptr, indices, nf, xc, V):  # pragma: no cover
+    """The standard error of ``V[k, s']`` over run ``k``'s samples of ``(x, a)`` (0 below 2)."""
+    S = V.shape[1]
+    n = nf[k, x, a]
+    if n < 2:
+        return 0.0
+    row = a * S + x
+    mean = 0.0
+    for j in range(indptr[row], indptr[row + 1]):
+        if xc[k, j] > 0 and not terminal[indices[j]]:
+            mean += xc[k, j] * V[k, indices[j]]
+    mean /= n
+    var = 0.0
+    for j in range(indptr[row], indptr[row + 1]):
+        if xc[k, j] > 0:
+            v = 0.0 if terminal[indices[j]] else V[k, indices[j]]
+            var += xc[k, j] * (v - mean) * (v - mean)
+    return math.sqrt(var / (n - 1) / n)
+
+
+@compiled
+def lower_sweep(k, x0, floor, tol, gamma, R, terminal, indptr, indices, prim_adm, nf, xc, Ql, Vl,
+                pred_ptr, pred_idx, queue, inq):  # pragma: no cover - compiled
+    """Re-plan run ``k``'s grounded model values after a step from ``x0``: a tried pair is
+    worth its empirical backup, an untried one ``floor``."""
+    S = R.shape[0]
+    A = R.shape[1]
+    head = 0
+    size = 1
+    queue[k, 0] = x0
+    inq[k, x0] = True
+    while size > 0:
+        x = queue[k, head]
+        head = (head + 1) % S
+        size -= 1
+        inq[k, x] = False
+        best = -math.inf
+        for a in range(A):
+            if not prim_adm[x, a]:
+                continue
+            q = floor
+            if nf[k, x, a] > 0:
+                q = model_backup(k, x, a, nf[k, x, a], gamma, R, terminal, indptr, indices, xc,
+                                 Vl)
+            Ql[k, x, a] = q
+            best = max(best, q)
+        if abs(best - Vl[k, x]) > tol:
+            Vl[k, x] = best
+            for i in range(pred_ptr[x], pred_ptr[x + 1]):
+                p = pred_idx[i]
+                if not inq[k, p] and not terminal[p]:
+                    queue[k, (head + size) % S] = p
+                    inq[k, p] = True
+                    size += 1
+
+
+@compiled
+def rmax_sweep(k, x0, m, v_max, tol, gamma, R, terminal, indptr, indices, prim_adm, nf, xm,
+               Qx, Vx, pred_ptr, pred_idx, queue, inq):  # pragma: no cover - compiled
+    """Re-plan run ``k`` after a pair of state ``x0`` became known (module docstring)."""
+    S = R.shape[0]
+    A = R.shape[1]
+    head = 0
+    size = 1
+    queue[k, 0] = x0
+    inq[k, x0] = True
+    while size > 0:
+        x = queue[k, head]
+        head = (head + 1) % S
+        size -= 1
+        inq[k, x] = False
+        best = -math.inf
+        for a in range(A):
+            if not prim_adm[x, a]:
+                continue
+            if nf[k, x, a] < m:
+                q = v_max
+            else:
+                q = model_backup(k, x, a, m, gamma, R, terminal, indptr, indices, xm, Vx)
+            Qx[k, x, a] = q
+            best = max(best, q)
+        if abs(best - Vx[k, x]) > tol:
+            Vx[k, x] = best
+            for i in range(pred_ptr[x], pred_ptr[x + 1]):
+                p = pred_idx[i]
+                if not inq[k, p] and not terminal[p]:
+                    queue[k, (head + size) % S] = p
+                    inq[k, p] = True
+                    size += 1
+
+
+@compiled
+def rmax_observe(k, s, a, s2, m, v_max, tol, gamma, R, terminal, indptr, indices, prim_adm, nf,
+                 xc, xm, Qx, Vx, pred_ptr, pred_idx, queue, inq):  # pragma: no cover - compiled
+    """Record the step ``(s, a) -> s2`` of run ``k`` (``nf`` already counts it): count the
+    successor in ``xc``, and in ``xm`` while the pair is unknown; re-plan when this try makes
+    it known."""
+    S = R.shape[0]
+    row = a * S + s
+    n = nf[k, s, a]
+    for j in range(indptr[row], indptr[row + 1]):
+        if indices[j] == s2:
+            xc[k, j] += 1
+            if n <= m:
+                xm[k, j] += 1
+            break
+    if n == m:
+        rmax_sweep(k, s, m, v_max, tol, gamma, R, terminal, indptr, indices, prim_adm, nf, xm,
+                   Qx, Vx, pred_ptr, pred_idx, queue, inq)

@@ -1,0 +1,149 @@
+"""Directed exploration by R-max and the grounded model values (``adpart.learning._rmax``).
+
+The oracles are independent value iterations, in numpy, of the models the counts define: R-max's
+optimistic model (an unknown pair worth the ceiling, a known one its first ``m`` samples) and the
+grounded one (an untried pair worth the floor, a tried one all its samples).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from adpart.errors import TaskError
+from adpart.learning._rmax import lower_sweep, predecessors, rmax_observe, value_ceiling
+from adpart.learning.hierarchical import flat_lower_bound, hierarchical_learning
+from adpart.mdp.model import FiniteMDP
+from adpart.mdp.solvers import solve
+
+from .test_hierarchical import DELTA, SETTINGS, final_gap, goal_grid, setup  # noqa: F401
+
+TOL = 1e-11
+
+
+def random_mdp(seed: int, S: int = 7, A: int = 3, *, deterministic: bool = False) -> FiniteMDP:
+    rng = np.random.default_rng(seed)
+    P = np.zeros((S, A, S))
+    for s in range(S):
+        for a in range(A):
+            if deterministic:
+                P[s, a, rng.integers(S)] = 1.0
+            else:
+                support = rng.choice(S, size=rng.integers(1, 4), replace=False)
+                P[s, a, support] = rng.dirichlet(np.ones(support.size))
+    R = rng.uniform(-1.0, 0.0, size=(S, A))
+    terminal = np.zeros(S, dtype=bool)
+    terminal[S - 1] = True
+    R[:, 0] = np.where(P[:, 0, S - 1] > 0, 1.0, R[:, 0])
+    return FiniteMDP.from_dense(P, R, 0.9, terminal=terminal)
+
+
+def empirical_values(mdp: FiniteMDP, counts: np.ndarray, n: np.ndarray, unknown: np.ndarray,
+                     unknown_value: float) -> np.ndarray:
+    """Q of the model ``counts / n`` (per CSR entry), ``unknown`` pairs at ``unknown_value``."""
+    _, indptr, indices = mdp.sampler_arrays
+    S, A = mdp.n_states, mdp.n_actions
+    rows = np.repeat(np.arange(S * A), np.diff(indptr))
+    P = np.zeros((S * A, S))
+    np.add.at(P, (rows, indices), counts)
+    P /= np.maximum(n.T.reshape(-1), 1)[:, None]
+    P = P.reshape(A, S, S).transpose(1, 0, 2)
+    V = np.zeros(S)
+    for _ in range(5000):
+        Q = np.where(unknown, unknown_value, mdp.R + mdp.gamma * P @ np.where(mdp.terminal, 0, V))
+        Q = np.where(mdp.admissible, Q, -np.inf)
+        V_new = np.where(mdp.terminal, 0.0, Q.max(axis=1))
+        if np.max(np.abs(V_new - V)) < 1e-13:
+            break
+        V = V_new
+    return Q
+
+
+def observe(mdp: FiniteMDP, m: int, steps: int, seed: int) -> dict[str, np.ndarray]:
+    """Feed ``steps`` sampled transitions of random non-terminal pairs to both planners."""
+    rng = np.random.default_rng(seed)
+    _, indptr, indices = mdp.sampler_arrays
+    S, A = mdp.n_states, mdp.n_actions
+    ptr, idx = predecessors(mdp)
+    v_max, floor = value_ceiling(mdp, 100), flat_lower_bound(mdp, 100)
+    a_ = {"nf": np.zeros((1, S, A), np.int64), "xc": np.zeros((1, indices.size), np.int64),
+          "xm": np.zeros((1, indices.size), np.int64),
+          "Qx": np.where(mdp.admissible, v_max, -np.inf)[None].copy(),
+          "Vx": np.where(mdp.terminal, 0.0, v_max)[None].copy(),
+          "Ql": np.where(mdp.admissible, floor, -np.inf)[None].copy(),
+          "Vl": np.where(mdp.terminal, 0.0, floor)[None].copy()}
+    queue, inq = np.zeros((1, S), np.int64), np.zeros((1, S), bool)
+    adm = np.ascontiguousarray(mdp.admissible)
+    R = np.ascontiguousarray(mdp.R)
+    live = np.flatnonzero(~mdp.terminal)
+    for _ in range(steps):
+        s, a = int(rng.choice(live)), int(rng.integers(A))
+        s2 = int(mdp.sample_next(np.array([s]), np.array([a]), rng)[0])
+        a_["nf"][0, s, a] += 1
+        rmax_observe(0, s, a, s2, m, v_max, TOL, mdp.gamma, R, mdp.terminal, indptr, indices,
+                     adm, a_["nf"], a_["xc"], a_["xm"], a_["Qx"], a_["Vx"], ptr, idx, queue, inq)
+        lower_sweep(0, s, floor, TOL, mdp.gamma, R, mdp.terminal, indptr, indices, adm,
+                    a_["nf"], a_["xc"], a_["Ql"], a_["Vl"], ptr, idx, queue, inq)
+    return {**a_, "v_max": v_max, "floor": floor}
+
+
+@given(seed=st.integers(0, 2**16), deterministic=st.booleans())
+@settings(max_examples=20, deadline=None)
+def test_predecessors_are_the_support_read_backwards(seed, deterministic):
+    mdp = random_mdp(seed, deterministic=deterministic)
+    ptr, idx = predecessors(mdp)
+    P = mdp.P.toarray().reshape(mdp.n_actions, mdp.n_states, mdp.n_states)
+    for y in range(mdp.n_states):
+        assert idx[ptr[y]:ptr[y + 1]].tolist() == np.flatnonzero(P[:, :, y].any(axis=0)).tolist()
+
+
+@given(seed=st.integers(0, 2**16), m=st.integers(1, 4), steps=st.integers(0, 150))
+@settings(max_examples=25, deadline=None)
+def test_the_incremental_plans_are_the_optima_of_the_models_the_counts_define(seed, m, steps):
+    mdp = random_mdp(seed)
+    got = observe(mdp, m, steps, seed + 1)
+    n = got["nf"][0]
+    live = ~mdp.terminal[:, None] & mdp.admissible
+    optimistic = empirical_values(mdp, got["xm"][0], np.minimum(n, m), n < m, got["v_max"])
+    grounded = empirical_values(mdp, got["xc"][0], n, n == 0, got["floor"])
+    np.testing.assert_allclose(got["Qx"][0][live], optimistic[live], atol=1e-8)
+    np.testing.assert_allclose(got["Ql"][0][live], grounded[live], atol=1e-8)
+    assert (got["xm"][0].sum() == np.minimum(n, m).sum()) and got["xc"][0].sum() == steps
+
+
+@given(seed=st.integers(0, 2**16), steps=st.integers(0, 200))
+@settings(max_examples=25, deadline=None)
+def test_on_a_deterministic_mdp_the_grounded_values_never_exceed_q_star(seed, steps):
+    mdp = random_mdp(seed, deterministic=True)
+    got = observe(mdp, 1, steps, seed + 1)
+    V = solve(mdp, 1e-12).V
+    Q_star = mdp.R + mdp.gamma * (mdp.P @ np.where(mdp.terminal, 0.0, V)).reshape(
+        mdp.n_actions, mdp.n_states).T
+    live = ~mdp.terminal[:, None] & mdp.admissible
+    assert (got["Ql"][0][live] <= Q_star[live] + 1e-9).all()
+
+
+def test_with_directed_exploration_refinement_reaches_the_goal_and_kernels_agree(setup):  # noqa: F811
+    mdp, opts, part, _ = setup
+    kw = dict(SETTINGS, episodes=300, explore_known=1)
+    on = hierarchical_learning(mdp, opts, part, **kw)
+    off = hierarchical_learning(mdp, opts, part, threshold=np.inf, **kw)
+    np.testing.assert_allclose(final_gap(off), off.v_star_start)  # still never arrives
+    assert (on.n_refinements > 0).all()
+    assert (final_gap(on) <= 0.05 * on.v_star_start).all()
+    assert on.parameters["explore_known"] == 1
+    small = dict(kw, runs=2, episodes=60, eval_every=20)
+    a = hierarchical_learning(mdp, opts, part, kernel="numba", **small)
+    b = hierarchical_learning(mdp, opts, part, kernel="python", **small)
+    np.testing.assert_array_equal(a.Q, b.Q)
+    np.testing.assert_array_equal(a.Q_flat, b.Q_flat)
+    assert a.refinements == b.refinements
+
+
+@pytest.mark.parametrize("bad", [-1, 1.5, True])
+def test_a_bad_known_count_is_refused(setup, bad):  # noqa: F811
+    mdp, opts, part, _ = setup
+    with pytest.raises(TaskError, match="explore_known"):
+        hierarchical_learning(mdp, opts, part, explore_known=bad, **SETTINGS)
