@@ -73,6 +73,16 @@ def test_three_floor_arm_quick_and_resume(tmp_path):
     report, files = _run("three-floor-arm", tmp_path, kb=kb)
     _check_common(report, files, tmp_path, 3600)
     assert report.data["settings"]["detector"] == "count-mc"
+    # the directed-exploration pair: the unrefined layer cannot reach deliver's goal whatever
+    # its values (its exact best block policy never arrives); no layer beats V*
+    directed = report.data["directed_exploration"]
+    rows = {r["learner"]: r for r in report.data["rows"]}
+    off, on = directed["partition, no refinement, R-max"], directed["partition, refinement, R-max"]
+    never = rows["flat Q"]["v_star_start"] + 1 / (1 - 0.99)
+    assert off["refinements"] == [0, 0]
+    np.testing.assert_allclose(off["layer_optimum_gap"], never, atol=1e-6)
+    assert all(-1e-9 <= g <= never + 1e-6 for g in on["layer_optimum_gap"])
+    assert {"partition, no refinement, R-max", "partition, refinement, R-max"} <= set(rows)
     # a rerun on the same knowledge base recomputes none of the pipeline's stages
     again, _ = _run("three-floor-arm", tmp_path, kb=kb)
     assert all(s["reused"] for s in again.data["pipeline"]["stages"])
