@@ -10,7 +10,7 @@ finds a goal that is no subgoal when no option and no one-step optimism does
 (docs/hierarchical-learning.md, three-floor-arm ``deliver``).
 
 Planning is incremental (prioritized sweeping without priorities, Moore & Atkeson 1993): the model
-changes only when a pair becomes known, and then :func:`rmax_sweep` re-backs-up that pair's
+changes only when a pair becomes known, and then :func:`sweep` re-backs-up that pair's
 state and, while a state's value moves by more than ``tol``, its predecessors, in FIFO order.
 The predecessor lists (:func:`predecessors`) are read from the task's transition support: they
 only say which states to back up again (a state whose known pairs never led to ``x`` gets the
@@ -18,7 +18,7 @@ same value back), so a superset of the observed predecessors changes the work, n
 
 Arrays, per run ``k``: ``xc[k, j]`` counts the samples of CSR entry ``j`` (successor
 ``indices[j]`` of row ``a*S + s``), ``xm[k, j]`` those taken while the pair was unknown (R-max's
-frozen model); :func:`lower_sweep` plans on ``xc``, the grounded model of every sample;
+frozen model); the grounded values plan on ``xc``, the grounded model of every sample;
 ``Qx`` (K, S, A) and ``Vx`` (K, S) the optimistic model's values; ``Ql`` and ``Vl`` the grounded
 one's; ``queue`` (K, S) and ``inq`` (K, S) the sweeps' FIFO.
 """
@@ -91,10 +91,13 @@ def model_spread(k, x, a, terminal, indptr, indices, nf, xc, V):  # pragma: no c
 
 
 @compiled
-def lower_sweep(k, x0, floor, tol, gamma, R, terminal, indptr, indices, prim_adm, nf, xc, Ql, Vl,
-                pred_ptr, pred_idx, queue, inq):  # pragma: no cover - compiled
-    """Re-plan run ``k``'s grounded model values after a step from ``x0``: a tried pair is
-    worth its empirical backup, an untried one ``floor``."""
+def sweep(k, x0, m, unknown, frozen, tol, gamma, R, terminal, indptr, indices, prim_adm, nf, xc,
+          Q, V, pred_ptr, pred_idx, queue, inq):  # pragma: no cover - compiled
+    """Re-plan run ``k``'s values ``Q``/``V`` of a count model after the model of a pair of
+    ``x0`` changed (module docstring). A pair tried fewer than ``m`` times is worth ``unknown``;
+    a known one its backup on the successor counts ``xc``, over its first ``m`` samples when
+    ``frozen`` (R-max: ``m``, ``v_max``, ``xm``), over all of them otherwise (the grounded values:
+    ``m = 1``, the floor, ``xc``)."""
     S = R.shape[0]
     A = R.shape[1]
     head = 0
@@ -110,49 +113,15 @@ def lower_sweep(k, x0, floor, tol, gamma, R, terminal, indptr, indices, prim_adm
         for a in range(A):
             if not prim_adm[x, a]:
                 continue
-            q = floor
-            if nf[k, x, a] > 0:
-                q = model_backup(k, x, a, nf[k, x, a], gamma, R, terminal, indptr, indices, xc,
-                                 Vl)
-            Ql[k, x, a] = q
+            n = nf[k, x, a]
+            q = unknown
+            if n >= m:
+                q = model_backup(k, x, a, m if frozen else n, gamma, R, terminal, indptr, indices,
+                                 xc, V)
+            Q[k, x, a] = q
             best = max(best, q)
-        if abs(best - Vl[k, x]) > tol:
-            Vl[k, x] = best
-            for i in range(pred_ptr[x], pred_ptr[x + 1]):
-                p = pred_idx[i]
-                if not inq[k, p] and not terminal[p]:
-                    queue[k, (head + size) % S] = p
-                    inq[k, p] = True
-                    size += 1
-
-
-@compiled
-def rmax_sweep(k, x0, m, v_max, tol, gamma, R, terminal, indptr, indices, prim_adm, nf, xm,
-               Qx, Vx, pred_ptr, pred_idx, queue, inq):  # pragma: no cover - compiled
-    """Re-plan run ``k`` after a pair of state ``x0`` became known (module docstring)."""
-    S = R.shape[0]
-    A = R.shape[1]
-    head = 0
-    size = 1
-    queue[k, 0] = x0
-    inq[k, x0] = True
-    while size > 0:
-        x = queue[k, head]
-        head = (head + 1) % S
-        size -= 1
-        inq[k, x] = False
-        best = -math.inf
-        for a in range(A):
-            if not prim_adm[x, a]:
-                continue
-            if nf[k, x, a] < m:
-                q = v_max
-            else:
-                q = model_backup(k, x, a, m, gamma, R, terminal, indptr, indices, xm, Vx)
-            Qx[k, x, a] = q
-            best = max(best, q)
-        if abs(best - Vx[k, x]) > tol:
-            Vx[k, x] = best
+        if abs(best - V[k, x]) > tol:
+            V[k, x] = best
             for i in range(pred_ptr[x], pred_ptr[x + 1]):
                 p = pred_idx[i]
                 if not inq[k, p] and not terminal[p]:
@@ -177,5 +146,5 @@ def rmax_observe(k, s, a, s2, m, v_max, tol, gamma, R, terminal, indptr, indices
                 xm[k, j] += 1
             break
     if n == m:
-        rmax_sweep(k, s, m, v_max, tol, gamma, R, terminal, indptr, indices, prim_adm, nf, xm,
-                   Qx, Vx, pred_ptr, pred_idx, queue, inq)
+        sweep(k, s, m, v_max, True, tol, gamma, R, terminal, indptr, indices, prim_adm, nf, xm,
+              Qx, Vx, pred_ptr, pred_idx, queue, inq)

@@ -97,7 +97,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from adpart.learning._kernels import ScheduledAgents, njit_lazily
-from adpart.learning._rmax import lower_sweep, model_spread, rmax_observe
+from adpart.learning._rmax import model_spread, rmax_observe, sweep
 from adpart.mdp._sampling import compiled, first_above, successor
 
 #: Uniforms per agent-step in the main stream (explore?, which option, successor, next start).
@@ -421,8 +421,8 @@ def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, h
                                  indptr, indices, prim_adm, nf, xc, xm, Qx, Vx, pred_ptr,
                                  pred_idx, xqueue, xinq)
                 if check_on and explore_m > 0:
-                    lower_sweep(k, s, floor, sweep_tol, gamma, R, terminal, indptr, indices,
-                                prim_adm, nf, xc, Ql, Vl, pred_ptr, pred_idx, xqueue, xinq)
+                    sweep(k, s, 1, floor, False, sweep_tol, gamma, R, terminal, indptr, indices,
+                          prim_adm, nf, xc, Ql, Vl, pred_ptr, pred_idx, xqueue, xinq)
                 elif check_on:
                     tdl = watkins_target(Ql, k, s2, r, gamma, done)
                     old = Ql[k, s, a]

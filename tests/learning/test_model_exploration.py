@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from adpart.errors import TaskError
-from adpart.learning._rmax import lower_sweep, predecessors, rmax_observe, value_ceiling
+from adpart.learning._rmax import predecessors, rmax_observe, sweep, value_ceiling
 from adpart.learning.hierarchical import flat_lower_bound, hierarchical_learning
 from adpart.mdp.model import FiniteMDP
 from adpart.mdp.solvers import solve
@@ -84,8 +84,8 @@ def observe(mdp: FiniteMDP, m: int, steps: int, seed: int) -> dict[str, np.ndarr
         a_["nf"][0, s, a] += 1
         rmax_observe(0, s, a, s2, m, v_max, TOL, mdp.gamma, R, mdp.terminal, indptr, indices,
                      adm, a_["nf"], a_["xc"], a_["xm"], a_["Qx"], a_["Vx"], ptr, idx, queue, inq)
-        lower_sweep(0, s, floor, TOL, mdp.gamma, R, mdp.terminal, indptr, indices, adm,
-                    a_["nf"], a_["xc"], a_["Ql"], a_["Vl"], ptr, idx, queue, inq)
+        sweep(0, s, 1, floor, False, TOL, mdp.gamma, R, mdp.terminal, indptr, indices, adm,
+              a_["nf"], a_["xc"], a_["Ql"], a_["Vl"], ptr, idx, queue, inq)
     return {**a_, "v_max": v_max, "floor": floor}
 
 
