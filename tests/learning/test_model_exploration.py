@@ -134,6 +134,14 @@ def test_with_directed_exploration_refinement_reaches_the_goal_and_kernels_agree
     assert (on.n_refinements > 0).all()
     assert (final_gap(on) <= 0.05 * on.v_star_start).all()
     assert on.parameters["explore_known"] == 1
+    # exploration is R-max's: the layer starts at the lower bound, not at optimistic zeros
+    costly = mdp.with_rewards(mdp.R - 0.1)  # a step costs 0.1: the bound is -0.1 / (1 - 0.9)
+    quick = dict(SETTINGS, episodes=1, runs=1)
+    assert hierarchical_learning(costly, opts, part, explore_known=1, **quick
+                                 ).parameters["q_init"] == pytest.approx(-0.1 / (1 - 0.9))
+    assert hierarchical_learning(costly, opts, part, **quick).parameters["q_init"] == 0.0
+    assert hierarchical_learning(costly, opts, part, explore_known=1, q_init=-3.0, **quick
+                                 ).parameters["q_init"] == -3.0
     small = dict(kw, runs=2, episodes=60, eval_every=20)
     a = hierarchical_learning(mdp, opts, part, kernel="numba", **small)
     b = hierarchical_learning(mdp, opts, part, kernel="python", **small)
