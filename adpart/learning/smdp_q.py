@@ -167,8 +167,10 @@ def _reference_table(K: int, S: int, capacity: int, block_values: np.ndarray | N
     return np.zeros((K, capacity))
 
 
-def _rmax_arrays(mdp: FiniteMDP, K: int, m: int, horizon: int) -> dict[str, object]:
-    """The kernel's R-max model for K runs, all pairs unknown (placeholders when ``m = 0``)."""
+def _rmax_arrays(mdp: FiniteMDP, K: int, m: int, horizon: int, *, floor: float,
+                 grounded: bool) -> dict[str, object]:
+    """The kernel's count model for K runs, all pairs unknown: R-max's plan and, when the test
+    is on (``grounded``), the grounded values ``Vl`` at ``floor`` (placeholders when ``m = 0``)."""
     S, A = mdp.n_states, mdp.n_actions
     if m == 0:
         one = np.zeros((1, 1), dtype=np.int64)
@@ -176,7 +178,7 @@ def _rmax_arrays(mdp: FiniteMDP, K: int, m: int, horizon: int) -> dict[str, obje
                 "Vx": np.zeros((1, 1)),
                 "pred_ptr": np.zeros(1, dtype=np.int64), "pred_idx": np.zeros(1, dtype=np.int64),
                 "xqueue": one, "xinq": np.zeros((1, 1), dtype=bool), "v_max": 0.0,
-                "sweep_tol": 0.0}
+                "sweep_tol": 0.0, "Vl": np.zeros((1, 1)), "floor": floor}
     v_max = value_ceiling(mdp, horizon)
     ptr, idx = predecessors(mdp)
     nnz = mdp.sampler_arrays[2].size
@@ -186,7 +188,9 @@ def _rmax_arrays(mdp: FiniteMDP, K: int, m: int, horizon: int) -> dict[str, obje
             "Vx": np.broadcast_to(np.where(mdp.terminal, 0.0, v_max), (K, S)).copy(),
             "pred_ptr": ptr, "pred_idx": idx, "xqueue": np.zeros((K, S), dtype=np.int64),
             "xinq": np.zeros((K, S), dtype=bool), "v_max": v_max,
-            "sweep_tol": SWEEP_TOL * max(1.0, v_max)}
+            "sweep_tol": SWEEP_TOL * max(1.0, v_max), "floor": floor,
+            "Vl": np.broadcast_to(np.where(mdp.terminal, 0.0, floor), (K, S)).copy()
+            if grounded else np.zeros((1, 1))}
 
 
 def make_state(
@@ -257,10 +261,7 @@ def make_state(
         vr_g=np.ones((K, O)),
         ref_model=1 if block_values is not None else 2 if state_values is not None else 0,
         Vref=_reference_table(K, S, capacity, block_values, state_values),
-        **_rmax_arrays(mdp, K, m_known, horizon),
-        Vl=np.broadcast_to(np.where(mdp.terminal, 0.0, float(lower_bound)), (K, S)).copy()
-        if m_known and check else np.zeros((1, 1)),
-        floor=float(lower_bound),
+        **_rmax_arrays(mdp, K, m_known, horizon, floor=float(lower_bound), grounded=check),
         Ql=np.broadcast_to(np.where(mdp.admissible, float(lower_bound), -np.inf)
                            if check else np.zeros((1, A)), flat_shape if check else (1, 1, A)
                            ).copy(),
