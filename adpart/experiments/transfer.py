@@ -346,12 +346,16 @@ def three_floor_arm(config: ExperimentConfig) -> ExperimentReport:
     _finish(config, setup, report, ctx,
             "Seed: refinement converges, no refinement does not; blocks grow with refinement.")
     _report_directed(report, ctx)
+    _report_sample_limit(report, ctx, CE_SAMPLES if not config.quick else CE_SAMPLES[::2],
+                         draws=b["runs"], seed=config.seed)
     return report
 
 
 #: R-max's known count for the arm's directed-exploration learners (3 tries, as in the flat R-max
 #: measurement of docs/hierarchical-learning.md that first delivered).
 ARM_KNOWN = 3
+#: Tries of every pair in the certainty-equivalence limit (:func:`certainty_equivalence_gaps`).
+CE_SAMPLES = (3, 10, 30, 100)
 DIRECTED = ("partition, no refinement, R-max", "partition, refinement, R-max")
 
 
@@ -387,6 +391,63 @@ def layer_optimum_gaps(result: Any, mdp: Any, options: list[Any], models: list[A
     best = np.array([solve(point_model(p, smdp), 1e-8).policy[p.labels]
                      for p in result.partitions])
     return result.v_star_start - start_values(smdp, best, mu)
+
+
+def certainty_equivalence_gaps(mdp: Any, samples: tuple[int, ...], *, draws: int, seed: int
+                               ) -> dict[int, np.ndarray]:
+    """For each count ``n``, the exact start-value gap of the optimal policy of ``draws``
+    empirical models with ``n`` successors drawn for every pair
+    (:func:`~adpart.mdp.generate.empirical_model`): what planning on counts can reach after ``n``
+    tries of every pair, whatever the exploration (a generative model is its best case)."""
+    from adpart.learning.curves import start_distribution, start_values
+    from adpart.mdp.generate import empirical_model
+    from adpart.mdp.solvers import solve
+
+    mu, smdp = start_distribution(mdp), mdp.as_smdp()
+    v_star = float(mu @ solve(mdp, 1e-10).V)
+    rng = np.random.default_rng(seed)
+    gaps = {}
+    for n in samples:
+        policies = np.array([solve(empirical_model(mdp, n, rng), 1e-10).policy
+                             for _ in range(draws)])
+        gaps[n] = v_star - start_values(smdp, policies, mu)
+    return gaps
+
+
+def grounded_policy_gaps(result: Any, mdp: Any) -> np.ndarray | None:
+    """Per run, the gap of the greedy flat policy of the learner's grounded values: the
+    certainty-equivalent policy of the samples it collected (``None`` if it kept none)."""
+    from adpart.learning.curves import start_distribution, start_values
+    from adpart.mdp.evaluation import greedy_policy
+
+    if result.Q_grounded is None:
+        return None
+    K, S, A = result.Q_grounded.shape
+    policies = greedy_policy(result.Q_grounded.reshape(K * S, A)).reshape(K, S)
+    return result.v_star_start - start_values(mdp.as_smdp(), policies, start_distribution(mdp))
+
+
+def _report_sample_limit(report: ExperimentReport, ctx: dict[str, Any], samples: tuple[int, ...],
+                         *, draws: int, seed: int) -> None:
+    """How many tries of every pair a policy planned on counts needs to be within the bound, set
+    beside the certainty-equivalent policy of the refinement learner's own samples."""
+    mdp = ctx["mdp"]
+    result = ctx["results"][DIRECTED[1].removeprefix("partition, ")]
+    bound = GAP_FRACTION * abs(result.v_star_start)
+    limit = certainty_equivalence_gaps(mdp, samples, draws=draws, seed=seed)
+    own = grounded_policy_gaps(result, mdp)
+    per_n = "; ".join(f"{n} tries: median {np.median(g):.3g}, within {int(np.sum(g <= bound))}/"
+                      f"{g.size}" for n, g in limit.items())
+    pairs = int((mdp.admissible & ~mdp.terminal[:, None]).sum())
+    report.findings.append(
+        f"Sample limit: the optimal policy of an empirical model with n tries of each of the "
+        f"{pairs:,} pairs is this far below V* ({per_n}; bound {bound:.3g}). The "
+        f"certainty-equivalent flat policy of the {DIRECTED[1]} learner's own samples: median "
+        f"{np.median(own):.3g}, within the bound in {int(np.sum(own <= bound))}/{own.size} runs.")
+    report.data["sample_limit"] = {"samples_per_pair": list(limit),
+                                   "gaps": [g.tolist() for g in limit.values()],
+                                   "learner_samples_gap": own.tolist(), "bound": bound,
+                                   "pairs": pairs}
 
 
 def _report_directed(report: ExperimentReport, ctx: dict[str, Any]) -> None:

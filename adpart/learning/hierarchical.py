@@ -173,6 +173,9 @@ class HierarchicalResult(LearnResult):
         block_Q: per run, the ``(B_k, O)`` block values.
         partitions: per run, the final decision layer.
         Q_flat: ``(K, S, A)`` the flat values learned beside it.
+        Q_grounded: ``(K, S, A)`` the grounded flat values the test read (with ``explore_known``
+            the optimum of each run's empirical model, untried pairs at the floor), or ``None``
+            when the test was off (threshold infinite, or a mode that does not test).
         curve: the :class:`LearningCurve`.
         blocks: ``(K, N)`` number of blocks at the end of each episode (Figs. 5.10, 5.13).
         refinements: one dict per refinement: run, episode (0-based, the one in progress),
@@ -186,6 +189,7 @@ class HierarchicalResult(LearnResult):
     blocks: np.ndarray
     refinements: list[dict[str, int]]
     option_names: tuple[str, ...]
+    Q_grounded: np.ndarray | None = None
 
     @property
     def n_refinements(self) -> np.ndarray:
@@ -567,9 +571,11 @@ def hierarchical_learning(
                   "gamma": mdp.gamma, "v_star_start": v_star, **parameters,
                   "final_blocks": st.out_blocks[:, -1].tolist()},
     )
+    grounded = st.Ql.copy() if st.Ql.shape[1] == S else None  # a placeholder when not testing
     return HierarchicalResult(
         Q=lifted(), block_Q=[st.Q[k, :parts[k].n_blocks].copy() for k in range(K)],
-        partitions=parts, Q_flat=st.Qf.copy(), curve=curve, blocks=st.out_blocks.copy(),
+        partitions=parts, Q_flat=st.Qf.copy(), Q_grounded=grounded,
+        curve=curve, blocks=st.out_blocks.copy(),
         refinements=events, seed=root_seed, v_star_start=v_star, option_names=names,
         parameters=parameters,
     )

@@ -9,6 +9,9 @@ one CSR of shape ``(A*S, S)`` whose row ``a*S + s`` is ``P(. | s, a)``.
   a slippery grid world of any size (``10**6`` cells build in about a second), whose transition
   structure is that of the navigation domains of the dissertation (chapter 6) without walls.
 * :func:`random_mdp` is a small dense-ish random MDP for property tests of the solvers.
+* :func:`empirical_model` is a model estimated from ``n`` sampled successors of every pair: what a
+  certainty-equivalent learner would plan on after that many tries (the arm's sample limit in
+  docs/hierarchical-learning.md).
 """
 
 from __future__ import annotations
@@ -190,3 +193,26 @@ def random_mdp(
     P = sp.csr_array(sp.diags_array(1.0 / totals) @ P)
     R = rng.standard_normal((n, n_act))
     return FiniteMDP(P, R, g, name=f"random-{n}x{n_act}")
+
+
+def empirical_model(mdp: FiniteMDP, samples_per_pair: int, rng: np.random.Generator) -> FiniteMDP:
+    """``mdp`` with each admissible, non-terminal pair's row replaced by the empirical distribution
+    of ``samples_per_pair`` successors drawn from it (:meth:`FiniteMDP.sample_next`).
+
+    Rewards, terminals, admissibility and the other rows are ``mdp``'s. The row of a
+    deterministic pair is therefore exact for any count, and every estimated row's support lies
+    in the true one.
+    """
+    n = _check_count(samples_per_pair, "samples_per_pair")
+    S = mdp.n_states
+    sampled = mdp.admissible & ~mdp.terminal[:, None]
+    states, actions = np.nonzero(sampled)
+    succ = mdp.sample_next(np.repeat(states, n), np.repeat(actions, n), rng)
+    drawn = sp.coo_array((np.full(succ.size, 1.0 / n), (np.repeat(actions * S + states, n), succ)),
+                         shape=mdp.P.shape)
+    kept = sp.diags_array(np.where(sampled.T.reshape(-1), 0.0, 1.0)) @ mdp.P
+    P = sp.csr_array(drawn.tocsr() + kept)
+    P.sum_duplicates()
+    return FiniteMDP(P, mdp.R, mdp.gamma, terminal=mdp.terminal, admissible=mdp.admissible,
+                     initial=mdp.initial, features=mdp.features, action_names=mdp.action_names,
+                     name=f"{mdp.name}-empirical-{n}")

@@ -8,7 +8,15 @@ import numpy as np
 import pytest
 
 from adpart.experiments.base import ExperimentConfig, run_experiment
-from adpart.experiments.transfer import three_floor  # noqa: F401 (registers the three)
+from adpart.experiments.transfer import (  # three_floor registers the three
+    certainty_equivalence_gaps,
+    grounded_policy_gaps,
+    three_floor,  # noqa: F401
+)
+from adpart.learning.hierarchical import decision_layer, hierarchical_learning
+from adpart.mdp.generate import random_grid_mdp
+from adpart.options import subgoal_option
+from tests.learning.test_hierarchical import DELTA, SETTINGS, goal_grid
 
 LEARNERS = {"flat Q", "partition, no refinement", "partition, refinement",
             "partition, reward variation"}
@@ -67,6 +75,30 @@ def test_three_floor_quick(tmp_path):
     assert ("partition, refinement", "partition, reward variation") in labels
 
 
+def test_planning_on_counts_is_exact_on_a_deterministic_task_and_improves_with_tries():
+    exact = random_grid_mdp(36, slip=0.0, terminal_fraction=0.1, seed=1)
+    for gaps in certainty_equivalence_gaps(exact, (1, 3), draws=2, seed=0).values():
+        np.testing.assert_allclose(gaps, 0.0, atol=1e-9)
+    slippery = random_grid_mdp(36, slip=0.6, terminal_fraction=0.1, seed=1)
+    gaps = certainty_equivalence_gaps(slippery, (1, 20_000), draws=5, seed=0)
+    assert (gaps[1] >= -1e-9).all() and gaps[1].max() > 1e-3  # one try misleads somewhere
+    np.testing.assert_allclose(gaps[20_000], 0.0, atol=1e-9)  # enough tries find the optimum
+
+
+def test_the_grounded_policy_of_a_learner_that_tried_every_pair_is_optimal():
+    """R-max with one try a pair explores the deterministic goal grid whole in 200 episodes."""
+    mdp = goal_grid()
+    side = int(np.sqrt(mdp.n_states))
+    opts = [subgoal_option(mdp, c, initiation="reachable")
+            for c in (0, side - 1, side * (side - 1), side * side - 1)]
+    part, _, _ = decision_layer(mdp, opts, delta=DELTA, epsilon=0.0)
+    kw = dict(SETTINGS, runs=2, episodes=200, explore_known=1)
+    np.testing.assert_allclose(
+        grounded_policy_gaps(hierarchical_learning(mdp, opts, part, **kw), mdp), 0.0, atol=1e-9)
+    assert grounded_policy_gaps(
+        hierarchical_learning(mdp, opts, part, threshold=np.inf, **kw), mdp) is None
+
+
 @pytest.mark.slow
 def test_three_floor_arm_quick_and_resume(tmp_path):
     kb = str(tmp_path / "kb")
@@ -83,6 +115,12 @@ def test_three_floor_arm_quick_and_resume(tmp_path):
     np.testing.assert_allclose(off["layer_optimum_gap"], never, atol=1e-6)
     assert all(-1e-9 <= g <= never + 1e-6 for g in on["layer_optimum_gap"])
     assert {"partition, no refinement, R-max", "partition, refinement, R-max"} <= set(rows)
+    # planning on 30 tries of every pair beats planning on 3; the learner's own samples too
+    limit = report.data["sample_limit"]
+    assert limit["samples_per_pair"] == [3, 30]
+    few, more = (np.array(g) for g in limit["gaps"])
+    assert np.median(more) < np.median(few) <= never + 1e-6 and (more >= -1e-9).all()
+    assert all(-1e-9 <= g <= never + 1e-6 for g in limit["learner_samples_gap"])
     # a rerun on the same knowledge base recomputes none of the pipeline's stages
     again, _ = _run("three-floor-arm", tmp_path, kb=kb)
     assert all(s["reused"] for s in again.data["pipeline"]["stages"])

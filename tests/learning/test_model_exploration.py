@@ -23,6 +23,13 @@ from .test_hierarchical import DELTA, SETTINGS, final_gap, goal_grid, setup  # n
 TOL = 1e-11
 
 
+def optimal_q(mdp: FiniteMDP) -> np.ndarray:
+    """``Q*`` of ``mdp`` from value iteration's ``V*``."""
+    V = solve(mdp, 1e-12).V
+    return mdp.R + mdp.gamma * (mdp.P @ np.where(mdp.terminal, 0.0, V)).reshape(
+        mdp.n_actions, mdp.n_states).T
+
+
 def random_mdp(seed: int, S: int = 7, A: int = 3, *, deterministic: bool = False) -> FiniteMDP:
     rng = np.random.default_rng(seed)
     P = np.zeros((S, A, S))
@@ -118,9 +125,7 @@ def test_the_incremental_plans_are_the_optima_of_the_models_the_counts_define(se
 def test_on_a_deterministic_mdp_the_grounded_values_never_exceed_q_star(seed, steps):
     mdp = random_mdp(seed, deterministic=True)
     got = observe(mdp, 1, steps, seed + 1)
-    V = solve(mdp, 1e-12).V
-    Q_star = mdp.R + mdp.gamma * (mdp.P @ np.where(mdp.terminal, 0.0, V)).reshape(
-        mdp.n_actions, mdp.n_states).T
+    Q_star = optimal_q(mdp)
     live = ~mdp.terminal[:, None] & mdp.admissible
     assert (got["Ql"][0][live] <= Q_star[live] + 1e-9).all()
 
@@ -134,6 +139,12 @@ def test_with_directed_exploration_refinement_reaches_the_goal_and_kernels_agree
     assert (on.n_refinements > 0).all()
     assert (final_gap(on) <= 0.05 * on.v_star_start).all()
     assert on.parameters["explore_known"] == 1
+    # every pair tried in 300 episodes of R-max: the grounded values are the task's Q*
+    Q_star = optimal_q(mdp)
+    live = ~mdp.terminal
+    for run in on.Q_grounded:
+        np.testing.assert_allclose(run[live], Q_star[live], atol=1e-6)
+    assert off.Q_grounded is None  # no test, no grounded values
     # exploration is R-max's: the layer starts at the lower bound, not at optimistic zeros
     costly = mdp.with_rewards(mdp.R - 0.1)  # a step costs 0.1: the bound is -0.1 / (1 - 0.9)
     quick = dict(SETTINGS, episodes=1, runs=1)

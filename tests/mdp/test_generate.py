@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from adpart.errors import ModelError
 from adpart.mdp.evaluation import policy_evaluation
-from adpart.mdp.generate import grid_shape, random_grid_mdp, random_mdp
+from adpart.mdp.generate import empirical_model, grid_shape, random_grid_mdp, random_mdp
 from adpart.mdp.solvers import modified_policy_iteration, value_iteration
 
 
@@ -130,3 +130,37 @@ def test_random_mdp_input_errors():
         random_mdp(5, 2, density=2.0, seed=0)
     with pytest.raises(ModelError, match="n_actions"):
         random_mdp(5, 0, density=0.5, seed=0)
+
+
+@given(st.integers(0, 1000), st.integers(1, 12), st.integers(1, 3), st.integers(1, 6))
+@settings(max_examples=30)
+def test_an_empirical_model_counts_draws_inside_the_true_support(seed, S, A, n):
+    mdp = random_mdp(S, A, density=0.5, seed=seed)
+    est = empirical_model(mdp, n, np.random.default_rng(seed))
+    np.testing.assert_allclose(est.P.sum(axis=1), 1.0, atol=1e-12)
+    true, got = mdp.P.toarray(), est.P.toarray()
+    assert np.all(got[true == 0] == 0)  # no successor outside the support
+    np.testing.assert_allclose(got * n, np.round(got * n), atol=1e-9)  # whole counts of n draws
+    assert est.content_hash == empirical_model(mdp, n, np.random.default_rng(seed)).content_hash
+
+
+def test_an_empirical_model_converges_to_the_true_rows():
+    """Frequencies of 20,000 draws lie within 5 standard errors of each true probability."""
+    mdp = random_mdp(8, 2, density=0.6, seed=3)
+    n = 20_000
+    got, true = empirical_model(mdp, n, np.random.default_rng(0)).P.toarray(), mdp.P.toarray()
+    assert np.all(np.abs(got - true) <= 5 * np.sqrt(true * (1 - true) / n) + 1e-12)
+
+
+def test_an_empirical_model_of_a_deterministic_mdp_is_exact_and_keeps_terminals():
+    mdp = random_grid_mdp(49, slip=0.0, terminal_fraction=0.1, seed=2)
+    est = empirical_model(mdp, 1, np.random.default_rng(0))
+    assert abs(est.P - mdp.P).max() == 0
+    np.testing.assert_array_equal(est.terminal, mdp.terminal)
+    np.testing.assert_array_equal(est.R, mdp.R)
+
+
+@pytest.mark.parametrize("bad", [0, -1, 1.5, True])
+def test_an_empirical_model_refuses_a_bad_sample_count(bad):
+    with pytest.raises(ModelError, match="samples_per_pair"):
+        empirical_model(random_mdp(4, 2, density=0.5, seed=0), bad, np.random.default_rng(0))
