@@ -151,7 +151,7 @@ MODES = ("inconsistency", "action-refinement", "reward-variation",
 REWARD_OPTION_MODES = ("reward-variation", "reward-variation+inconsistency")
 TESTING_MODES = ("inconsistency", "reward-variation+inconsistency")
 #: What the grounded flat value must beat by L (module docstring).
-REFERENCES = ("model", "learned", "offered")
+REFERENCES = ("model", "learned", "offered", "state")
 #: Where an action added by a firing joins the layer (module docstring).
 REFINE_RULES = ("state", "block")
 #: When epsilon-exploration draws among the primitive actions alone (module docstring).
@@ -384,7 +384,9 @@ def hierarchical_learning(
             block achieve from ``s`` itself
             (:func:`~adpart.learning.decision_layer.offered_values`), recomputed after every
             refinement: a firing then also certifies that ``a*`` beats everything the layer
-            offers at ``s``. Default (``None``): ``"offered"`` in ``reward-variation+inconsistency``
+            offers at ``s``; ``"state"``, that per-state optimum alone, which never exceeds
+            ``V*(s)`` (the point model's ``V*_P(b)`` can: docs/hierarchical-learning.md,
+            session 12). Default (``None``): ``"offered"`` in ``reward-variation+inconsistency``
             mode, ``"learned"`` in ``inconsistency`` mode (docs/hierarchical-learning.md).
         flat_explore: at a greedy decision take the optimistic flat action where it beats
             the block's best value (exploration for goals that are no subgoal; ``inconsistency``
@@ -477,10 +479,12 @@ def hierarchical_learning(
         return solve(point_model(partition, smdp), 1e-8).V
 
     def state_values(partition: Partition) -> np.ndarray:
-        """Per state, the larger of its block's ``V*_P`` and the best the options offered there
-        achieve from it (:func:`offered_values`)."""
-        return np.maximum(offered_values(partition, smdp, mdp.terminal, lower),
-                          layer_values(partition)[partition.labels])
+        """Per state, the best the options offered there achieve from it (:func:`offered_values`),
+        with reference ``"offered"`` raised to its block's ``V*_P``."""
+        own = offered_values(partition, smdp, mdp.terminal, lower)
+        if reference == "state":
+            return own
+        return np.maximum(own, layer_values(partition)[partition.labels])
     st = make_state(
         mdp, full, np.broadcast_to(part0.labels, (K, S)),
         np.broadcast_to(part0.admissible, (K, B0, len(full))), episodes=N, horizon=H,
@@ -491,7 +495,7 @@ def hierarchical_learning(
         primitive_epsilon=PRIMITIVE_EXPLORATION[primitive_exploration] if check else 0,
         r_min=reward_floor(mdp),
         block_values=layer_values(part0) if check and reference == "model" else None,
-        state_values=state_values(part0) if check and reference == "offered" else None,
+        state_values=state_values(part0) if check and reference in ("offered", "state") else None,
         explore_known=m_known,
     )
     parts = [part0] * K
@@ -530,7 +534,7 @@ def hierarchical_learning(
         st.vr_on[k] = False  # virtual executions started in the old blocks are dropped
         if reference == "model":
             st.Vref[k, :B_new] = layer_values(new)
-        elif reference == "offered":
+        elif reference in ("offered", "state"):
             st.Vref[k] = state_values(new)
         parts[k] = new
         events.append({"run": k, "episode": int(st.episode[k]), "state": s, "block": b,

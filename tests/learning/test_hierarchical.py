@@ -373,20 +373,23 @@ def test_offered_values_are_the_optimum_of_the_offered_columns(setup):
     assert offered_values(fired, smdp, mdp.terminal, -3.0)[goal - 1] == pytest.approx(1.0)
 
 
-def test_the_offered_reference_fires_only_where_the_layer_cannot_do_as_well(setup):
+@pytest.mark.parametrize("reference", ["offered", "state"])
+def test_the_offered_reference_fires_only_where_the_layer_cannot_do_as_well(setup, reference):
     """With ``reference="offered"`` a firing certifies ``Q*(s, a*) - V > L`` for both ``V*_P`` of
     s's block and the best the offered options achieve from s, in the layer as it stood
-    (replayed from the recorded refinements): every firing is real by both definitions."""
+    (replayed from the recorded refinements): every firing is real by both definitions. With
+    ``"state"`` it certifies it for the offered options' best, which never exceeds ``V*(s)``."""
     from adpart.learning.decision_layer import offered_values
     from adpart.mdp.solvers import q_from_v, solve
     from adpart.partition.bpsmdp import point_model
 
     mdp, opts, part, smdp = setup
-    res = hierarchical_learning(mdp, opts, part, reference="offered",
+    res = hierarchical_learning(mdp, opts, part, reference=reference,
                                 **dict(SETTINGS, alpha=1.0, episodes=1000))
-    assert res.parameters["test_reference"] == "offered"
+    assert res.parameters["test_reference"] == reference
     assert (final_gap(res) <= 0.05 * res.v_star_start).all()
-    q_star = q_from_v(mdp, solve(mdp, 1e-10).V)
+    v_star = solve(mdp, 1e-10).V
+    q_star = q_from_v(mdp, v_star)
     L, refiner = res.parameters["threshold"], refinement_model(mdp, smdp)
     checked = 0
     for k in range(SETTINGS["runs"]):
@@ -394,8 +397,10 @@ def test_the_offered_reference_fires_only_where_the_layer_cannot_do_as_well(setu
         for e in (e for e in res.refinements if e["run"] == k):
             s, a = e["state"], e["action"]
             v_block = solve(point_model(layer, smdp), 1e-10).V[layer.labels[s]]
-            v_offered = offered_values(layer, smdp, mdp.terminal, 0.0)[s]
-            assert q_star[s, a] - max(v_block, v_offered) > L
+            v_offered = offered_values(layer, smdp, mdp.terminal, 0.0)
+            assert (v_offered <= v_star + 1e-9).all()
+            assert q_star[s, a] - (v_offered[s] if reference == "state"
+                                   else max(v_block, v_offered[s])) > L
             checked += 1
             layer = refine_block(layer, e["block"], [a], refiner, delta=DELTA, epsilon=0.0,
                                  at=s)

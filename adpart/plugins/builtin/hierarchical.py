@@ -83,9 +83,10 @@ class HierarchicalLearner:
               "take the optimistic flat action where it beats the block's best"),
         Param("reference", "str", "auto",
               "what the grounded flat value must beat by L: the block's point-model value "
-              "(model), its learned value (learned), or the best the options offered at the "
-              "state achieve from it (offered); auto: offered in reward-variation+inconsistency "
-              "mode, else learned", choices=("auto", "model", "learned", "offered")),
+              "(model), its learned value (learned), the larger of that point-model value and "
+              "the best the options offered at the state achieve from it (offered), or that "
+              "per-state best alone (state); auto: offered in reward-variation+inconsistency "
+              "mode, else learned", choices=("auto", "model", "learned", "offered", "state")),
         Param("min-visits", "int", 2, "visits of the flat pair and block before a test fires",
               min=0),
         Param("intra-option", "bool", False,
