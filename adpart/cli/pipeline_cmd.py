@@ -29,11 +29,11 @@ def _check_plugin_params(kind: str, name: str, params: dict[str, Any], option: s
     """Validate ``params`` against plugin ``name`` now, naming ``option`` in the message.
 
     The pipeline stores a run, policies, subgoals and options before it reaches the later
-    steps; checking every step's parameters here means a bad value fails before anything is
-    computed or stored.
+    steps; building every step's plugin here (so that a constructor's checks across parameters
+    run too) means a bad value fails before anything is computed or stored.
     """
     try:
-        registry().get(kind, name).resolve_params(params)
+        registry().get(kind, name).create(params)
     except AdpartError as exc:
         raise CLIError(f"{option}: {exc}") from None
 

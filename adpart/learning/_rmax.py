@@ -28,9 +28,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import scipy.sparse as sp
 
 from adpart.mdp._sampling import compiled
-from adpart.mdp.model import FiniteMDP
+from adpart.mdp.model import FiniteMDP, SMDPModel
 
 #: The sweep's tolerance, as a fraction of ``max(1, v_max)``: a value that moves by less is
 #: not propagated to its predecessors.
@@ -53,6 +54,26 @@ def predecessors(mdp: FiniteMDP) -> tuple[np.ndarray, np.ndarray]:
     ptr = np.zeros(S + 1, dtype=np.int64)
     np.cumsum(np.bincount(dst, minlength=S), out=ptr[1:])
     return ptr, src.astype(np.int64)
+
+
+def counted_smdp(smdp: SMDPModel, mdp: FiniteMDP, xc: np.ndarray, floor: float) -> SMDPModel:
+    """``smdp`` (primitive columns first, as stacked by the learner) with its primitive columns
+    replaced by one run's grounded model: a tried pair pays its reward and moves by the
+    frequencies of its samples (``xc``, counts of the CSR entries of ``mdp.P``); an untried pair
+    is worth ``floor`` and has no successor. The option columns keep the models given. Planning
+    on it is what the grounded values do for the flat pairs, done for the whole layer."""
+    S, A = mdp.n_states, mdp.n_actions
+    indptr, indices = mdp.P.indptr, mdp.P.indices
+    row = np.repeat(np.arange(A * S), np.diff(indptr))
+    total = np.bincount(row, weights=xc, minlength=A * S)
+    live = np.tile(~mdp.terminal, A)
+    data = np.where(live[row], mdp.gamma * xc / np.maximum(total[row], 1.0), 0.0)
+    F_prim = sp.csr_array((data, indices.copy(), indptr.copy()), shape=(A * S, S))
+    F_prim.eliminate_zeros()
+    tried = (total > 0).reshape(A, S).T
+    R_prim = np.where(mdp.terminal[:, None], 0.0, np.where(tried, mdp.R, floor))
+    F = sp.csr_array(sp.vstack([F_prim, smdp.F[A * S:]], format="csr"))
+    return SMDPModel(R=np.hstack([R_prim, smdp.R[:, A:]]), F=F, admissible=smdp.admissible)
 
 
 @compiled

@@ -82,6 +82,17 @@ had never visited (all their values still 0), a loop that never arrives (gap 27.
 100 to 1,000); started at the floor, 20 of 20 runs were exact by episode 200, the median
 unchanged at 40 episodes.
 
+**Planned layer values** (``layer_values="planned"``, with R-max). On arm ``deliver`` the
+layer's SMDP Q-values, learned by step sizes over 1,400-1,600 blocks of a slip-0.5 domain, sit
+8-22 above ``V*`` along the route with near-ties, and their greedy policy never delivers, even
+after 2,500 episodes in which the counts pin down a flat policy 0.3-0.9 from ``V*``. Planned, the
+layer's values are the optimum of its point model on the run's grounded model (the primitive
+columns from the counts, untried pairs at the floor; the options' models as given): certainty
+equivalence on the decision layer, scored like any greedy policy. The test's ``"policy"``
+reference reads the same kind of value: what the layer's best block policy achieves from ``s``,
+which the point model's ``V*_P(b)`` and the per-state best of the offered columns both
+overstate on a layer whose blocks mix states that need different columns.
+
 **Threshold.** Theorem 4.5 bounds ``||V* - V*_P||`` by ``2 (1 + gamma/(1-gamma) max(eps, delta))``;
 the seed uses it as the inconsistency threshold. The bound mixes units: with the seed's own
 ``epsilon = 10-20`` and ``gamma >= 0.9`` it is 180-360, above the whole value range of its tasks, so
@@ -101,6 +112,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from adpart.errors import TaskError
+from adpart.learning._rmax import counted_smdp
 from adpart.learning.curves import (
     LearningCurve,
     optimal_start_value,
@@ -122,9 +134,9 @@ from adpart.learning.result import LearnResult
 from adpart.learning.schedules import Schedule, constant, visit_count
 from adpart.learning.settings import count, run_settings
 from adpart.learning.smdp_q import drive, kernel_function, make_state, option_set
-from adpart.mdp.evaluation import greedy_policy
+from adpart.mdp.evaluation import greedy_policy, policy_evaluation
 from adpart.mdp.model import FiniteMDP, SMDPModel
-from adpart.mdp.solvers import solve
+from adpart.mdp.solvers import q_from_v, solve
 from adpart.options.models import OptionModel, option_models
 from adpart.options.option import Option
 from adpart.partition.bpsmdp import point_model, theorem_4_5_bound
@@ -151,11 +163,13 @@ MODES = ("inconsistency", "action-refinement", "reward-variation",
 REWARD_OPTION_MODES = ("reward-variation", "reward-variation+inconsistency")
 TESTING_MODES = ("inconsistency", "reward-variation+inconsistency")
 #: What the grounded flat value must beat by L (module docstring).
-REFERENCES = ("model", "learned", "offered", "state")
+REFERENCES = ("model", "learned", "offered", "policy")
 #: Where an action added by a firing joins the layer (module docstring).
 REFINE_RULES = ("state", "block")
 #: When epsilon-exploration draws among the primitive actions alone (module docstring).
 PRIMITIVE_EXPLORATION = {"never": 0, "always": 1, "until-reward": 2}
+#: What the greedy policy is greedy on (module docstring).
+LAYER_VALUES = ("learned", "planned")
 #: Default fraction of |V*(start)| used as the inconsistency threshold (module docstring).
 THRESHOLD_SCALE = 0.025
 #: Default z of the lower confidence bound of stochastic flat pairs (module docstring).
@@ -359,6 +373,7 @@ def hierarchical_learning(
     refine: str = "state",
     primitive_exploration: str = "until-reward",
     explore_known: int = 0,
+    layer_values: str = "learned",
 ) -> HierarchicalResult:
     """Learn ``mdp`` on a decision layer over ``options`` (section 4.3; module docstring).
 
@@ -384,9 +399,11 @@ def hierarchical_learning(
             block achieve from ``s`` itself
             (:func:`~adpart.learning.decision_layer.offered_values`), recomputed after every
             refinement: a firing then also certifies that ``a*`` beats everything the layer
-            offers at ``s``; ``"state"``, that per-state optimum alone, which never exceeds
-            ``V*(s)`` (the point model's ``V*_P(b)`` can: docs/hierarchical-learning.md,
-            session 12). Default (``None``): ``"offered"`` in ``reward-variation+inconsistency``
+            offers at ``s``; ``"policy"``, the exact value from ``s`` of the layer's best block
+            policy (the point model's optimum, lifted to states, evaluated on the columns'
+            models), recomputed after every refinement: what the layer's policy achieves, never
+            above ``V*(s)`` (``V*_P(b)`` and the per-state best can be far above it:
+            docs/hierarchical-learning.md, session 12). Default (``None``): ``"offered"`` in ``reward-variation+inconsistency``
             mode, ``"learned"`` in ``inconsistency`` mode (docs/hierarchical-learning.md).
         flat_explore: at a greedy decision take the optimistic flat action where it beats
             the block's best value (exploration for goals that are no subgoal; ``inconsistency``
@@ -408,6 +425,12 @@ def hierarchical_learning(
         explore_known: R-max's ``m`` (0: off; ``inconsistency`` mode with ``flat_explore``):
             the flat action explored is the optimistic model's, a pair known after ``m`` tries,
             and the test reads the grounded values of the empirical model (module docstring).
+        layer_values: what the greedy policy (scored, and returned as ``Q``) is greedy on:
+            ``"learned"``, the layer's SMDP Q-values; ``"planned"`` (with ``explore_known``),
+            the optimum of the layer's point model on each run's grounded model
+            (:func:`~adpart.learning._rmax.counted_smdp`: the primitive columns from the counts,
+            the options' given models), certainty equivalence on the decision layer
+            (docs/hierarchical-learning.md, session 12).
         q_init: the starting values of the layer and the flat table. Default 0, or the lower
             bound ``r_min / (1 - gamma)`` with ``explore_known``: exploration is then R-max's,
             and a block the agent never visited must not look better to the greedy policy than
@@ -470,21 +493,28 @@ def hierarchical_learning(
         raise TaskError(f"reference = {reference!r}; choose one of {list(REFERENCES)}")
     if refine not in REFINE_RULES:
         raise TaskError(f"refine = {refine!r}; choose one of {list(REFINE_RULES)}")
+    if layer_values not in LAYER_VALUES:
+        raise TaskError(f"layer_values = {layer_values!r}; choose one of {list(LAYER_VALUES)}")
+    if layer_values == "planned" and not directed:
+        raise TaskError("layer_values = 'planned' plans on the counts of R-max exploration: "
+                        "give explore_known >= 1 (inconsistency mode, flat_explore on)")
     if primitive_exploration not in PRIMITIVE_EXPLORATION:
         raise TaskError(f"primitive_exploration = {primitive_exploration!r}; choose one of "
                         f"{list(PRIMITIVE_EXPLORATION)}")
 
-    def layer_values(partition: Partition) -> np.ndarray:
+    def point_optima(partition: Partition) -> np.ndarray:
         """``V*_P`` per block: the optimum of the layer's point model (section 4.2.2)."""
         return solve(point_model(partition, smdp), 1e-8).V
 
     def state_values(partition: Partition) -> np.ndarray:
-        """Per state, the best the options offered there achieve from it (:func:`offered_values`),
-        with reference ``"offered"`` raised to its block's ``V*_P``."""
-        own = offered_values(partition, smdp, mdp.terminal, lower)
-        if reference == "state":
-            return own
-        return np.maximum(own, layer_values(partition)[partition.labels])
+        """Per state, the larger of its block's ``V*_P`` and the best the options offered there
+        achieve from it (:func:`offered_values`); with reference ``"policy"``, the value of the
+        layer's best block policy from it."""
+        if reference == "policy":
+            best = solve(point_model(partition, smdp), 1e-8).policy[partition.labels]
+            return policy_evaluation(smdp, best)
+        return np.maximum(offered_values(partition, smdp, mdp.terminal, lower),
+                          point_optima(partition)[partition.labels])
     st = make_state(
         mdp, full, np.broadcast_to(part0.labels, (K, S)),
         np.broadcast_to(part0.admissible, (K, B0, len(full))), episodes=N, horizon=H,
@@ -494,8 +524,8 @@ def hierarchical_learning(
         flat_explore=flat_explore and mode == "inconsistency",
         primitive_epsilon=PRIMITIVE_EXPLORATION[primitive_exploration] if check else 0,
         r_min=reward_floor(mdp),
-        block_values=layer_values(part0) if check and reference == "model" else None,
-        state_values=state_values(part0) if check and reference in ("offered", "state") else None,
+        block_values=point_optima(part0) if check and reference == "model" else None,
+        state_values=state_values(part0) if check and reference in ("offered", "policy") else None,
         explore_known=m_known,
     )
     parts = [part0] * K
@@ -533,14 +563,21 @@ def hierarchical_learning(
         st.n_blocks[k] = B_new
         st.vr_on[k] = False  # virtual executions started in the old blocks are dropped
         if reference == "model":
-            st.Vref[k, :B_new] = layer_values(new)
-        elif reference in ("offered", "state"):
+            st.Vref[k, :B_new] = point_optima(new)
+        elif reference in ("offered", "policy"):
             st.Vref[k] = state_values(new)
         parts[k] = new
         events.append({"run": k, "episode": int(st.episode[k]), "state": s, "block": b,
                        "action": a, "blocks_before": B_old, "blocks_after": B_new})
 
+    def planned(k: int) -> np.ndarray:
+        """``(B_k, C)`` the block values of run k's layer planned on its grounded model."""
+        model = point_model(parts[k], counted_smdp(smdp, mdp, st.xc[k], lower))
+        return q_from_v(model, solve(model, 1e-8).V)
+
     def lifted() -> np.ndarray:
+        if layer_values == "planned":
+            return np.stack([planned(k)[parts[k].labels] for k in range(K)])
         return np.take_along_axis(st.Q, st.labels[:, :, None], axis=1)
 
     def score() -> np.ndarray:
@@ -560,7 +597,7 @@ def hierarchical_learning(
         "lcb_z": float(lcb_z), "flat_explore": bool(flat_explore and mode == "inconsistency"),
         "test_reference": reference, "refine": refine,
         "primitive_exploration": primitive_exploration if check else "never",
-        "explore_known": m_known if directed else 0,
+        "explore_known": m_known if directed else 0, "layer_values": layer_values,
         "flat_lower_bound": lower,
         "min_visits": V, "alpha": alpha_s.to_dict(), "epsilon_greedy": eps_s.to_dict(),
         "max_steps_per_episode": H, "eval_every": M, "q_init": float(q0),

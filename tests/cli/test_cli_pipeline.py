@@ -250,6 +250,9 @@ def test_directed_exploration_is_a_learner_option_and_a_bad_count_is_refused(tmp
     assert bad.output.strip() == ("Error: --hier-opt: learner 'hierarchical': --explore-known "
                                   "must be >= 0; got -1")
     assert not kb_dir.exists()
+    unplanned = CliRunner().invoke(cli, [*rmax, "--hier-opt", "layer-values=planned"])
+    assert unplanned.exit_code == 2 and not kb_dir.exists()
+    assert "--layer-values planned" in unplanned.output and "--explore-known" in unplanned.output
     res = CliRunner().invoke(cli, [*rmax, "--hier-opt", "explore-known=1"])
     assert res.exit_code == 0, res.output
     summary = json.loads(res.output)
@@ -263,3 +266,7 @@ def test_directed_exploration_is_a_learner_option_and_a_bad_count_is_refused(tmp
         assert run.provenance.parameters["explore_known"] == 1
     finally:
         kb.close()
+    planned = json.loads(CliRunner().invoke(cli, [*rmax, "--hier-opt", "explore-known=1",
+                                                  "--hier-opt", "layer-values=planned"]).output)
+    layer = next(r for r in planned["tasks"] if r["learner"] == "hierarchical")
+    assert layer["runs_within_bound"] == layer["runs"] == 3

@@ -373,13 +373,15 @@ def test_offered_values_are_the_optimum_of_the_offered_columns(setup):
     assert offered_values(fired, smdp, mdp.terminal, -3.0)[goal - 1] == pytest.approx(1.0)
 
 
-@pytest.mark.parametrize("reference", ["offered", "state"])
+@pytest.mark.parametrize("reference", ["offered", "policy"])
 def test_the_offered_reference_fires_only_where_the_layer_cannot_do_as_well(setup, reference):
     """With ``reference="offered"`` a firing certifies ``Q*(s, a*) - V > L`` for both ``V*_P`` of
     s's block and the best the offered options achieve from s, in the layer as it stood
     (replayed from the recorded refinements): every firing is real by both definitions. With
-    ``"state"`` it certifies it for the offered options' best, which never exceeds ``V*(s)``."""
+    ``"policy"`` it certifies it for the value from s of the layer's best block policy, which
+    never exceeds ``V*(s)``."""
     from adpart.learning.decision_layer import offered_values
+    from adpart.mdp.evaluation import policy_evaluation
     from adpart.mdp.solvers import q_from_v, solve
     from adpart.partition.bpsmdp import point_model
 
@@ -397,10 +399,14 @@ def test_the_offered_reference_fires_only_where_the_layer_cannot_do_as_well(setu
         for e in (e for e in res.refinements if e["run"] == k):
             s, a = e["state"], e["action"]
             v_block = solve(point_model(layer, smdp), 1e-10).V[layer.labels[s]]
-            v_offered = offered_values(layer, smdp, mdp.terminal, 0.0)
-            assert (v_offered <= v_star + 1e-9).all()
-            assert q_star[s, a] - (v_offered[s] if reference == "state"
-                                   else max(v_block, v_offered[s])) > L
+            if reference == "policy":
+                best = solve(point_model(layer, smdp), 1e-10).policy[layer.labels]
+                v_policy = policy_evaluation(smdp, best)
+                assert (v_policy <= v_star + 1e-9).all()
+                assert q_star[s, a] - v_policy[s] > L
+            else:
+                v_offered = offered_values(layer, smdp, mdp.terminal, 0.0)[s]
+                assert q_star[s, a] - max(v_block, v_offered) > L
             checked += 1
             layer = refine_block(layer, e["block"], [a], refiner, delta=DELTA, epsilon=0.0,
                                  at=s)

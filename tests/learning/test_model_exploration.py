@@ -9,14 +9,22 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from adpart.errors import TaskError
-from adpart.learning._rmax import predecessors, rmax_observe, sweep, value_ceiling
+from adpart.learning._rmax import (
+    counted_smdp,
+    predecessors,
+    rmax_observe,
+    sweep,
+    value_ceiling,
+)
 from adpart.learning.hierarchical import flat_lower_bound, hierarchical_learning
-from adpart.mdp.model import FiniteMDP
-from adpart.mdp.solvers import solve
+from adpart.mdp.model import FiniteMDP, SMDPModel
+from adpart.mdp.solvers import q_from_v, solve
+from adpart.partition.bpsmdp import point_model
 
 from .test_hierarchical import DELTA, SETTINGS, final_gap, goal_grid, setup  # noqa: F401
 
@@ -131,7 +139,7 @@ def test_on_a_deterministic_mdp_the_grounded_values_never_exceed_q_star(seed, st
 
 
 def test_with_directed_exploration_refinement_reaches_the_goal_and_kernels_agree(setup):  # noqa: F811
-    mdp, opts, part, _ = setup
+    mdp, opts, part, smdp = setup
     kw = dict(SETTINGS, episodes=300, explore_known=1)
     on = hierarchical_learning(mdp, opts, part, **kw)
     off = hierarchical_learning(mdp, opts, part, threshold=np.inf, **kw)
@@ -145,6 +153,14 @@ def test_with_directed_exploration_refinement_reaches_the_goal_and_kernels_agree
     for run in on.Q_grounded:
         np.testing.assert_allclose(run[live], Q_star[live], atol=1e-6)
     assert off.Q_grounded is None  # no test, no grounded values
+    # planned on the grounded model, the refined layer's greedy policy is its exact optimum
+    plan = hierarchical_learning(mdp, opts, part, layer_values="planned", **kw)
+    assert plan.parameters["layer_values"] == "planned"
+    for k, layer in enumerate(plan.partitions):
+        exact = point_model(layer, smdp)
+        best = q_from_v(exact, solve(exact, 1e-10).V)[layer.labels]
+        np.testing.assert_allclose(plan.Q[k], best, atol=1e-6)
+    assert (final_gap(plan) <= 0.05 * plan.v_star_start).all()
     # exploration is R-max's: the layer starts at the lower bound, not at optimistic zeros
     costly = mdp.with_rewards(mdp.R - 0.1)  # a step costs 0.1: the bound is -0.1 / (1 - 0.9)
     quick = dict(SETTINGS, episodes=1, runs=1)
@@ -166,3 +182,39 @@ def test_a_bad_known_count_is_refused(setup, bad):  # noqa: F811
     mdp, opts, part, _ = setup
     with pytest.raises(TaskError, match="explore_known"):
         hierarchical_learning(mdp, opts, part, explore_known=bad, **SETTINGS)
+
+
+@given(st.integers(0, 500), st.booleans())
+@settings(max_examples=20, deadline=None)
+def test_the_counted_layer_model_is_the_task_model_where_counts_are_its_probabilities(seed, gap):
+    """Counts proportional to ``P`` give the task's primitive columns; an untried pair is worth
+    the floor with no successor; the option columns are the given ones."""
+    mdp = random_mdp(seed, S=6, A=2)
+    smdp = mdp.as_smdp()
+    S, A = mdp.n_states, mdp.n_actions
+    option_R = np.random.default_rng(seed).random((S, 1))
+    stacked = SMDPModel(R=np.hstack([smdp.R, option_R]),
+                        F=sp.csr_array(sp.vstack([smdp.F, 0.5 * sp.eye_array(S)], format="csr")),
+                        admissible=np.hstack([mdp.admissible, np.ones((S, 1), bool)]))
+    untried = np.zeros(A * S, bool)
+    untried[1] = gap  # pair (s=1, a=0) never tried
+    row = np.repeat(np.arange(A * S), np.diff(mdp.P.indptr))
+    xc = np.where(untried[row], 0, np.round(mdp.P.data * 1e9)).astype(np.int64)
+    got = counted_smdp(stacked, mdp, xc, floor=-7.0)
+    tried = ~untried & np.tile(~mdp.terminal, A)
+    np.testing.assert_allclose(got.F.toarray()[:A * S][tried], smdp.F.toarray()[tried],
+                               atol=1e-8)
+    assert not got.F.toarray()[:A * S][untried].any()
+    R_want = np.where(untried.reshape(A, S).T, -7.0, smdp.R)
+    np.testing.assert_allclose(got.R[:, :A], np.where(mdp.terminal[:, None], 0.0, R_want))
+    np.testing.assert_array_equal(got.R[:, A:], option_R)
+    assert abs(got.F[A * S:] - stacked.F[A * S:]).max() == 0
+
+
+def test_planned_layer_values_need_directed_exploration(setup):  # noqa: F811
+    mdp, opts, part, _ = setup
+    with pytest.raises(TaskError, match="explore_known"):
+        hierarchical_learning(mdp, opts, part, layer_values="planned", **SETTINGS)
+    with pytest.raises(TaskError, match="layer_values"):
+        hierarchical_learning(mdp, opts, part, layer_values="guessed", explore_known=1,
+                              **SETTINGS)

@@ -84,9 +84,9 @@ class HierarchicalLearner:
         Param("reference", "str", "auto",
               "what the grounded flat value must beat by L: the block's point-model value "
               "(model), its learned value (learned), the larger of that point-model value and "
-              "the best the options offered at the state achieve from it (offered), or that "
-              "per-state best alone (state); auto: offered in reward-variation+inconsistency "
-              "mode, else learned", choices=("auto", "model", "learned", "offered", "state")),
+              "the best the options offered at the state achieve from it (offered), or the value "
+              "from the state of the layer's best block policy (policy); auto: offered in reward-variation+inconsistency "
+              "mode, else learned", choices=("auto", "model", "learned", "offered", "policy")),
         Param("min-visits", "int", 2, "visits of the flat pair and block before a test fires",
               min=0),
         Param("intra-option", "bool", False,
@@ -100,6 +100,10 @@ class HierarchicalLearner:
         Param("explore-known", "int", 0,
               "R-max: explore by the optimistic model of the flat pairs, a pair known after "
               "this many tries, and test against its grounded model values (0: off)", min=0),
+        Param("layer-values", "str", "learned",
+              "what the greedy policy is greedy on: the layer's learned Q-values (learned), or "
+              "the layer's point model planned on the counts of explore-known (planned)",
+              choices=("learned", "planned")),
         ALPHA,
         EPSILON,
         MAX_STEPS,
@@ -112,11 +116,15 @@ class HierarchicalLearner:
                  reference: str = "auto",
                  min_visits: int = 2, intra_option: bool = False, refine: str = "state",
                  primitive_exploration: str = "until-reward", explore_known: int = 0,
+                 layer_values: str = "learned",
                  alpha: str = "1/n^0.8", epsilon: str = "0.1", max_steps: int = 1000,
                  kernel: str = "auto") -> None:
         self.intra_option = bool(intra_option)
         self.refine, self.primitive_exploration = refine, primitive_exploration
-        self.explore_known = explore_known
+        if layer_values == "planned" and explore_known == 0:
+            raise TaskError("--layer-values planned plans on the counts of R-max exploration; "
+                            "give --explore-known 1 or more")
+        self.explore_known, self.layer_values = explore_known, layer_values
         self.lcb_z, self.flat_explore = lcb_z, bool(flat_explore)
         self.reference = None if reference == "auto" else reference
         self.mode, self.delta, self.partition_epsilon = mode, delta, partition_epsilon
@@ -146,6 +154,7 @@ class HierarchicalLearner:
             max_steps_per_episode=self.max_steps, eval_every=eval_every, progress=progress,
             kernel=self.kernel, intra_option=self.intra_option, refine=self.refine,
             primitive_exploration=self.primitive_exploration, explore_known=self.explore_known,
+            layer_values=self.layer_values,
         )
 
 
