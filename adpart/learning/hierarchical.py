@@ -403,8 +403,9 @@ def hierarchical_learning(
             policy (the point model's optimum, lifted to states, evaluated on the columns'
             models), recomputed after every refinement: what the layer's policy achieves, never
             above ``V*(s)`` (``V*_P(b)`` and the per-state best can be far above it:
-            docs/hierarchical-learning.md, session 12). Default (``None``): ``"offered"`` in ``reward-variation+inconsistency``
-            mode, ``"learned"`` in ``inconsistency`` mode (docs/hierarchical-learning.md).
+            docs/hierarchical-learning.md, session 12). Default (``None``): ``"offered"`` in
+            ``reward-variation+inconsistency`` mode, ``"learned"`` in ``inconsistency`` mode
+            (docs/hierarchical-learning.md).
         flat_explore: at a greedy decision take the optimistic flat action where it beats
             the block's best value (exploration for goals that are no subgoal; ``inconsistency``
             mode only - the other modes make the goal reachable on the layer).

@@ -84,9 +84,10 @@ class HierarchicalLearner:
         Param("reference", "str", "auto",
               "what the grounded flat value must beat by L: the block's point-model value "
               "(model), its learned value (learned), the larger of that point-model value and "
-              "the best the options offered at the state achieve from it (offered), or the value "
-              "from the state of the layer's best block policy (policy); auto: offered in reward-variation+inconsistency "
-              "mode, else learned", choices=("auto", "model", "learned", "offered", "policy")),
+              "the best the options offered at the state achieve from it (offered), or the "
+              "value from the state of the layer's best block policy (policy); auto: offered "
+              "in reward-variation+inconsistency mode, else learned",
+              choices=("auto", "model", "learned", "offered", "policy")),
         Param("min-visits", "int", 2, "visits of the flat pair and block before a test fires",
               min=0),
         Param("intra-option", "bool", False,
