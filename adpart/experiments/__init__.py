@@ -21,6 +21,7 @@ EXPERIMENT_MODULES: tuple[str, ...] = (
     "adpart.experiments.partition_three_floor",
     "adpart.experiments.task_sequence",
     "adpart.experiments.transfer",
+    "adpart.experiments.arm_planned",
     "adpart.experiments.maxq",
     "adpart.experiments.maxq_parr",
 )

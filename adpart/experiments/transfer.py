@@ -53,7 +53,7 @@ FIRST_URBAN_TASK = "navigate-2"
 
 
 @dataclass(frozen=True)
-class _Setup:
+class TransferSetup:
     """One domain's transfer: tasks, detector, and the learning budget."""
 
     env: str
@@ -68,7 +68,7 @@ class _Setup:
     eval_every: int = 10
 
 
-def _curve_rows(task: str, curves: dict[str, Any]
+def curve_rows(task: str, curves: dict[str, Any]
                 ) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
     """Pipeline-style rows per learner and per-run episodes to the bound (censored: N + 1)."""
     from adpart.learning.comparison import episodes_to_bound, task_row
@@ -78,7 +78,7 @@ def _curve_rows(task: str, curves: dict[str, Any]
     return rows, reached
 
 
-def _plot_blocks(blocks: dict[str, np.ndarray], path: Path, title: str) -> str:
+def plot_blocks(blocks: dict[str, np.ndarray], path: Path, title: str) -> str:
     from adpart.plotting import new_figure
 
     fig, ax = new_figure((7, 4.2))
@@ -110,12 +110,13 @@ def _stored_layer(kb: Any, pipe: Any) -> tuple[list[Any], list[Any], Any]:
     return options, models, partition
 
 
-def _transfer(config: ExperimentConfig, setup: _Setup, report: ExperimentReport
-              ) -> dict[str, Any]:
-    """Run the pipeline and the alternative learners; fill ``report`` with the shared parts."""
-    from adpart.learning.curves import plot_curves
-    from adpart.learning.hierarchical import hierarchical_learning
+def pipeline_layer(config: ExperimentConfig, setup: TransferSetup, report: ExperimentReport
+                   ) -> dict[str, Any]:
+    """Run the transfer pipeline (first task flat, subgoals, options, the layer, and the new
+    task's pipeline learners) and return its stored layer, with the options' models on the new
+    task and the settings the experiment's own learners share."""
     from adpart.options.models import option_models
+    from adpart.workflows.knowledge import working_kb
     from adpart.workflows.pipeline import PipelineConfig, run_pipeline
     from adpart.workflows.resolve import resolve_domain as get_domain
 
@@ -132,13 +133,11 @@ def _transfer(config: ExperimentConfig, setup: _Setup, report: ExperimentReport
                              "partition-epsilon": EPSILON},
         gap_fraction=GAP_FRACTION, fallback=False,  # the experiment compares the layer with flat
     )
-    from adpart.workflows.knowledge import working_kb
-
     # the knowledge base of config, else config.out/kb (kept, so a rerun resumes)
     with working_kb(config.kb or Path(config.out) / "kb", "transfer") as kb:
         config.progress(f"{s.env}: pipeline {s.first} -> {s.new} ({s.detector})")
         pipe = run_pipeline(kb, pconfig, out=out, progress=config.progress)
-        options, models, partition = _stored_layer(kb, pipe)
+        options, _, partition = _stored_layer(kb, pipe)
     report.figures += pipe.figures
     mdp = get_domain(s.env).mdp(s.new)
     # the stored models are the first task's; the learners below work on the new one
@@ -146,6 +145,20 @@ def _transfer(config: ExperimentConfig, setup: _Setup, report: ExperimentReport
     common = {"runs": s.runs, "episodes": s.episodes, "seed": config.seed,
               "alpha": s.alpha,
               "eval_every": s.eval_every, "max_steps_per_episode": s.horizon}
+    return {"pipe": pipe, "mdp": mdp, "options": options, "models": models,
+            "partition": partition, "common": common}
+
+
+def _transfer(config: ExperimentConfig, setup: TransferSetup, report: ExperimentReport
+              ) -> dict[str, Any]:
+    """Run the pipeline and the alternative learners; fill ``report`` with the shared parts."""
+    from adpart.learning.curves import plot_curves
+    from adpart.learning.hierarchical import hierarchical_learning
+
+    s = setup
+    ctx = pipeline_layer(config, setup, report)
+    pipe, mdp, options, models = ctx["pipe"], ctx["mdp"], ctx["options"], ctx["models"]
+    partition, common = ctx["partition"], ctx["common"]
     hier = {"models": models, "delta": DELTA, "epsilon": EPSILON, **common}
     results: dict[str, Any] = {}
     config.progress(f"{s.env}/{s.new}: partition space without refinement")
@@ -164,13 +177,13 @@ def _transfer(config: ExperimentConfig, setup: _Setup, report: ExperimentReport
             "common": common, "plot_curves": plot_curves}
 
 
-def _finish(config: ExperimentConfig, setup: _Setup, report: ExperimentReport,
+def _finish(config: ExperimentConfig, setup: TransferSetup, report: ExperimentReport,
             ctx: dict[str, Any], seed_shape: str) -> None:
     """Rows, comparisons, blocks over time, the bound check and figures, into ``report``."""
     s = setup
     out = Path(config.out)
     pipe, results, curves = ctx["pipe"], ctx["results"], ctx["curves"]
-    rows, reached = _curve_rows(s.new, curves)
+    rows, reached = curve_rows(s.new, curves)
     stage = {st.stage: st for st in pipe.stages}
     part = stage["partition"].detail
     refine = results["refinement"]
@@ -247,7 +260,7 @@ def _finish(config: ExperimentConfig, setup: _Setup, report: ExperimentReport,
     report.figures.append(str(ctx["plot_curves"](
         curves, out / "value_gap.png", metric="value_gap",
         title=f"{s.env}/{s.new}: value gap of the greedy policy")))
-    report.figures.append(_plot_blocks(blocks, out / "blocks.png",
+    report.figures.append(plot_blocks(blocks, out / "blocks.png",
                                        f"{s.env}/{s.new}: blocks over time"))
 
 
@@ -263,7 +276,7 @@ def _shape(reached: dict[str, np.ndarray], episodes: int) -> str:
         "): " + "; ".join(parts) + "."
 
 
-def _budget(config: ExperimentConfig, full: dict[str, int], quick: dict[str, int]
+def budget(config: ExperimentConfig, full: dict[str, int], quick: dict[str, int]
             ) -> dict[str, int]:
     b = dict(quick if config.quick else full)
     b["runs"] = min(config.runs, b["runs"])
@@ -280,10 +293,10 @@ def three_floor(config: ExperimentConfig) -> ExperimentReport:
     from adpart.options.models import option_models
     from adpart.workflows.partitioning import plot_partition
 
-    b = _budget(config, {"runs": config.runs, "first": 800, "episodes": 600, "horizon": 5000},
+    b = budget(config, {"runs": config.runs, "first": 800, "episodes": 600, "horizon": 5000},
                 {"runs": 2, "first": 200, "episodes": 40, "horizon": 1000})
-    setup = _Setup("three-floor", "reach-goal", "reach-top-west", "count-exhaustive", b["runs"],
-                   b["first"], b["episodes"], b["horizon"], "1")
+    setup = TransferSetup("three-floor", "reach-goal", "reach-top-west", "count-exhaustive",
+                          b["runs"], b["first"], b["episodes"], b["horizon"], "1")
     report = ExperimentReport("three-floor", "Transfer on three-floor (Figs. 5.2-5.5)")
     report.seed_reports = [
         ("Fig. 5.3: three-floor's 2,900 states partition into about 63 blocks (delta 0.3, "
@@ -328,10 +341,10 @@ def three_floor(config: ExperimentConfig) -> ExperimentReport:
             "Figs. 5.7-5.10; section 5.1.4")
 def three_floor_arm(config: ExperimentConfig) -> ExperimentReport:
     """navigate -> deliver with count-mc subgoals, with and without refinement, blocks over time."""
-    b = _budget(config, {"runs": config.runs, "first": 1500, "episodes": 800, "horizon": 2000},
+    b = budget(config, {"runs": config.runs, "first": 1500, "episodes": 800, "horizon": 2000},
                 {"runs": 2, "first": 100, "episodes": 30, "horizon": 500})
-    setup = _Setup("three-floor-arm", "navigate", "deliver", "count-mc", b["runs"], b["first"],
-                   b["episodes"], b["horizon"], "1/n^0.8")
+    setup = TransferSetup("three-floor-arm", "navigate", "deliver", "count-mc",
+                          b["runs"], b["first"], b["episodes"], b["horizon"], "1/n^0.8")
     report = ExperimentReport("three-floor-arm",
                               "Find-pick-deliver on three-floor-arm (Figs. 5.7-5.10)")
     report.seed_reports = [
@@ -480,11 +493,11 @@ def _report_directed(report: ExperimentReport, ctx: dict[str, Any]) -> None:
             "Figs. 5.12-5.14; section 5.1.5")
 def urban(config: ExperimentConfig) -> ExperimentReport:
     """navigate -> navigate-pickup with count-mc subgoals; refinement, none, reward variation."""
-    b = _budget(config, {"runs": config.runs, "first": 1500, "episodes": 500,
+    b = budget(config, {"runs": config.runs, "first": 1500, "episodes": 500,
                          "horizon": 1000},
                 {"runs": 2, "first": 1200, "episodes": 20, "horizon": 1000})
-    setup = _Setup("urban", FIRST_URBAN_TASK, "navigate-pickup", "count-mc", b["runs"], b["first"],
-                   b["episodes"], b["horizon"], "1")
+    setup = TransferSetup("urban", FIRST_URBAN_TASK, "navigate-pickup", "count-mc",
+                          b["runs"], b["first"], b["episodes"], b["horizon"], "1")
     report = ExperimentReport("urban", "Transfer on the urban domain (Figs. 5.12-5.14)")
     report.seed_reports = [
         ("Fig. 5.12: on the 20,000-state game domain partition-space learning reaches the bound "

@@ -128,6 +128,29 @@ def test_three_floor_arm_quick_and_resume(tmp_path):
 
 
 @pytest.mark.slow
+def test_three_floor_arm_planned_quick(tmp_path):
+    """The planned learners run on the stored layer; without refinement the layer keeps its
+    blocks and can never deliver; every gap lies between 0 and that of never delivering."""
+    report, files = _run("three-floor-arm-planned", tmp_path, kb=str(tmp_path / "kb"))
+    assert set(files) == {"json", "markdown"}
+    rows = {r["learner"]: r for r in report.data["rows"]}
+    assert set(rows) == {"flat Q", "partition, no refinement, planned",
+                         "partition, refinement, planned"}
+    never = rows["flat Q"]["v_star_start"] + 1 / (1 - 0.99)
+    for row in rows.values():
+        assert row["runs"] == 2 and -1e-9 <= row["final_gap_mean"] <= never + 1e-6
+    off = report.data["layers"]["partition, no refinement, planned"]
+    assert off["refinements"] == [0, 0] and off["blocks_after"] == [off["blocks_before"]] * 2
+    np.testing.assert_allclose(off["layer_optimum_gap"], never, atol=1e-6)
+    assert off["learner_samples_gap"] is None
+    on = report.data["layers"]["partition, refinement, planned"]
+    assert all(-1e-9 <= g <= never + 1e-6 for g in on["layer_optimum_gap"])
+    assert report.data["settings"]["explore_known"] == 2
+    for fig in report.figures:
+        assert (tmp_path / "out" / fig.split("/")[-1]).stat().st_size > 1000
+
+
+@pytest.mark.slow
 def test_urban_quick(tmp_path):
     """Slow (about 90 s): 1,200 flat episodes of the first task on 20,004 states, then phases
     1-3 split the states into thousands of blocks (docs/hierarchical-learning.md)."""
