@@ -134,7 +134,7 @@ from adpart.learning.result import LearnResult
 from adpart.learning.schedules import Schedule, constant, visit_count
 from adpart.learning.settings import count, run_settings
 from adpart.learning.smdp_q import drive, kernel_function, make_state, option_set
-from adpart.mdp.evaluation import greedy_policy, policy_evaluation
+from adpart.mdp.evaluation import greedy_policy, policy_values
 from adpart.mdp.model import FiniteMDP, SMDPModel
 from adpart.mdp.solvers import q_from_v, solve
 from adpart.options.models import OptionModel, option_models
@@ -513,7 +513,7 @@ def hierarchical_learning(
         layer's best block policy from it."""
         if reference == "policy":
             best = solve(point_model(partition, smdp), 1e-8).policy[partition.labels]
-            return policy_evaluation(smdp, best)
+            return policy_values(smdp, best, lower)
         return np.maximum(offered_values(partition, smdp, mdp.terminal, lower),
                           point_optima(partition)[partition.labels])
     st = make_state(

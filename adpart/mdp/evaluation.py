@@ -116,6 +116,22 @@ def policy_evaluation(model: HasSMDP, policy: np.ndarray) -> np.ndarray:
     return np.asarray(V, dtype=np.float64)
 
 
+def policy_values(model: HasSMDP, policy: np.ndarray, never: float) -> np.ndarray:
+    """``V^pi`` like :func:`policy_evaluation`, except that a state from which ``pi`` never ends
+    (possible only with ``gamma = 1``; :func:`never_terminating_states`) is worth ``never``, as
+    if it ended there with that value, instead of raising."""
+    smdp = model.as_smdp()
+    F_pi, R_pi = _policy_matrix(smdp, policy)
+    trapped = never_terminating_states(F_pi)
+    if trapped.size:
+        keep = np.ones(smdp.n_states)
+        keep[trapped] = 0.0
+        F_pi = sp.csr_array(sp.diags_array(keep) @ F_pi)
+        R_pi = np.where(keep > 0, R_pi, never)
+    V = spla.spsolve(sp.csc_array(sp.eye_array(smdp.n_states) - F_pi), R_pi)
+    return np.asarray(V, dtype=np.float64)
+
+
 #: Rows from which :func:`greedy_policy` uses the compiled parallel kernel (below, numpy's
 #: argmax is as fast and needs no compiled code).
 GREEDY_COMPILED_ROWS = 200_000
