@@ -18,7 +18,10 @@ and partition the pipeline stored, learns the new task the other ways the seed c
 exploration (R-max, ``explore_known``), which is what first reaches ``deliver``'s goal, the test
 reading the grounded model values against what the layer offers, and refinement by 4.3.3's block
 rule; for each run it reports the value of the best block-constant policy of the final layer
-(:func:`layer_optimum_gaps`), beside what the learned values achieve.
+(:func:`layer_optimum_gaps`), beside what the learned values achieve, and the sample limit of
+planning on counts (:func:`certainty_equivalence_gaps`, :func:`grounded_policy_gaps`).
+:mod:`adpart.experiments.arm_planned` runs the same pipeline (:func:`pipeline_layer`) with the
+learner those limits called for.
 
 ``three-floor`` (5.1.1-5.1.3, Figs. 5.2-5.5) adds SMDP Q-learning over the discovered options plus
 primitives and the hand-designed doorway/stair options
