@@ -35,6 +35,7 @@ from adpart.experiments.transfer import (
     layer_optimum_gaps,
     pipeline_layer,
     plot_blocks,
+    setup_settings,
 )
 
 #: R-max's known count: the tries of every pair the sample limit measured as enough.
@@ -79,12 +80,7 @@ def three_floor_arm_planned(config: ExperimentConfig) -> ExperimentReport:
     curves = {"flat Q": pipe.curves[setup.new][flat_label],
               **{label: r.curve for label, r in results.items()}}
     rows, reached = curve_rows(setup.new, curves)
-    report.data["settings"] = {
-        "env": setup.env, "first_task": setup.first, "new_task": setup.new,
-        "detector": setup.detector, "runs": setup.runs, "first_episodes": setup.first_episodes,
-        "episodes": setup.episodes, "max_steps_per_episode": setup.horizon,
-        "alpha": setup.alpha, "eval_every": setup.eval_every, "explore_known": b["known"],
-        "delta": DELTA, "epsilon": EPSILON, "gap_fraction": GAP_FRACTION, "seed": config.seed}
+    report.data["settings"] = {**setup_settings(setup, config), "explore_known": b["known"]}
     report.data["rows"] = rows
     report.data["episodes_to_bound"] = {k: v.tolist() for k, v in reached.items()}
     for row in rows:

@@ -104,7 +104,7 @@ def layer_sizes_figure(tasks: list[str], built: list[int], offered: list[int]) -
     return fig
 
 
-def plot_blocks(blocks: dict[str, np.ndarray], path: Path) -> str:
+def _plot_blocks(blocks: dict[str, np.ndarray], path: Path) -> str:
     from adpart.plotting import new_figure
 
     fig, ax = new_figure((6, 3.6))
@@ -217,7 +217,7 @@ def task_sequence(config: ExperimentConfig) -> ExperimentReport:
     report.figures.append(_plot({k: r.curve for k, r in five.items()},
                                 out / "task5_layers.png",
                                 f"{ENV} / {TASKS[-1]}: automatic layer vs all-subgoals"))
-    report.figures.append(plot_blocks({k: r.blocks for k, r in five.items()},
+    report.figures.append(_plot_blocks({k: r.blocks for k, r in five.items()},
                                        out / "task5_blocks.png"))
     started = {r["task"]: r["initial_blocks"] for r in pipe.rows if r["learner"] == "hierarchical"}
     sizes = layer_sizes_figure([st.task for st in layers],

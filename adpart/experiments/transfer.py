@@ -113,6 +113,16 @@ def _stored_layer(kb: Any, pipe: Any) -> tuple[list[Any], list[Any], Any]:
     return options, models, partition
 
 
+def setup_settings(setup: TransferSetup, config: ExperimentConfig) -> dict[str, Any]:
+    """The settings an experiment's summary records for ``setup``."""
+    s = setup
+    return {"env": s.env, "first_task": s.first, "new_task": s.new, "detector": s.detector,
+            "runs": s.runs, "first_episodes": s.first_episodes, "episodes": s.episodes,
+            "max_steps_per_episode": s.horizon, "alpha": s.alpha, "epsilon_greedy": 0.1,
+            "eval_every": s.eval_every, "delta": DELTA, "epsilon": EPSILON,
+            "gap_fraction": GAP_FRACTION, "seed": config.seed}
+
+
 def pipeline_layer(config: ExperimentConfig, setup: TransferSetup, report: ExperimentReport
                    ) -> dict[str, Any]:
     """Run the transfer pipeline (first task flat, subgoals, options, the layer, and the new
@@ -192,11 +202,7 @@ def _finish(config: ExperimentConfig, setup: TransferSetup, report: ExperimentRe
     refine = results["refinement"]
     bound45 = float(refine.parameters["theorem_4_5_bound"])
     blocks = {k: r.blocks for k, r in results.items()}
-    report.data["settings"] = {
-        "env": s.env, "first_task": s.first, "new_task": s.new, "detector": s.detector,
-        "runs": s.runs, "first_episodes": s.first_episodes, "episodes": s.episodes,
-        "max_steps_per_episode": s.horizon, "alpha": s.alpha, "epsilon_greedy": 0.1,
-        "delta": DELTA, "epsilon": EPSILON, "gap_fraction": GAP_FRACTION, "seed": config.seed}
+    report.data["settings"] = setup_settings(setup, config)
     report.data["pipeline"] = pipe.to_json()
     report.data["rows"] = rows
     report.data["episodes_to_bound"] = {k: v.tolist() for k, v in reached.items()}
@@ -415,12 +421,12 @@ def certainty_equivalence_gaps(mdp: Any, samples: tuple[int, ...], *, draws: int
     empirical models with ``n`` successors drawn for every pair
     (:func:`~adpart.mdp.generate.empirical_model`): what planning on counts can reach after ``n``
     tries of every pair, whatever the exploration (a generative model is its best case)."""
-    from adpart.learning.curves import start_distribution, start_values
+    from adpart.learning.curves import optimal_start_value, start_distribution, start_values
     from adpart.mdp.generate import empirical_model
     from adpart.mdp.solvers import solve
 
     mu, smdp = start_distribution(mdp), mdp.as_smdp()
-    v_star = float(mu @ solve(mdp, 1e-10).V)
+    v_star = optimal_start_value(mdp, mu)
     rng = np.random.default_rng(seed)
     gaps = {}
     for n in samples:
