@@ -70,7 +70,7 @@ def three_floor_arm_planned(config: ExperimentConfig) -> ExperimentReport:
     mdp, pipe = ctx["mdp"], ctx["pipe"]
     kw = {"models": ctx["models"], "delta": DELTA, "epsilon": EPSILON, **ctx["common"],
           "explore_known": b["known"], "reference": "policy", "intra_option": True,
-          "refine": "block", "layer_values": "planned"}
+          "refine": "block", "layer_values": "planned", "split_offered": True}
     results = {}
     for label, threshold in zip(LEARNERS, (np.inf, None), strict=True):
         config.progress(f"three-floor-arm/deliver: {label}")

@@ -25,7 +25,8 @@ flat learner's exactly, :mod:`adpart.learning._kernels`):
    with ``a*`` the flat greedy action of ``s`` (lowest index on ties), if ``a*`` is not yet
    offered in ``b``, ``n_flat(s, a*) >= min_visits``, ``n(b) >= min_visits`` and
    ``Q_flat(s, a*) - max_o Q(b, o) > threshold``, the agent stops *before* using its row and the
-   kernel returns 2;
+   kernel returns 2 (with ``split_offered``, also where ``a*`` is offered in ``b`` and
+   ``Q_flat(s, a*) - Voff[k, s] > threshold``);
 1. at a decision point: ``n(b) += 1``; ``epsilon = max(floor, eps_ep * n(b)**-omega)``; if
    ``u[0] < epsilon`` the option is the ``floor(u[1] m)``-th of the ``m`` options offered in ``b``
    (in index order; hierarchical: also every primitive action admissible in ``s`` - "the agent
@@ -138,7 +139,10 @@ class SMDPLockStepState(ScheduledAgents):
     confidence bound; ``flat_explore``: take the optimistic flat action where it beats the block;
     ``ref_model``: what the grounded flat value is compared with - 0 the block's learned
     ``max_o Q``, 1 ``Vref[k, block]`` (K, Bcap) the block's point-model value, 2 ``Vref[k, state]``
-    (K, S) the optimum of the options offered in the state's block, from the state itself.
+    (K, S) the optimum of the options offered in the state's block, from the state itself;
+    ``split_offered``: the test also reads an action the block already offers, against
+    ``Voff[k, state]`` (K, S) (+inf where the state's block cannot be split), and a firing then
+    splits the state from its block.
 
     Agents: ``state``, ``episode``, ``target``, ``t_ep``, ``d_ep``, ``ret``, ``dret``, ``gpow``,
     ``cur`` (running option or -1), ``s0``, ``b0``, ``G``, ``g``, ``alpha_ep``, ``eps_ep``;
@@ -193,6 +197,8 @@ class SMDPLockStepState(ScheduledAgents):
     vr_g: np.ndarray
     ref_model: int
     Vref: np.ndarray
+    split_offered: bool
+    Voff: np.ndarray
     explore_m: int
     xc: np.ndarray
     xm: np.ndarray
@@ -241,11 +247,10 @@ class SMDPLockStepState(ScheduledAgents):
             self.intra, self.chained, self.Ql, self.tsum, self.tsq, self.succ0, self.lcb_z,
             self.flat_explore, self.prim_eps, self.rewarded, self.r_min,
             self.vr_on, self.vr_b0, self.vr_G, self.vr_g, self.ref_model,
-            self.Vref, self.explore_m, self.xc, self.xm, self.Qx, self.Vx, self.pred_ptr,
-            self.pred_idx, self.xqueue, self.xinq, self.v_max, self.sweep_tol, self.Vl, self.floor,
-            self.state,
-            self.episode,
-            self.target, self.t_ep, self.d_ep, self.ret, self.dret, self.gpow, self.cur, self.s0,
+            self.Vref, self.split_offered, self.Voff, self.explore_m, self.xc, self.xm, self.Qx,
+            self.Vx, self.pred_ptr, self.pred_idx, self.xqueue, self.xinq, self.v_max,
+            self.sweep_tol, self.Vl, self.floor, self.state, self.episode, self.target,
+            self.t_ep, self.d_ep, self.ret, self.dret, self.gpow, self.cur, self.s0,
             self.b0, self.G, self.g, self.alpha_ep, self.eps_ep, self.U, self.W, self.cursor,
             self.out_steps, self.out_dec, self.out_ret, self.out_dret, self.out_blocks,
         )
@@ -268,7 +273,8 @@ def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, h
              check_on, threshold, min_visits, prim_opt, prim_adm, fired, intra, chained,
              Ql, tsum, tsq, succ0, lcb_z, flat_explore, prim_eps, rewarded, r_min,
              vr_on, vr_b0, vr_G, vr_g, ref_model,
-             Vref, explore_m, xc, xm, Qx, Vx, pred_ptr, pred_idx, xqueue, xinq, v_max, sweep_tol,
+             Vref, split_offered, Voff, explore_m, xc, xm, Qx, Vx, pred_ptr, pred_idx, xqueue,
+             xinq, v_max, sweep_tol,
              Vl, floor, state,
              episode, target,
              t_ep,
@@ -318,9 +324,12 @@ def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, h
                             best_a = a
                     if best_a >= 0:
                         oa = prim_opt[best_a]
-                        if oa >= 0 and not adm[k, d, oa]:
+                        offered = oa >= 0 and adm[k, d, oa]
+                        if oa >= 0 and (not offered or split_offered):
                             vp = neg_inf
-                            if ref_model == 1:
+                            if offered:
+                                vp = Voff[k, s]
+                            elif ref_model == 1:
                                 vp = Vref[k, d]
                             elif ref_model == 2:
                                 vp = Vref[k, s]

@@ -212,13 +212,16 @@ def refine_block(
     With ``at`` (a member state of ``block``) the new options join the option set of ``at``
     alone, the state whose evidence fired (the ``state`` rule of the module docstring): ``at``
     becomes a block of its own offering them, and the rest of ``block`` is refined to stability
-    for its unchanged set.
+    for its unchanged set. An option ``block`` already offers stays offered in all of it, so with
+    options it already offers ``at`` is split off with the block's set (the test's reply to a
+    state its block's policy fails, :func:`~adpart.learning.hierarchical.hierarchical_learning`).
 
     Every block of ``partition`` must offer only columns all its states may start (every layer
     the learner builds or accepts does); only the refined block's children are checked.
     """
     S = partition.n_states
     new_options = list(new_options)
+    added = [o for o in new_options if not partition.admissible[block, o]]
     labels = partition.labels
     adm_rows = partition.admissible.copy()
     adm_rows[block, new_options] = True
@@ -228,10 +231,11 @@ def refine_block(
     sel = np.flatnonzero(adm_rows[block])
     adm_in = model.admissible[inside][:, sel]  # (members, offered columns)
     if at is not None:
-        adm_in[:, np.searchsorted(sel, new_options)] &= (inside == at)[:, None]
-    # the block's split by where its columns may start, then by their rewards (eq. 4.7), on the
-    # members alone (the same groups reward_split forms on the whole labelling)
-    local = row_codes(adm_in[:, ~adm_in.all(axis=0)])  # columns every member may start split none
+        adm_in[:, np.searchsorted(sel, added)] &= (inside == at)[:, None]
+    # the block's split by where its columns may start (and ``at`` from the rest), then by their
+    # rewards (eq. 4.7), on the members alone (the groups reward_split forms on the whole labelling)
+    keys = adm_in[:, ~adm_in.all(axis=0)]  # columns every member may start split none
+    local = row_codes(keys if at is None else np.column_stack([keys, inside == at]))
     if epsilon is not None:
         every = np.arange(inside.size)
         n_local = int(local.max()) + 1
@@ -256,7 +260,7 @@ def refine_block(
     allowed[:, sel] = block_all(new[inside], n_new, adm_in)
     if at is not None:  # the other children of the block keep its former option set
         others = (parent == block) & (np.arange(n_new) != new[at])
-        allowed[np.ix_(others, new_options)] = False
+        allowed[np.ix_(others, added)] = False
     return Partition.from_canonical(new, adm_rows[parent] & allowed)  # canonical_labels made it
 
 

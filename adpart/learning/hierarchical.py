@@ -374,6 +374,7 @@ def hierarchical_learning(
     primitive_exploration: str = "until-reward",
     explore_known: int = 0,
     layer_values: str = "learned",
+    split_offered: bool = False,
 ) -> HierarchicalResult:
     """Learn ``mdp`` on a decision layer over ``options`` (section 4.3; module docstring).
 
@@ -432,6 +433,11 @@ def hierarchical_learning(
             (:func:`~adpart.learning._rmax.counted_smdp`: the primitive columns from the counts,
             the options' given models), certainty equivalence on the decision layer
             (docs/hierarchical-learning.md, session 12).
+        split_offered: (reference ``"policy"``) the test also reads an action ``s``'s block
+            already offers, and where the grounded value of the best one beats what the layer's
+            policy gets from ``s`` by more than ``L``, ``s`` is split from its block with the
+            block's set (:func:`~adpart.learning.decision_layer.refine_block` with ``at``): the
+            block's point model chose for states that need another column (module docstring).
         q_init: the starting values of the layer and the flat table. Default 0, or the lower
             bound ``r_min / (1 - gamma)`` with ``explore_known``: exploration is then R-max's,
             and a block the agent never visited must not look better to the greedy policy than
@@ -496,6 +502,9 @@ def hierarchical_learning(
         raise TaskError(f"refine = {refine!r}; choose one of {list(REFINE_RULES)}")
     if layer_values not in LAYER_VALUES:
         raise TaskError(f"layer_values = {layer_values!r}; choose one of {list(LAYER_VALUES)}")
+    if split_offered and reference != "policy":
+        raise TaskError("split_offered compares with what the layer's policy gets from each "
+                        "state: give reference = 'policy'")
     if layer_values == "planned" and not directed:
         raise TaskError("layer_values = 'planned' plans on the counts of R-max exploration: "
                         "give explore_known >= 1 (inconsistency mode, flat_explore on)")
@@ -516,6 +525,13 @@ def hierarchical_learning(
             return policy_values(smdp, best, lower)
         return np.maximum(offered_values(partition, smdp, mdp.terminal, lower),
                           point_optima(partition)[partition.labels])
+
+    def split_values(partition: Partition, values: np.ndarray) -> np.ndarray:
+        """The reference for an action the state's block offers: ``values`` where the state
+        shares its block, ``+inf`` (never fires) where it is a block of its own."""
+        shared = np.bincount(partition.labels, minlength=partition.n_blocks) > 1
+        return np.where(shared[partition.labels], values, np.inf)
+    vref0 = state_values(part0) if check and reference in ("offered", "policy") else None
     st = make_state(
         mdp, full, np.broadcast_to(part0.labels, (K, S)),
         np.broadcast_to(part0.admissible, (K, B0, len(full))), episodes=N, horizon=H,
@@ -526,7 +542,8 @@ def hierarchical_learning(
         primitive_epsilon=PRIMITIVE_EXPLORATION[primitive_exploration] if check else 0,
         r_min=reward_floor(mdp),
         block_values=point_optima(part0) if check and reference == "model" else None,
-        state_values=state_values(part0) if check and reference in ("offered", "policy") else None,
+        state_values=vref0,
+        offered_values=split_values(part0, vref0) if check and split_offered else None,
         explore_known=m_known,
     )
     parts = [part0] * K
@@ -548,8 +565,9 @@ def hierarchical_learning(
     def on_fire(k: int) -> None:
         s, b, a = (int(x) for x in st.fired[k])
         old = parts[k]
+        offered = bool(old.admissible[b, prims[a]])  # split_offered: s leaves its block
         new = refine_block(old, b, [a], refiner, delta=delta, epsilon=epsilon,
-                           at=s if refine == "state" else None)
+                           at=s if refine == "state" or offered else None)
         B_old, B_new = old.n_blocks, new.n_blocks
         grow(B_new)
         parent = new.parent_map(old)
@@ -567,9 +585,12 @@ def hierarchical_learning(
             st.Vref[k, :B_new] = point_optima(new)
         elif reference in ("offered", "policy"):
             st.Vref[k] = state_values(new)
+            if split_offered:
+                st.Voff[k] = split_values(new, st.Vref[k])
         parts[k] = new
         events.append({"run": k, "episode": int(st.episode[k]), "state": s, "block": b,
-                       "action": a, "blocks_before": B_old, "blocks_after": B_new})
+                       "action": a, "offered": offered, "blocks_before": B_old,
+                       "blocks_after": B_new})
 
     def planned(k: int) -> np.ndarray:
         """``(B_k, C)`` the block values of run k's layer planned on its grounded model."""
@@ -599,6 +620,7 @@ def hierarchical_learning(
         "test_reference": reference, "refine": refine,
         "primitive_exploration": primitive_exploration if check else "never",
         "explore_known": m_known if directed else 0, "layer_values": layer_values,
+        "split_offered": bool(split_offered),
         "flat_lower_bound": lower,
         "min_visits": V, "alpha": alpha_s.to_dict(), "epsilon_greedy": eps_s.to_dict(),
         "max_steps_per_episode": H, "eval_every": M, "q_init": float(q0),

@@ -201,12 +201,14 @@ def make_state(
     lower_bound: float = -np.inf, lcb_z: float = 0.0, flat_explore: bool = False,
     primitive_epsilon: int = 0, r_min: float = np.inf,
     block_values: np.ndarray | None = None, state_values: np.ndarray | None = None,
-    explore_known: int = 0,
+    offered_values: np.ndarray | None = None, explore_known: int = 0,
 ) -> kernels.SMDPLockStepState:
     """Kernel state for K runs on decision layers ``labels`` (K, S) / ``block_adm`` (K, B, O).
 
     The inconsistency test compares with ``block_values`` (B,) per block or ``state_values`` (S,)
-    per state when one is given (at most one), else with the block's learned values. With
+    per state when one is given (at most one), else with the block's learned values; with
+    ``offered_values`` (S,) it also reads an action the state's block already offers, against
+    that reference (+inf where the state cannot be split from its block). With
     ``explore_known`` m > 0 (and ``flat_explore``) the flat action explored is R-max's, a pair
     known after m tries (:mod:`adpart.learning._rmax`), instead of the optimistic flat table's.
     """
@@ -261,6 +263,9 @@ def make_state(
         vr_g=np.ones((K, O)),
         ref_model=1 if block_values is not None else 2 if state_values is not None else 0,
         Vref=_reference_table(K, S, capacity, block_values, state_values),
+        split_offered=offered_values is not None,
+        Voff=np.zeros((1, 1)) if offered_values is None
+        else np.broadcast_to(offered_values, (K, S)).astype(np.float64),
         **_rmax_arrays(mdp, K, m_known, horizon, floor=float(lower_bound), grounded=check),
         Ql=np.broadcast_to(np.where(mdp.admissible, float(lower_bound), -np.inf)
                            if check else np.zeros((1, A)), flat_shape if check else (1, 1, A)

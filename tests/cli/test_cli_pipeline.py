@@ -253,6 +253,9 @@ def test_directed_exploration_is_a_learner_option_and_a_bad_count_is_refused(tmp
     unplanned = CliRunner().invoke(cli, [*rmax, "--hier-opt", "layer-values=planned"])
     assert unplanned.exit_code == 2 and not kb_dir.exists()
     assert "--layer-values planned" in unplanned.output and "--explore-known" in unplanned.output
+    unsplit = CliRunner().invoke(cli, [*rmax, "--hier-opt", "split-offered=true"])
+    assert unsplit.exit_code == 2 and not kb_dir.exists()
+    assert "--split-offered" in unsplit.output and "--reference policy" in unsplit.output
     res = CliRunner().invoke(cli, [*rmax, "--hier-opt", "explore-known=1"])
     assert res.exit_code == 0, res.output
     summary = json.loads(res.output)
@@ -270,3 +273,9 @@ def test_directed_exploration_is_a_learner_option_and_a_bad_count_is_refused(tmp
                                                   "--hier-opt", "layer-values=planned"]).output)
     layer = next(r for r in planned["tasks"] if r["learner"] == "hierarchical")
     assert layer["runs_within_bound"] == layer["runs"] == 3
+    split = json.loads(CliRunner().invoke(cli, [
+        *rmax, "--hier-opt", "explore-known=1", "--hier-opt", "layer-values=planned",
+        "--hier-opt", "reference=policy", "--hier-opt", "split-offered=true"]).output)
+    layer = next(r for r in split["tasks"] if r["learner"] == "hierarchical")
+    assert layer["runs_within_bound"] == layer["runs"] == 3
+    assert split["config"]["hierarchical_params"]["split-offered"] == "true"

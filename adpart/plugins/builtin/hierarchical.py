@@ -105,6 +105,9 @@ class HierarchicalLearner:
               "what the greedy policy is greedy on: the layer's learned Q-values (learned), or "
               "the layer's point model planned on the counts of explore-known (planned)",
               choices=("learned", "planned")),
+        Param("split-offered", "bool", False,
+              "with reference policy: where an action the state's block already offers beats "
+              "what the layer's policy gets there, split the state from its block"),
         ALPHA,
         EPSILON,
         MAX_STEPS,
@@ -117,7 +120,7 @@ class HierarchicalLearner:
                  reference: str = "auto",
                  min_visits: int = 2, intra_option: bool = False, refine: str = "state",
                  primitive_exploration: str = "until-reward", explore_known: int = 0,
-                 layer_values: str = "learned",
+                 layer_values: str = "learned", split_offered: bool = False,
                  alpha: str = "1/n^0.8", epsilon: str = "0.1", max_steps: int = 1000,
                  kernel: str = "auto") -> None:
         self.intra_option = bool(intra_option)
@@ -126,6 +129,10 @@ class HierarchicalLearner:
             raise TaskError("--layer-values planned plans on the counts of R-max exploration; "
                             "give --explore-known 1 or more")
         self.explore_known, self.layer_values = explore_known, layer_values
+        if split_offered and reference != "policy":
+            raise TaskError("--split-offered compares with what the layer's policy gets from "
+                            "each state; give --reference policy")
+        self.split_offered = bool(split_offered)
         self.lcb_z, self.flat_explore = lcb_z, bool(flat_explore)
         self.reference = None if reference == "auto" else reference
         self.mode, self.delta, self.partition_epsilon = mode, delta, partition_epsilon
@@ -155,7 +162,7 @@ class HierarchicalLearner:
             max_steps_per_episode=self.max_steps, eval_every=eval_every, progress=progress,
             kernel=self.kernel, intra_option=self.intra_option, refine=self.refine,
             primitive_exploration=self.primitive_exploration, explore_known=self.explore_known,
-            layer_values=self.layer_values,
+            layer_values=self.layer_values, split_offered=self.split_offered,
         )
 
 
