@@ -11,8 +11,10 @@ values learned by step sizes stay biased and nearly tied. This experiment runs t
 baseline) with a budget for the first limit, 2,500 episodes, and learns ``deliver`` on the stored
 layer without and with refinement, both exploring by R-max with a pair known after 30 tries, the
 test reading the exact value of the layer's best block policy (``reference="policy"``), 4.3.3's
-block rule, intra-option updates, and the greedy policy planned on each run's counts
-(``layer_values="planned"``).
+block rule, intra-option updates, the greedy policy planned on each run's counts
+(``layer_values="planned"``), and a state split from its block where an action the block already
+offers beats what the layer's policy gets there (``split_offered``; without it 3 of 20 final
+layers never delivered, docs/hierarchical-learning.md, session 13).
 """
 
 from __future__ import annotations

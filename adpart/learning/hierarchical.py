@@ -93,6 +93,19 @@ reference reads the same kind of value: what the layer's best block policy achie
 which the point model's ``V*_P(b)`` and the per-state best of the offered columns both
 overstate on a layer whose blocks mix states that need different columns.
 
+**An offered action the block's policy fails** (``split_offered``, with the ``"policy"``
+reference). 4.3.3's test only adds an action the block does not offer. In 3 of 20 arm runs the
+final layer's best block policy never delivered (gap 27.1) although at every state of its loop
+the action the grounded values chose was already offered: blocks of two states (the same cell with
+and without the object, or before and after delivery) whose point model picked a move one of
+them needs and the other does not, and successor blocks whose averaged values pulled the policy
+the wrong way. With ``split_offered`` the test also reads an offered ``a*``: where its lower
+bound beats the value from ``s`` of the layer's best block policy by more than ``L``, ``s`` leaves
+its block with the block's set (``refine_block(..., at=s)``) and the point model may choose for
+it alone; a state that is already a block of its own is not tested that way. On the three
+final layers, splitting such states one at a time in random order brought each within the bound
+(0.95-3.06 from ``V*`` after 57-87 splits; docs/hierarchical-learning.md, session 13).
+
 **Threshold.** Theorem 4.5 bounds ``||V* - V*_P||`` by ``2 (1 + gamma/(1-gamma) max(eps, delta))``;
 the seed uses it as the inconsistency threshold. The bound mixes units: with the seed's own
 ``epsilon = 10-20`` and ``gamma >= 0.9`` it is 180-360, above the whole value range of its tasks, so
