@@ -82,7 +82,8 @@ def three_floor_arm_planned(config: ExperimentConfig) -> ExperimentReport:
     curves = {"flat Q": pipe.curves[setup.new][flat_label],
               **{label: r.curve for label, r in results.items()}}
     rows, reached = curve_rows(setup.new, curves)
-    report.data["settings"] = {**setup_settings(setup, config), "explore_known": b["known"]}
+    report.data["settings"] = {**setup_settings(setup, config), "explore_known": b["known"],
+                               "split_offered": kw["split_offered"]}
     report.data["rows"] = rows
     report.data["episodes_to_bound"] = {k: v.tolist() for k, v in reached.items()}
     for row in rows:

@@ -146,6 +146,7 @@ def test_three_floor_arm_planned_quick(tmp_path):
     on = report.data["layers"]["partition, refinement, planned"]
     assert all(-1e-9 <= g <= never + 1e-6 for g in on["layer_optimum_gap"])
     assert report.data["settings"]["explore_known"] == 2
+    assert report.data["settings"]["split_offered"] is True
     for fig in report.figures:
         assert (tmp_path / "out" / fig.split("/")[-1]).stat().st_size > 1000
 
