@@ -544,6 +544,7 @@ def hierarchical_learning(
         shares its block, ``+inf`` (never fires) where it is a block of its own."""
         shared = np.bincount(partition.labels, minlength=partition.n_blocks) > 1
         return np.where(shared[partition.labels], values, np.inf)
+
     vref0 = state_values(part0) if check and reference in ("offered", "policy") else None
     st = make_state(
         mdp, full, np.broadcast_to(part0.labels, (K, S)),
