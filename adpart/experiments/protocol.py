@@ -54,12 +54,9 @@ def layer_ceiling(partition: Any, smdp: Any, mu: np.ndarray) -> float:
     the true options (section 4.3.3): solve the point model, give every state its block's
     option, evaluate exactly. The best a learner on this layer can settle at."""
     from adpart.mdp.evaluation import policy_evaluation
-    from adpart.mdp.solvers import solve
-    from adpart.partition import point_model
+    from adpart.partition import point_policy
 
-    pm = point_model(partition, smdp)
-    block_policy = solve(pm, 1e-10).policy
-    return float(mu @ policy_evaluation(smdp, block_policy[partition.labels]))
+    return float(mu @ policy_evaluation(smdp, point_policy(partition, smdp)))
 
 
 def steps_to(gaps: np.ndarray, steps: np.ndarray, ev: np.ndarray, tol: float

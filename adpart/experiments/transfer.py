@@ -405,13 +405,11 @@ def layer_optimum_gaps(result: Any, mdp: Any, options: list[Any], models: list[A
     whatever its learned values."""
     from adpart.learning.curves import start_distribution, start_values
     from adpart.learning.smdp_q import option_set
-    from adpart.mdp.solvers import solve
-    from adpart.partition.bpsmdp import point_model
+    from adpart.partition import point_policy
 
     _, smdp = option_set(mdp, options, include_primitives=True, models=models)
     mu = start_distribution(mdp)
-    best = np.array([solve(point_model(p, smdp), 1e-8).policy[p.labels]
-                     for p in result.partitions])
+    best = np.array([point_policy(p, smdp, 1e-8) for p in result.partitions])
     return result.v_star_start - start_values(smdp, best, mu)
 
 

@@ -147,12 +147,12 @@ from adpart.learning.result import LearnResult
 from adpart.learning.schedules import Schedule, constant, visit_count
 from adpart.learning.settings import count, run_settings
 from adpart.learning.smdp_q import drive, kernel_function, make_state, option_set
-from adpart.mdp.evaluation import greedy_policy, policy_values
+from adpart.mdp.evaluation import greedy_policy, policy_evaluation
 from adpart.mdp.model import FiniteMDP, SMDPModel
 from adpart.mdp.solvers import q_from_v, solve
 from adpart.options.models import OptionModel, option_models
 from adpart.options.option import Option
-from adpart.partition.bpsmdp import point_model, theorem_4_5_bound
+from adpart.partition.bpsmdp import point_model, point_policy, theorem_4_5_bound
 from adpart.partition.partition import Partition, block_all, row_codes
 
 __all__ = [
@@ -534,8 +534,7 @@ def hierarchical_learning(
         achieve from it (:func:`offered_values`); with reference ``"policy"``, the value of the
         layer's best block policy from it."""
         if reference == "policy":
-            best = solve(point_model(partition, smdp), 1e-8).policy[partition.labels]
-            return policy_values(smdp, best, lower)
+            return policy_evaluation(smdp, point_policy(partition, smdp, 1e-8), never=lower)
         return np.maximum(offered_values(partition, smdp, mdp.terminal, lower),
                           point_optima(partition)[partition.labels])
 

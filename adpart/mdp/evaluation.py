@@ -80,19 +80,29 @@ def never_terminating_states(F_pi: sp.csr_array, atol: float = 1e-12) -> np.ndar
     return np.flatnonzero(~reach).astype(np.int64)
 
 
-def policy_evaluation(model: HasSMDP, policy: np.ndarray) -> np.ndarray:
+def policy_evaluation(model: HasSMDP, policy: np.ndarray, *, never: float | None = None
+                      ) -> np.ndarray:
     """Exact ``V^pi`` by one sparse direct solve of ``(I - F_pi) V = R_pi``.
 
     Args:
         policy: ``(S,)`` int actions, or ``(S, O)`` probabilities.
+        never: the value of a state from which ``pi`` never ends (possible only with
+            ``gamma = 1``; :func:`never_terminating_states`), as if it ended there with that
+            value. Default: such a state raises.
 
     Raises:
-        ModelError: if ``I - F_pi`` is singular (a policy that never ends with ``gamma = 1``).
+        ModelError: if ``I - F_pi`` is singular (a policy that never ends with ``gamma = 1``
+            and no ``never`` value).
     """
     smdp = model.as_smdp()
     F_pi, R_pi = _policy_matrix(smdp, policy)
     trapped = never_terminating_states(F_pi)
-    if trapped.size:
+    if trapped.size and never is not None:
+        keep = np.ones(smdp.n_states)
+        keep[trapped] = 0.0
+        F_pi = sp.csr_array(sp.diags_array(keep) @ F_pi)
+        R_pi = np.where(keep > 0, R_pi, never)
+    elif trapped.size:
         raise ModelError(
             f"policy evaluation: the policy never terminates from {trapped.size} state(s) (first: "
             f"state {int(trapped[0])}); with gamma = 1 every state must reach a terminal state "
@@ -113,22 +123,6 @@ def policy_evaluation(model: HasSMDP, policy: np.ndarray) -> np.ndarray:
             "policy evaluation produced non-finite values: I - F_pi is singular (with gamma = 1 "
             "the policy must reach a terminal state from every state)"
         )
-    return np.asarray(V, dtype=np.float64)
-
-
-def policy_values(model: HasSMDP, policy: np.ndarray, never: float) -> np.ndarray:
-    """``V^pi`` like :func:`policy_evaluation`, except that a state from which ``pi`` never ends
-    (possible only with ``gamma = 1``; :func:`never_terminating_states`) is worth ``never``, as
-    if it ended there with that value, instead of raising."""
-    smdp = model.as_smdp()
-    F_pi, R_pi = _policy_matrix(smdp, policy)
-    trapped = never_terminating_states(F_pi)
-    if trapped.size:
-        keep = np.ones(smdp.n_states)
-        keep[trapped] = 0.0
-        F_pi = sp.csr_array(sp.diags_array(keep) @ F_pi)
-        R_pi = np.where(keep > 0, R_pi, never)
-    V = spla.spsolve(sp.csc_array(sp.eye_array(smdp.n_states) - F_pi), R_pi)
     return np.asarray(V, dtype=np.float64)
 
 

@@ -24,6 +24,7 @@ from adpart.partition.bpsmdp import (
     BPSMDP,
     IntervalValues,
     point_model,
+    point_policy,
     theorem_4_5_bound,
     value_gap,
 )
@@ -55,6 +56,7 @@ __all__ = [
     "phase2",
     "phase3",
     "point_model",
+    "point_policy",
     "reachable_states",
     "refine",
     "theorem_4_5_bound",

@@ -289,6 +289,13 @@ def point_model(
     return SMDPModel(R=R_P, F=F, admissible=adm)
 
 
+def point_policy(partition: Partition, model: SMDPModel | object, tol: float = 1e-10
+                 ) -> np.ndarray:
+    """``(S,)`` the optimal block policy of :func:`point_model` lifted to states: every state
+    takes its block's column (section 4.2.2), the policy a learner on the layer can settle at."""
+    return solve(point_model(partition, model), tol).policy[partition.labels]
+
+
 def theorem_4_5_bound(gamma: float, epsilon: float, delta: float) -> float:
     """Theorem 4.5 as printed: ``2 (1 + gamma / (1 - gamma) * max(epsilon, delta))``."""
     if not 0.0 <= gamma < 1.0:

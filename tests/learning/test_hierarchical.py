@@ -383,7 +383,7 @@ def test_the_offered_reference_fires_only_where_the_layer_cannot_do_as_well(setu
     from adpart.learning.decision_layer import offered_values
     from adpart.mdp.evaluation import policy_evaluation
     from adpart.mdp.solvers import q_from_v, solve
-    from adpart.partition.bpsmdp import point_model
+    from adpart.partition.bpsmdp import point_model, point_policy
 
     mdp, opts, part, smdp = setup
     res = hierarchical_learning(mdp, opts, part, reference=reference,
@@ -400,8 +400,7 @@ def test_the_offered_reference_fires_only_where_the_layer_cannot_do_as_well(setu
             s, a = e["state"], e["action"]
             v_block = solve(point_model(layer, smdp), 1e-10).V[layer.labels[s]]
             if reference == "policy":
-                best = solve(point_model(layer, smdp), 1e-10).policy[layer.labels]
-                v_policy = policy_evaluation(smdp, best)
+                v_policy = policy_evaluation(smdp, point_policy(layer, smdp))
                 assert (v_policy <= v_star + 1e-9).all()
                 assert q_star[s, a] - v_policy[s] > L
             else:

@@ -20,11 +20,11 @@ from adpart.learning.hierarchical import (
     refine_block,
     refinement_model,
 )
-from adpart.mdp.evaluation import policy_values
+from adpart.mdp.evaluation import policy_evaluation
 from adpart.mdp.model import FiniteMDP
 from adpart.mdp.solvers import q_from_v, solve
 from adpart.partition import Partition
-from adpart.partition.bpsmdp import point_model
+from adpart.partition.bpsmdp import point_policy
 
 from .test_hierarchical import DELTA, setup  # noqa: F401
 
@@ -57,9 +57,9 @@ def final_gap(result) -> np.ndarray:
 def test_the_block_policy_fails_half_the_corridor_and_the_seeds_test_cannot_see_it():
     mdp = corridor()
     smdp = mdp.as_smdp()
-    best = solve(point_model(one_block(), smdp), 1e-10).policy[one_block().labels]
+    best = point_policy(one_block(), smdp)
     lower = flat_lower_bound(mdp, HORIZON)
-    values = policy_values(smdp, best, lower)
+    values = policy_evaluation(smdp, best, never=lower)
     assert len(set(best[np.arange(CELLS) != GOAL].tolist())) == 1  # one move for the block
     assert np.isclose(values, lower).sum() == 3  # the three cells on the other side never arrive
     off = hierarchical_learning(mdp, [], one_block(), **RUN)
@@ -85,8 +85,8 @@ def test_splitting_where_an_offered_action_beats_the_layer_policy_reaches_the_op
         assert events and all(e["offered"] for e in events)
         for e in events:
             s, a = e["state"], e["action"]
-            best = solve(point_model(layer, smdp), 1e-10).policy[layer.labels]
-            assert q_star[s, a] - policy_values(smdp, best, lower)[s] > L
+            best = point_policy(layer, smdp)
+            assert q_star[s, a] - policy_evaluation(smdp, best, never=lower)[s] > L
             layer = refine_block(layer, e["block"], [a], refiner, delta=1.0, epsilon=None, at=s)
             assert layer.sizes[layer.labels[s]] == 1
         assert layer.n_blocks == on.partitions[k].n_blocks

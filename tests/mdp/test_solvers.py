@@ -9,7 +9,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from adpart.errors import ModelError
-from adpart.mdp.evaluation import greedy_policy, policy_evaluation, policy_values
+from adpart.mdp.evaluation import greedy_policy, policy_evaluation
 from adpart.mdp.model import FiniteMDP, SMDPModel
 from adpart.mdp.solvers import q_from_v, solve, value_iteration
 
@@ -100,15 +100,15 @@ def test_policy_evaluation_matches_dense_solve(seed, S, A):
 
 
 @given(st.integers(0, 10_000), st.integers(2, 20), st.integers(1, 4))
-def test_policy_values_equal_policy_evaluation_where_the_policy_ends(seed, S, A):
+def test_a_never_value_changes_nothing_where_the_policy_ends(seed, S, A):
     P, R = random_dense(seed, S, A, 0.5)
     mdp = FiniteMDP.from_dense(P, R, 0.9)
     pi = np.random.default_rng(seed).integers(0, A, S)
-    np.testing.assert_allclose(policy_values(mdp, pi, -5.0), policy_evaluation(mdp, pi),
+    np.testing.assert_allclose(policy_evaluation(mdp, pi, never=-5.0), policy_evaluation(mdp, pi),
                                atol=1e-10)
 
 
-def test_policy_values_give_never_where_an_undiscounted_policy_loops():
+def test_a_never_value_is_given_where_an_undiscounted_policy_loops():
     """A 4-state chain, gamma = 1: state 3 is terminal; 0 -> 1 -> 3 ends, 2 loops on itself.
     By hand: V(1) = -1, V(0) = -2, V(2) = never; a state that may enter the loop mixes both."""
     P = np.zeros((4, 2, 4))
@@ -121,9 +121,9 @@ def test_policy_values_give_never_where_an_undiscounted_policy_loops():
     mdp = FiniteMDP.from_dense(P, -np.ones((4, 2)), 1.0, terminal=terminal)
     with pytest.raises(ModelError, match="never terminates"):
         policy_evaluation(mdp, np.zeros(4, dtype=int))
-    np.testing.assert_allclose(policy_values(mdp, np.zeros(4, dtype=int), -50.0),
+    np.testing.assert_allclose(policy_evaluation(mdp, np.zeros(4, dtype=int), never=-50.0),
                                [-2.0, -1.0, -50.0, 0.0])
-    np.testing.assert_allclose(policy_values(mdp, np.array([1, 0, 0, 0]), -50.0),
+    np.testing.assert_allclose(policy_evaluation(mdp, np.array([1, 0, 0, 0]), never=-50.0),
                                [-1 + 0.5 * -1 + 0.5 * -50, -1.0, -50.0, 0.0])
 
 
