@@ -8,14 +8,16 @@ may declare parameters.
 
 from __future__ import annotations
 
+import itertools
 import math
-from collections.abc import Callable
-from dataclasses import dataclass, field
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 from adpart.errors import AdpartError, PluginError
 
-__all__ = ["PARAM_TYPES", "Param"]
+__all__ = ["PARAM_TYPES", "Param", "SettingField", "build_settings", "setting", "setting_fields",
+           "settings", "settings_dict", "settings_params"]
 
 #: The spelling of a parameter's type -> the Python type a value is converted to.
 PARAM_TYPES: dict[str, type] = {"int": int, "float": float, "str": str, "bool": bool}
@@ -33,6 +35,8 @@ class Param:
         help: one line for ``--help``.
         choices: allowed values (strings), or None.
         min: smallest allowed value for numbers, or None.
+        max: largest allowed value for numbers, or None.
+        none: the word that means None (``auto``, ``none``), or None when every value is typed.
         check: an optional validator of the converted value (e.g. a schedule's spelling); it
             raises an :class:`AdpartError`, which is reported naming ``--<name>``.
 
@@ -46,6 +50,8 @@ class Param:
     help: str
     choices: tuple[str, ...] | None = None
     min: float | None = None
+    max: float | None = None
+    none: str | None = None
     check: Callable[[Any], Any] | None = field(default=None, compare=False, repr=False)
 
     @property
@@ -57,6 +63,10 @@ class Param:
         if self.type not in PARAM_TYPES:
             raise PluginError(f"{owner}: parameter {self.name!r} has unknown type {self.type!r}")
         target = PARAM_TYPES[self.type]
+        if value is None or (self.none is not None and value == self.none):
+            if self.none is None:
+                raise PluginError(f"{owner}: --{self.name} expects {self.type}, got None")
+            return None
         if self.type == "bool" and isinstance(value, str):
             lowered = value.lower()
             if lowered not in {"true", "false", "1", "0", "yes", "no"}:
@@ -78,9 +88,266 @@ class Param:
             )
         if self.min is not None and out < self.min:
             raise PluginError(f"{owner}: --{self.name} must be >= {self.min}; got {out!r}")
+        if self.max is not None and out > self.max:
+            raise PluginError(f"{owner}: --{self.name} must be <= {self.max}; got {out!r}")
         if self.check is not None:
             try:
                 self.check(out)
             except AdpartError as exc:
                 raise PluginError(f"{owner}: --{self.name} {value!r}: {exc}") from None
         return out
+
+
+# --------------------------------------------------------------------------------------------
+# Settings as data: one frozen dataclass per algorithm, the single source of each default and
+# check. Plugin parameters, click options and stored provenance are derived from it.
+# --------------------------------------------------------------------------------------------
+
+#: Metadata key of a settings field's declaration (see :func:`setting`).
+_SETTING = "adpart.setting"
+
+
+@dataclass(frozen=True)
+class _Bounds:
+    """How a settings field is checked: its kind, range, choices and the word that means None."""
+
+    kind: str
+    min: float | None = None
+    max: float | None = None
+    choices: tuple[str, ...] | None = None
+    none: str | None = None
+    check: Callable[[Any], Any] | None = None
+    cli: bool = True
+
+
+def setting(default: Any, *, kind: str | None = None, min: float | None = None,
+            max: float | None = None, choices: Sequence[str] | None = None,
+            none: str | None = None, check: Callable[[Any], Any] | None = None,
+            cli: bool = True) -> Any:
+    """A field of a :func:`settings` class: its default and how a value is checked.
+
+    The field's help is the string literal written right below it in the class body (its
+    attribute docstring, which the API reference renders too); nothing else restates it.
+
+    Args:
+        default: the one default of the setting in the whole package.
+        kind: ``"int"``, ``"float"``, ``"str"`` or ``"bool"`` (default: the default's type; give
+            it when the default is None).
+        min, max: closed bounds for numbers.
+        choices: the allowed spellings of a string.
+        none: the word that means None on the command line (e.g. ``"auto"``); a setting whose
+            default is None needs one.
+        check: a validator of the converted value, raising :class:`AdpartError` (e.g. a
+            schedule's spelling).
+        cli: False keeps the field out of the command line and the plugin parameters (a
+            setting only Python callers give, such as an array).
+    """
+    if kind is None:
+        if default is None:
+            raise TypeError("a setting whose default is None needs kind=")
+        kind = next(k for k, t in PARAM_TYPES.items() if isinstance(default, t)
+                    and not (t is int and isinstance(default, bool)))
+    if default is None and none is None and cli:
+        raise TypeError("a setting whose default is None needs none= (its command-line word)")
+    bounds = _Bounds(kind, min, max, tuple(choices) if choices is not None else None, none,
+                     check, cli)
+    return field(default=default, metadata={_SETTING: bounds})
+
+
+@dataclass(frozen=True)
+class SettingField:
+    """One field of a settings class as the derived interfaces see it."""
+
+    name: str
+    default: Any
+    help: str
+    bounds: _Bounds
+    owner: str
+
+    @property
+    def option(self) -> str:
+        """Its command-line spelling, ``--threshold-scale`` for ``threshold_scale``."""
+        return "--" + self.name.replace("_", "-")
+
+    def param(self) -> Param:
+        """The plugin parameter of this field (its CLI option and conversion)."""
+        b = self.bounds
+        return Param(self.name.replace("_", "-"), b.kind, self.default, self.help,
+                     choices=b.choices, min=b.min, max=b.max, none=b.none, check=b.check)
+
+    def validate(self, value: Any) -> Any:
+        """``value`` checked against the declaration; raises TaskError naming the field."""
+        from adpart.errors import TaskError
+
+        b = self.bounds
+        if value is None:
+            if self.default is None:
+                return None
+            raise TaskError(f"{self.owner}: {self.name} = None; give a {b.kind}")
+        if b.kind == "bool":
+            if not isinstance(value, (bool, np_bool())):
+                raise TaskError(f"{self.owner}: {self.name} = {value!r} must be true or false")
+            return bool(value)
+        if b.kind in ("int", "float"):
+            ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+            ok = ok or _is_numpy_number(value)
+            if not ok or (b.kind == "int" and int(value) != value):
+                raise TaskError(f"{self.owner}: {self.name} = {value!r} must be "
+                                f"{'an integer' if b.kind == 'int' else 'a number'}")
+            value = int(value) if b.kind == "int" else float(value)
+            if not math.isfinite(value):
+                raise TaskError(f"{self.owner}: {self.name} = {value!r} must be finite")
+            low = b.min if b.min is not None else -math.inf
+            high = b.max if b.max is not None else math.inf
+            if not low <= value <= high:
+                raise TaskError(f"{self.owner}: {self.name} = {value!r} is outside "
+                                f"[{_fmt(low)}, {_fmt(high)}]; {self.help}")
+            return value
+        if not isinstance(value, str):
+            raise TaskError(f"{self.owner}: {self.name} = {value!r} must be a string")
+        if b.choices is not None and value not in b.choices:
+            raise TaskError(f"{self.owner}: {self.name} = {value!r}; choose one of "
+                            f"{', '.join(b.choices)}")
+        if b.check is not None:
+            try:
+                b.check(value)
+            except AdpartError as exc:
+                raise TaskError(f"{self.owner}: {self.name} = {value!r}: {exc}") from None
+        return value
+
+
+def _fmt(x: float) -> str:
+    return "inf" if x == math.inf else "-inf" if x == -math.inf else f"{x:g}"
+
+
+def np_bool() -> type:
+    import numpy as np
+
+    return np.bool_
+
+
+def _is_numpy_number(value: Any) -> bool:
+    import numpy as np
+
+    return isinstance(value, (np.integer, np.floating))
+
+
+def _attribute_docstrings(cls: type) -> dict[str, str]:
+    """``{field: the string literal right below it}`` read from ``cls``'s source."""
+    import ast
+    import inspect
+    import textwrap
+
+    try:
+        source = textwrap.dedent(inspect.getsource(cls))
+    except (OSError, TypeError):
+        return {}
+    body = ast.parse(source).body[0].body  # type: ignore[attr-defined]
+    docs: dict[str, str] = {}
+    for node, nxt in itertools.pairwise(body):
+        if (isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name)
+                and isinstance(nxt, ast.Expr) and isinstance(nxt.value, ast.Constant)
+                and isinstance(nxt.value.value, str)):
+            docs[node.target.id] = " ".join(inspect.cleandoc(nxt.value.value).split())
+    return docs
+
+
+def settings(cls: type) -> type:
+    """Make ``cls`` a frozen, keyword-only settings dataclass, checked once when built.
+
+    Every field is declared with :func:`setting` (or is itself a settings class, a group) and
+    documented by the string below it. Building an instance converts and checks every field,
+    then runs the class's ``check(self)`` for rules across fields; anything wrong raises
+    :class:`~adpart.errors.TaskError` naming the field. Code below the boundary trusts it.
+    """
+    user_check = cls.__dict__.get("check")
+
+    def __post_init__(self: Any) -> None:
+        for sf in type(self).__settings_fields__:
+            object.__setattr__(self, sf.name, sf.validate(getattr(self, sf.name)))
+        if user_check is not None:
+            user_check(self)
+
+    cls.__post_init__ = __post_init__  # type: ignore[attr-defined]
+    cls = dataclass(frozen=True, kw_only=True)(cls)
+    docs = _attribute_docstrings(cls)
+    own: list[SettingField] = []
+    for f in fields(cls):
+        bounds = f.metadata.get(_SETTING)
+        if bounds is None:
+            if not (isinstance(f.default_factory, type)  # type: ignore[misc]
+                    and hasattr(f.default_factory, "__settings_fields__")):
+                raise TypeError(f"{cls.__name__}.{f.name}: declare it with setting(...) or as a "
+                                "group (field(default_factory=SomeSettings))")
+            continue
+        if f.name not in docs:
+            raise TypeError(f"{cls.__name__}.{f.name} has no docstring (a string literal right "
+                            "below the field): it is the option's help")
+        own.append(SettingField(f.name, f.default, docs[f.name], bounds, cls.__name__))
+    cls.__settings_fields__ = tuple(own)  # type: ignore[attr-defined]
+    return cls
+
+
+def setting_fields(cls_or_obj: Any) -> tuple[SettingField, ...]:
+    """Every leaf field of a settings class, its groups' fields included, in order."""
+    cls = cls_or_obj if isinstance(cls_or_obj, type) else type(cls_or_obj)
+    out: list[SettingField] = []
+    own = {sf.name: sf for sf in cls.__settings_fields__}
+    for f in fields(cls):
+        if f.name in own:
+            out.append(own[f.name])
+        else:
+            out.extend(setting_fields(f.default_factory))  # type: ignore[arg-type]
+    return tuple(out)
+
+
+def _groups(cls: type) -> dict[str, type]:
+    own = {sf.name for sf in cls.__settings_fields__}  # type: ignore[attr-defined]
+    return {f.name: f.default_factory for f in fields(cls)  # type: ignore[misc]
+            if f.name not in own}
+
+
+def settings_params(cls: type) -> tuple[Param, ...]:
+    """The plugin parameters (and so the CLI options) of a settings class, one per leaf field."""
+    found = [sf for sf in setting_fields(cls) if sf.bounds.cli]
+    names = [sf.name for sf in found]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise TypeError(f"{cls.__name__}: fields {twice} are declared in two groups")
+    return tuple(sf.param() for sf in found)
+
+
+def build_settings(cls: type, values: dict[str, Any] | None = None) -> Any:
+    """An instance of settings class ``cls`` from flat leaf values (``name`` or ``name-x``);
+    groups get the values of their own fields. Unknown names raise TaskError."""
+    from adpart.errors import TaskError
+
+    given = {k.replace("-", "_"): v for k, v in (values or {}).items()}
+    known = {sf.name for sf in setting_fields(cls)}
+    unknown = sorted(set(given) - known)
+    if unknown:
+        raise TaskError(f"{cls.__name__} has no setting {unknown[0]!r}; its settings: "
+                        f"{', '.join(sorted(known))}")
+    return _build(cls, given)
+
+
+def _build(cls: type, given: dict[str, Any]) -> Any:
+    own = {sf.name for sf in cls.__settings_fields__}  # type: ignore[attr-defined]
+    kwargs = {n: given[n] for n in own if n in given}
+    for name, group in _groups(cls).items():
+        kwargs[name] = _build(group, given)
+    return cls(**kwargs)
+
+
+def settings_dict(obj: Any) -> dict[str, Any]:
+    """The provenance record of a settings instance: every leaf field by name, flat."""
+    out: dict[str, Any] = {}
+    cls = type(obj)
+    own = {sf.name for sf in cls.__settings_fields__}
+    for f in fields(cls):
+        value = getattr(obj, f.name)
+        if f.name in own:
+            out[f.name] = value
+        else:
+            out.update(settings_dict(value))
+    return out

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 import sys
 import warnings
@@ -11,7 +12,9 @@ from typing import Any
 import click
 
 from adpart.cli.group import CLIError
+from adpart.errors import AdpartError
 from adpart.execution import Executor
+from adpart.params import Param, build_settings, settings_params
 from adpart.plugins import PluginSpec, PluginWarning, Registry, get_registry
 
 
@@ -136,7 +139,8 @@ def _plugin_options(reg: Registry, kind: str) -> list[click.Option]:
             metavar = _METAVARS.get(types.pop(), "TEXT") if len(types) == 1 else "TEXT"
         by_default: dict[str, list[str]] = {}
         for plugin, p in owners:
-            by_default.setdefault(str(p.default), []).append(plugin)
+            shown = p.none if p.default is None and p.none is not None else p.default
+            by_default.setdefault(str(shown), []).append(plugin)
         defaults = "; ".join(f"{', '.join(plugins)}: {value}"
                              for value, plugins in by_default.items())
         options.append(click.Option(
@@ -248,3 +252,85 @@ def make_executor(
             )
         given["address"] = ray_address
     return spec.create(given)
+
+
+class _SettingType(click.ParamType):
+    """A settings field's value on the command line: converted and checked by its declaration
+    (:meth:`adpart.params.Param.convert`), so the range and choices live in one place."""
+
+    def __init__(self, param: Param, metavar: str) -> None:
+        self.param, self.name = param, metavar
+
+    def get_metavar(self, param: click.Parameter, ctx: click.Context | None = None) -> str:
+        return self.name
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> Any:
+        if not isinstance(value, str):
+            return value
+        if self.param.type == "float" and value != self.param.none:  # FiniteFloat's messages
+            value = FiniteFloat(self.param.min, self.param.max).convert(value, param, ctx)
+        try:
+            return self.param.convert(value, "")
+        except AdpartError as exc:
+            raise CLIError(str(exc).removeprefix(": ")) from None
+
+
+def _setting_metavar(p: Param) -> str:
+    if p.choices is not None:
+        return "[" + "|".join(p.choices) + "]"
+    base = _METAVARS.get(p.type, "TEXT")
+    return f"{base}|{p.none}" if p.none is not None else base
+
+
+def settings_options(cls: type, keyword: str):  # type: ignore[no-untyped-def]
+    """Decorator: one option per field of the settings class ``cls`` (its name, default, range
+    and help from the field's declaration and docstring), handed to the command as one checked
+    instance ``keyword=cls(...)``; a rule across fields that fails is one line naming them."""
+    params = settings_params(cls)
+
+    def decorate(func):  # type: ignore[no-untyped-def]
+        @functools.wraps(func)
+        def command(*args: Any, **kwargs: Any) -> Any:
+            values = {p.keyword: kwargs.pop(f"{keyword}__{p.keyword}") for p in params}
+            try:
+                kwargs[keyword] = build_settings(cls, values)
+            except AdpartError as exc:
+                raise CLIError(str(exc)) from None
+            return func(*args, **kwargs)
+
+        for p in reversed(params):
+            name = f"--{p.name}"
+            if p.type == "bool":
+                option = click.option(f"{name}/--no-{p.name}", f"{keyword}__{p.keyword}",
+                                      default=p.default, show_default=True, help=p.help)
+            else:
+                shown = p.none if p.default is None else p.default
+                option = click.option(name, f"{keyword}__{p.keyword}",
+                                      type=_SettingType(p, _setting_metavar(p)),
+                                      default=p.default, show_default=str(shown), help=p.help)
+            command = option(command)
+        return command
+
+    return decorate
+
+
+def key_values(pairs: tuple[str, ...], option: str) -> dict[str, str]:
+    """``KEY=VALUE`` pairs of a repeatable option as a dict; a malformed one names ``option``."""
+    out: dict[str, str] = {}
+    for pair in pairs:
+        key, eq, value = pair.partition("=")
+        if not eq or not key:
+            raise CLIError(f"{option} takes KEY=VALUE (e.g. {option} alpha=1); got {pair!r}")
+        out[key.strip()] = value.strip()
+    return out
+
+
+def check_criterion(name: str, params: dict[str, Any], settings: Any) -> None:
+    """Build the partition criterion now, so a bad name or value fails before any work."""
+    from adpart.workflows.partitioning import build_criterion
+
+    try:
+        build_criterion(name, params, settings)
+    except AdpartError as exc:
+        raise CLIError(f"--criterion {name} / --criterion-opt: {exc}") from None

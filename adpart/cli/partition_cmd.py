@@ -11,10 +11,21 @@ from pathlib import Path
 
 import click
 
-from adpart.cli.common import FiniteFloat, echo_json, registry
+from adpart.cli.common import (
+    check_criterion,
+    echo_json,
+    key_values,
+    registry,
+    settings_options,
+)
 from adpart.cli.learn import kb_location_options
+from adpart.partition.settings import PartitionSettings
 from adpart.store.location import KBLocation
-from adpart.workflows.partitioning import partition_environment, plot_partition
+from adpart.workflows.partitioning import (
+    DEFAULT_CRITERION,
+    partition_environment,
+    plot_partition,
+)
 
 
 @click.command(name="partition")
@@ -27,20 +38,20 @@ from adpart.workflows.partitioning import partition_environment, plot_partition
     help="subgoal-set:N (its stored options), option:1,option:2, or primitive (the primitive "
     "actions as one-step options).",
 )
+@settings_options(PartitionSettings, "settings")
 @click.option(
-    "--delta",
-    type=FiniteFloat(min=0.0, max=1.0, what="eq. 4.6's delta"),
-    default=0.3,
+    "--criterion",
+    default=DEFAULT_CRITERION,
     show_default=True,
-    help="Eq. 4.6: largest spread of a block's discounted mass into another block, in [0, 1].",
+    metavar="NAME",
+    help="Partition-criterion plugin that refines every phase (`adpart plugins --kind "
+    "partition-criterion`); the default is delta-stability with --delta and --reward-epsilon.",
 )
 @click.option(
-    "--reward-epsilon",
-    "epsilon",
-    type=FiniteFloat(min=0.0, what="eq. 4.7's epsilon"),
-    default=10.0,
-    show_default=True,
-    help="Eq. 4.7: largest spread of a block's option rewards R(s, o), >= 0 (phase 3).",
+    "--criterion-opt",
+    multiple=True,
+    metavar="KEY=VALUE",
+    help="A parameter of the criterion (repeatable), e.g. --criterion-opt size=8.",
 )
 @click.option("--task", help="Task for phase 3 (reward refinement); omitted: phases 1-2 only. "
               "Every phase then runs on this task's model (its terminal and start states).")
@@ -70,8 +81,9 @@ from adpart.workflows.partitioning import partition_environment, plot_partition
 def partition_cmd(
     env: str,
     options_ref: str,
-    delta: float,
-    epsilon: float,
+    settings: PartitionSettings,
+    criterion: str,
+    criterion_opt: tuple[str, ...],
     task: str | None,
     reward_baseline: str,
     executor: str,
@@ -94,6 +106,8 @@ def partition_cmd(
     from adpart.store import KnowledgeBase
 
     baseline = _baseline_value(reward_baseline)
+    criterion_params = key_values(criterion_opt, "--criterion-opt")
+    check_criterion(criterion, criterion_params, settings)
     kb = KnowledgeBase.open(KBLocation.resolve(kb_path, kb_artifacts))
     try:
         with registry().get("executor", executor).create() as ex:
@@ -101,9 +115,10 @@ def partition_cmd(
                 kb,
                 env,
                 options_ref,
-                delta=delta,
-                epsilon=epsilon,
+                settings,
                 task=task,
+                criterion=criterion,
+                criterion_params=criterion_params,
                 executor=ex,
                 check=not no_check,
                 reward_baseline=baseline,

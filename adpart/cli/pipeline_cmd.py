@@ -12,16 +12,21 @@ import click
 from adpart.cli.common import (
     CLIError,
     FiniteFloat,
+    check_criterion,
     dumps,
     echo_json,
     kb_location_options,
+    key_values,
     registry,
     run_options,
+    settings_options,
 )
 from adpart.errors import AdpartError
 from adpart.options.subgoal_options import INITIATION_CHOICES as INITIATIONS
 from adpart.options.subgoal_options import LOCAL_RADIUS
+from adpart.partition.settings import PartitionSettings
 from adpart.store.location import KBLocation
+from adpart.workflows.partitioning import DEFAULT_CRITERION
 from adpart.workflows.reports import folder_name
 
 
@@ -42,21 +47,12 @@ def check_pipeline_options(config: Any) -> None:
     """Every value of a pipeline's config checked up front (plugins, parameters, tasks)."""
     _check_plugin_params("subgoal-detector", config.detector, config.detector_params,
                          "--detector-opt")
-    _check_plugin_params("learner", "q-learning", config.flat_params, "--flat-opt")
+    _check_plugin_params("learner", config.flat_learner, config.flat_params, "--flat-opt")
     _check_plugin_params("learner", "hierarchical", config.hierarchical_params, "--hier-opt")
+    check_criterion(config.criterion, config.criterion_params, config.partition)
     if config.hierarchy is not None:
         _check_plugin_params("hierarchy-estimator", config.hierarchy, config.hierarchy_params,
                              "--hierarchy-opt")
-
-
-def _key_values(pairs: tuple[str, ...], option: str) -> dict[str, str]:
-    out: dict[str, str] = {}
-    for pair in pairs:
-        key, eq, value = pair.partition("=")
-        if not eq or not key:
-            raise CLIError(f"{option} takes KEY=VALUE (e.g. {option} alpha=1); got {pair!r}")
-        out[key.strip()] = value.strip()
-    return out
 
 
 def split_tasks(text: str) -> tuple[str, ...]:
@@ -134,20 +130,21 @@ def _say(quiet: bool):  # type: ignore[no-untyped-def]
     show_default=True,
     help="Steps of a local initiation set.",
 )
+@settings_options(PartitionSettings, "partition")
 @click.option(
-    "--delta",
-    type=FiniteFloat(min=0.0, max=1.0, what="eq. 4.6's delta"),
-    default=0.3,
+    "--criterion",
+    default=DEFAULT_CRITERION,
     show_default=True,
-    help="delta of eq. 4.6 (transition homogeneity) in [0, 1].",
+    metavar="NAME",
+    help="Partition-criterion plugin that refines every phase of the partition (`adpart plugins "
+    "--kind partition-criterion`); the default is delta-stability with --delta and "
+    "--reward-epsilon.",
 )
 @click.option(
-    "--reward-epsilon",
-    "epsilon",
-    type=FiniteFloat(min=0.0, what="eq. 4.7's epsilon"),
-    default=10.0,
-    show_default=True,
-    help="epsilon of eq. 4.7 (reward homogeneity) >= 0.",
+    "--criterion-opt",
+    multiple=True,
+    metavar="KEY=VALUE",
+    help="A parameter of the criterion (repeatable).",
 )
 @run_options(runs_help="Runs per learner (20: enough for the summary's confidence intervals).",
              episodes_help="Episodes per later task.", runs_default=20)
@@ -212,8 +209,9 @@ def pipeline_cmd(
     detector_opt: tuple[str, ...],
     initiation: str,
     radius: float,
-    delta: float,
-    epsilon: float,
+    partition: PartitionSettings,
+    criterion: str,
+    criterion_opt: tuple[str, ...],
     runs: int,
     episodes: int,
     first_episodes: int,
@@ -258,21 +256,22 @@ def pipeline_cmd(
         env=env,
         tasks=split_tasks(tasks),
         detector=detector,
-        detector_params=_key_values(detector_opt, "--detector-opt"),
+        detector_params=key_values(detector_opt, "--detector-opt"),
         initiation=initiation,
         radius=radius,
-        delta=delta,
-        epsilon=epsilon,
+        partition=partition,
+        criterion=criterion,
+        criterion_params=key_values(criterion_opt, "--criterion-opt"),
         runs=runs,
         episodes=episodes,
         first_episodes=first_episodes,
         seed=seed,
         eval_every=eval_every,
-        flat_params=_key_values(flat_opt, "--flat-opt"),
-        hierarchical_params=_key_values(hier_opt, "--hier-opt"),
+        flat_params=key_values(flat_opt, "--flat-opt"),
+        hierarchical_params=key_values(hier_opt, "--hier-opt"),
         baseline=baseline,
         hierarchy=hierarchy,
-        hierarchy_params=_key_values(hierarchy_opt, "--hierarchy-opt"),
+        hierarchy_params=key_values(hierarchy_opt, "--hierarchy-opt"),
         flat_learner=flat_learner,
         fallback=not no_fallback,
     )
@@ -356,7 +355,7 @@ def transfer_cmd(
     )
     from adpart.workflows.refs import parse_ref
 
-    hier_params = _key_values(hier_opt, "--hier-opt")
+    hier_params = key_values(hier_opt, "--hier-opt")
     _check_plugin_params("learner", "hierarchical", hier_params, "--hier-opt")
     out = out or Path("adpart-transfer") / folder_name(env, task)
     requests = {

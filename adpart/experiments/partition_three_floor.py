@@ -41,12 +41,14 @@ import numpy as np
 
 from adpart.experiments.base import ExperimentConfig, ExperimentReport, experiment
 from adpart.experiments.stats import compare, episodes_to_threshold
+from adpart.partition.settings import PartitionSettings
 
 ENV = "three-floor"
 SOURCE_TASK = "reach-goal"
 NEW_TASK = "reach-top-west"
-DELTA = 0.3
-EPSILON = 10.0
+#: The partition's settings: the package's defaults (delta 0.3, epsilon 10, section 5.1.2).
+PARTITION = PartitionSettings()
+DELTA, EPSILON = PARTITION.delta, PARTITION.reward_epsilon
 
 
 def _settings(config: ExperimentConfig) -> dict[str, int]:
@@ -174,8 +176,8 @@ def partition_three_floor(config: ExperimentConfig) -> ExperimentReport:
             records, options, models = _store_options(kb, env, task_rec, mdp, np.unique(states),
                                                       name)
             outcome = partition_environment(
-                kb, ENV, ",".join(r.ref for r in records), delta=DELTA, epsilon=EPSILON,
-                task=NEW_TASK)
+                kb, ENV, ",".join(r.ref for r in records),
+                PARTITION, task=NEW_TASK)
             parts[name] = outcome
             learned_on[name] = (options, models)
             fig = out / f"partition_{name}.png"

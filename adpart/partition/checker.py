@@ -59,7 +59,7 @@ def check_stability(
     model: object,
     *,
     options: Sequence[int] | np.ndarray | None = None,
-    delta: float = 0.0,
+    delta: float,
     epsilon: float | None = None,
     rewards: np.ndarray | None = None,
     atol: float = DEFAULT_ATOL,

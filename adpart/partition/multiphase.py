@@ -26,6 +26,7 @@ from __future__ import annotations
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
@@ -52,6 +53,21 @@ from adpart.partition.partition import Partition, canonical_labels, combine_labe
 from adpart.partition.refine import refine
 
 _mask = as_mask
+
+
+@runtime_checkable
+class Criterion(Protocol):
+    """What refines a partition in each phase (a ``partition-criterion`` plugin's contract).
+
+    ``refine(partition, model, *, options, phase, require_admissible, rewards=None)`` returns a
+    refinement of ``partition`` on ``model`` (an :class:`SMDPModel`) for the option columns
+    ``options``; ``phase`` is 1, 2 or 3, and phase 3 also passes the task's ``rewards`` (``(S,
+    O)``, :meth:`MultiPhasePartitioner.decision_rewards`). ``require_admissible=False``: some
+    states (left out of the layer) offer no option.
+    """
+
+    def refine(self, partition: Partition, model: SMDPModel, **context: object) -> Partition:
+        ...
 
 
 def initial_termination_labels(termination: np.ndarray, initiation: np.ndarray,
@@ -86,7 +102,7 @@ def phase1(
     termination: object,
     initiation: object | None = None,
     *,
-    delta: float = 0.0,
+    delta: float,
     atol: float = DEFAULT_ATOL,
     terminal: object | None = None,
 ) -> Partition:
@@ -110,7 +126,8 @@ def phase1(
 
 
 def _phase1(smdp: SMDPModel, option: int, termination: object, initiation: object | None,
-            terminal: np.ndarray | None, delta: float, atol: float) -> Partition:
+            terminal: np.ndarray | None, delta: float, atol: float,
+            criterion: Criterion | None = None) -> Partition:
     S = smdp.n_states
     o = int(select_options(smdp, [option])[0])
     term = _mask(termination, S, f"termination mask of option {o}")
@@ -128,6 +145,8 @@ def _phase1(smdp: SMDPModel, option: int, termination: object, initiation: objec
     init = smdp.admissible[:, o]
     start = Partition.from_labels(initial_termination_labels(term, init, terminal),
                                   smdp.admissible)
+    if criterion is not None:
+        return criterion.refine(start, smdp, options=[o], phase=1, require_admissible=False)
     return refine(start, smdp, options=[o], delta=delta, epsilon=None, atol=atol,
                   require_admissible=False)
 
@@ -137,7 +156,7 @@ def phase2(
     phase1_partitions: Mapping[int, Partition],
     options: Sequence[int],
     *,
-    delta: float = 0.0,
+    delta: float,
     atol: float = DEFAULT_ATOL,
     unreachable: object | None = None,
 ) -> Partition:
@@ -155,7 +174,8 @@ def phase2(
 
 
 def _phase2(smdp: SMDPModel, phase1_partitions: Mapping[int, Partition], options: Sequence[int],
-            delta: float, atol: float, unreachable: np.ndarray | None) -> Partition:
+            delta: float, atol: float, unreachable: np.ndarray | None,
+            criterion: Criterion | None = None) -> Partition:
     sel = select_options(smdp, options)
     missing = [int(o) for o in sel if int(o) not in phase1_partitions]
     if missing:
@@ -164,11 +184,13 @@ def _phase2(smdp: SMDPModel, phase1_partitions: Mapping[int, Partition], options
         )
     labels = combine_labels(*(phase1_partitions[int(o)].labels for o in sel))
     start = Partition.from_labels(_one_block(labels, unreachable), smdp.admissible)
-    if unreachable is None:
-        return refine(start, smdp, options=sel, delta=delta, epsilon=None, atol=atol)
-    _require_cover_reachable(smdp, sel, unreachable)
+    if unreachable is not None:
+        _require_cover_reachable(smdp, sel, unreachable)
+    if criterion is not None:
+        return criterion.refine(start, smdp, options=sel, phase=2,
+                                require_admissible=unreachable is None)
     return refine(start, smdp, options=sel, delta=delta, epsilon=None, atol=atol,
-                  require_admissible=False)
+                  require_admissible=unreachable is None)
 
 
 def _require_cover_reachable(smdp: SMDPModel, sel: np.ndarray, unreachable: np.ndarray) -> None:
@@ -188,7 +210,7 @@ def phase3(
     options: Sequence[int],
     *,
     epsilon: float,
-    delta: float = 0.0,
+    delta: float,
     rewards: np.ndarray | None = None,
     atol: float = DEFAULT_ATOL,
     require_admissible: bool = True,
@@ -265,10 +287,14 @@ class MultiPhasePartitioner:
         delta: threshold of eq. 4.6 used in every phase.
         terminal: ``(S,)`` bool, the task's terminal states: one absorbing block with zero rows
             in every phase (module docstring). None: the model as given, no terminal block.
+        criterion: a partition criterion (:class:`Criterion`, e.g. a ``partition-criterion``
+            plugin) that refines every phase in place of delta-stability with ``delta`` and
+            eq. 4.7 with ``epsilon``; None: those built-in rules.
     """
 
-    def __init__(self, model: SMDPModel | object, termination: object, *, delta: float = 0.0,
-                 atol: float = DEFAULT_ATOL, terminal: object | None = None) -> None:
+    def __init__(self, model: SMDPModel | object, termination: object, *, delta: float,
+                 atol: float = DEFAULT_ATOL, terminal: object | None = None,
+                 criterion: Criterion | None = None) -> None:
         self.model = as_model(model)
         term = np.asarray(termination)
         if term.shape != self.model.R.shape or term.dtype != bool:
@@ -279,6 +305,7 @@ class MultiPhasePartitioner:
         self.termination = term
         self.delta = check_delta(delta)
         self.atol = atol
+        self.criterion = criterion
         self.terminal = None if terminal is None else _mask(
             terminal, self.model.n_states, "terminal mask")
         #: the model the phases refine on: terminal rows zero, every column offered there
@@ -291,7 +318,7 @@ class MultiPhasePartitioner:
         o = int(select_options(self.model, [option])[0])
         if o not in self._phase1:
             self._phase1[o] = _phase1(self.layer_model, o, self.termination[:, o], None,
-                                      self.terminal, self.delta, self.atol)
+                                      self.terminal, self.delta, self.atol, self.criterion)
             self.phase1_runs += 1
         return self._phase1[o]
 
@@ -344,7 +371,8 @@ class MultiPhasePartitioner:
         unr = None if unreachable is None else _mask(unreachable, self.model.n_states,
                                                      "unreachable mask")
         p1 = {int(o): self.phase1(int(o)) for o in sel}
-        return _phase2(self._model_without(unr), p1, sel, self.delta, self.atol, unr)
+        return _phase2(self._model_without(unr), p1, sel, self.delta, self.atol, unr,
+                       self.criterion)
 
     def decision_rewards(self, *, rewards: np.ndarray | None = None,
                          unreachable: np.ndarray | None = None,
@@ -369,7 +397,12 @@ class MultiPhasePartitioner:
     def phase3(self, partition: Partition, options: Sequence[int], *, epsilon: float,
                rewards: np.ndarray, unreachable: np.ndarray | None = None) -> Partition:
         """Phase 3 on the layer model: split ``partition`` by ``rewards`` (from
-        :meth:`decision_rewards`) within ``epsilon``, refine again."""
+        :meth:`decision_rewards`) within ``epsilon``, refine again (with :attr:`criterion`, that
+        criterion given the rewards)."""
+        if self.criterion is not None:
+            return self.criterion.refine(partition, self._model_without(unreachable),
+                                         options=options, phase=3, rewards=rewards,
+                                         require_admissible=unreachable is None)
         return phase3(self._model_without(unreachable), partition, options, epsilon=epsilon,
                       delta=self.delta, rewards=rewards, atol=self.atol,
                       require_admissible=unreachable is None)

@@ -296,7 +296,7 @@ def refine(
     model: SMDPModel | object,
     *,
     options: Sequence[int] | np.ndarray | None = None,
-    delta: float = 0.0,
+    delta: float,
     epsilon: float | None = None,
     rewards: np.ndarray | None = None,
     atol: float = DEFAULT_ATOL,

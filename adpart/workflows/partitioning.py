@@ -42,15 +42,16 @@ from adpart.execution import Executor
 from adpart.mdp.model import FiniteMDP, SMDPModel
 from adpart.options.models import OptionModel, option_models
 from adpart.options.smdp import stack_models
+from adpart.params import settings_dict
 from adpart.partition import (
     MultiPhasePartitioner,
     Partition,
-    check_delta,
-    check_epsilon,
     check_stability,
     value_gap,
 )
 from adpart.partition.layer import decision_view, layer_counts, resolve_baseline
+from adpart.partition.multiphase import Criterion
+from adpart.partition.settings import PartitionSettings
 from adpart.workflows.options import OptionSet, resolve_option_set
 from adpart.workflows.resolve import resolve_domain
 
@@ -178,12 +179,29 @@ class _Base:
         return self.option_set.records[column - self.fallback]
 
 
-def _check_settings(delta: object, epsilon: object) -> tuple[float, float]:
-    d = check_delta(delta)
-    e = check_epsilon(epsilon)
-    if e is None:
-        raise ModelError("epsilon must be a number >= 0 (the reward tolerance of eq. 4.7)")
-    return d, e
+#: The criterion of :class:`PartitionSettings` (delta-stability and eq. 4.7), built in.
+DEFAULT_CRITERION = "bisimulation"
+
+
+def build_criterion(name: str, params: dict[str, Any] | None, settings: PartitionSettings
+               ) -> tuple[Criterion | None, dict[str, Any]]:
+    """The partition criterion ``name`` built from ``params`` and ``settings`` (None for the
+    built-in default), and what it adds to the stored partitions' keys."""
+    from adpart.plugins import get_registry
+
+    spec = get_registry().get("partition-criterion", name)
+    declared = {p.keyword for p in spec.params}
+    given = {k.replace("-", "_"): v for k, v in (params or {}).items()}
+    base = {k: v for k, v in settings_dict(settings).items() if k in declared}
+    if name == DEFAULT_CRITERION and not given:
+        return None, {}
+    values = {**base, **given}
+    built = spec.create(values)
+    if not isinstance(built, Criterion):
+        raise TaskError(f"partition-criterion {name!r} has no refine(partition, model, "
+                        "**context) method")
+    return built, {"criterion": name, "criterion_params": dict(sorted(
+        (k, v) for k, v in values.items()))}
 
 
 def environment_record(kb: Any, env_name: str) -> tuple[Any, Any]:
@@ -488,10 +506,11 @@ def partition_environment(
     kb: Any,
     env_name: str,
     options: str,
+    settings: PartitionSettings,
     *,
-    delta: float = 0.3,
-    epsilon: float = 10.0,
     task: str | None = None,
+    criterion: str = DEFAULT_CRITERION,
+    criterion_params: dict[str, Any] | None = None,
     executor: Executor | None = None,
     check: bool = True,
     reward_baseline: str | float | None = "mode",
@@ -506,8 +525,13 @@ def partition_environment(
 
     Args:
         options: ``subgoal-set:N`` (its options), ``option:1,option:2``, or ``primitive``.
-        delta: eq. 4.6 threshold in [0, 1]. epsilon: eq. 4.7 threshold >= 0 (phase 3 only).
+        settings: delta (eq. 4.6) and the reward epsilon (eq. 4.7, phase 3 only).
         task: a task name or ``goal:...`` spec; None stops after phase 2.
+        criterion: the ``partition-criterion`` plugin that refines every phase
+            (:class:`~adpart.partition.multiphase.Criterion`); the default, ``bisimulation``, is
+            delta-stability with ``settings`` (eqs. 4.6-4.7). Another criterion is built from
+            ``criterion_params`` (and ``settings``' fields where it declares them), and its
+            name and parameters join the stored partitions' keys.
         executor: runs the option-model computations when a task needs them recomputed.
         check: run the independent checker on the final decision layer.
         reward_baseline: the constant step reward phase 3 takes out of the rewards before eq.
@@ -520,7 +544,8 @@ def partition_environment(
             admissible option. TaskError / StoreError: unknown ids, options of another
             environment, options without stored models.
     """
-    d, e = _check_settings(delta, epsilon)
+    d, e = settings.delta, settings.reward_epsilon
+    refiner, criterion_key = build_criterion(criterion, criterion_params, settings)
     domain, env = environment_record(kb, env_name)
     task_obj = task_mdp = task_rec = None
     if task is not None:
@@ -546,8 +571,10 @@ def partition_environment(
     baseline = _baseline(reward_baseline, layer_mdp) if task_rec is not None else None
     terminal = layer_mdp.terminal
     start = _start_states(layer_mdp)
-    key = {"layer": 1, "terminal": _mask_key(terminal), "gamma": float(layer_mdp.gamma)}
-    mp = MultiPhasePartitioner(model, base.termination, delta=d, terminal=terminal)
+    key = {"layer": 1, "terminal": _mask_key(terminal), "gamma": float(layer_mdp.gamma),
+           **criterion_key}
+    mp = MultiPhasePartitioner(model, base.termination, delta=d, terminal=terminal,
+                               criterion=refiner)
 
     _, p1_rows, seconds["phase1"] = _phase1_all(kb, env, base, mp, key)
 

@@ -44,6 +44,7 @@ from adpart.errors import TaskError
 from adpart.learning.comparison import best_final_run, ratio_to_flat, task_row
 from adpart.learning.curves import LearningCurve
 from adpart.options.subgoal_options import LOCAL_RADIUS
+from adpart.partition.settings import PartitionSettings
 from adpart.workflows.discovery import discover_subgoals
 from adpart.workflows.hierarchy import Layer, hierarchy_layer
 from adpart.workflows.learning import (
@@ -54,7 +55,7 @@ from adpart.workflows.learning import (
     run_learning,
 )
 from adpart.workflows.options import options_for_subgoals
-from adpart.workflows.partitioning import partition_environment
+from adpart.workflows.partitioning import DEFAULT_CRITERION, partition_environment
 from adpart.workflows.pipeline_figures import write_figures
 from adpart.workflows.refs import parse_ref
 
@@ -72,7 +73,9 @@ class PipelineConfig:
         detector, detector_params: the subgoal detector plugin and its parameters.
         initiation, radius: initiation sets of the subgoal options (``local`` with its radius in
             steps, ``basin`` or ``reachable``; :mod:`adpart.options.subgoal_options`).
-        delta, epsilon: the partition's delta (eq. 4.6) and reward epsilon (eq. 4.7).
+        partition: the partition's delta (eq. 4.6) and reward epsilon (eq. 4.7).
+        criterion, criterion_params: the ``partition-criterion`` plugin that refines every
+            phase, and its parameters (:func:`adpart.workflows.partitioning.build_criterion`).
         runs, episodes, first_episodes: runs per learner, episodes per later task, episodes of
             the first (flat) task.
         seed, eval_every: root seed; exact scoring every this many episodes.
@@ -95,8 +98,9 @@ class PipelineConfig:
     detector_params: dict[str, Any] = field(default_factory=dict)
     initiation: str = "local"
     radius: float = LOCAL_RADIUS
-    delta: float = 0.3
-    epsilon: float = 10.0
+    partition: PartitionSettings = field(default_factory=PartitionSettings)
+    criterion: str = DEFAULT_CRITERION
+    criterion_params: dict[str, Any] = field(default_factory=dict)
     runs: int = 20
     episodes: int = 300
     first_episodes: int = 500
@@ -176,7 +180,8 @@ def _task_layer(kb: Any, config: PipelineConfig, subgoal_ref: str, task: str, le
     """The layer ``task`` starts from: the multi-phase partition, or with ``config.hierarchy``
     the layer that estimator builds from the tasks ``learned`` before it (stage ``hierarchy``)."""
     if config.hierarchy is None:
-        say(f"partitioning for {task} (delta {config.delta}, epsilon {config.epsilon})")
+        say(f"partitioning for {task} (delta {config.partition.delta}, epsilon "
+            f"{config.partition.reward_epsilon}, criterion {config.criterion})")
         return _partition_layer(kb, config, subgoal_ref, task, report)
     say(f"building the {config.hierarchy} layer for {task} from {len(learned)} tasks")
     start = time.perf_counter()
@@ -193,7 +198,8 @@ def _partition_layer(kb: Any, config: PipelineConfig, subgoal_ref: str, task: st
                      report: PipelineReport) -> Layer:
     """The multi-phase partition over the subgoal options for ``task`` (phases 1-3)."""
     part = partition_environment(
-        kb, config.env, subgoal_ref, delta=config.delta, epsilon=config.epsilon, task=task
+        kb, config.env, subgoal_ref, config.partition, task=task, criterion=config.criterion,
+        criterion_params=config.criterion_params,
     )
     summary = part.summary()
     reused = (all(p.reused for p in part.phase1) and part.phase2.reused
@@ -281,7 +287,8 @@ def run_pipeline(
     defaults = episode_defaults(config.env)
     flat = {**learner_defaults(config.flat_learner, defaults), **config.flat_params}
     # a firing refines its block with the thresholds the layer was built with (eqs. 4.6-4.7)
-    hierarchical = {**defaults, "delta": config.delta, "partition-epsilon": config.epsilon,
+    hierarchical = {**defaults, "delta": config.partition.delta,
+                    "partition-epsilon": config.partition.reward_epsilon,
                     "mode": DEFAULT_MODE, **config.hierarchical_params}
     from adpart.learning.hierarchical import REWARD_OPTION_MODES
 

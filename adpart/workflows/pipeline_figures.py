@@ -63,8 +63,8 @@ def _draw_own_layer(kb: Any, report: PipelineReport, config: PipelineConfig, dom
     options = load_options(kb, records)[0] if records else []
     mdp = domain.mdp(task)
     extra = reward_options(mdp)
-    layer, _, _ = decision_layer(mdp, options + extra, delta=config.delta,
-                                 epsilon=config.epsilon)
+    layer, _, _ = decision_layer(mdp, options + extra, delta=config.partition.delta,
+                                 epsilon=config.partition.reward_epsilon)
     path = out / f"layer_{folder_name(task)}.png"
     domain.render(str(path), labels=layer.labels, task=task, title=(
         f"{config.env}/{task}: decision layer of {len(options)} subgoal and {len(extra)} "

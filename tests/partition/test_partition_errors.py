@@ -47,13 +47,14 @@ def test_shape_mismatches(grid):
     model, _cells, term, _goal = grid
     small = Partition.trivial(np.ones((3, 4), dtype=bool))
     with pytest.raises(ModelError, match="has 3 states but the model has"):
-        refine(small, model)
+        refine(small, model, delta=0.0)
     with pytest.raises(ModelError, match="task rewards have shape"):
-        refine(Partition.trivial(model.admissible), model, epsilon=1.0, rewards=np.zeros((2, 2)))
+        refine(Partition.trivial(model.admissible), model, delta=0.0, epsilon=1.0,
+               rewards=np.zeros((2, 2)))
     with pytest.raises(ModelError, match="termination must be a boolean"):
-        MultiPhasePartitioner(model, term[:, :2])
+        MultiPhasePartitioner(model, term[:, :2], delta=0.0)
     with pytest.raises(ModelError, match="termination mask of option 0"):
-        phase1(model, 0, term[:3, 0])
+        phase1(model, 0, term[:3, 0], delta=0.0)
     bad = SMDPModel(R=model.R, F=sp.csr_array((3, 3)), admissible=model.admissible)
     with pytest.raises(ModelError, match="model F has shape"):
         exact_lumping(bad)
@@ -62,11 +63,11 @@ def test_shape_mismatches(grid):
 def test_missing_models(grid):
     model, _cells, term, _goal = grid
     with pytest.raises(ModelError, match="no option models"):
-        refine(Partition.trivial(model.admissible), None)
+        refine(Partition.trivial(model.admissible), None, delta=0.0)
     with pytest.raises(ModelError, match="option index 7 has no model"):
-        refine(Partition.trivial(model.admissible), model, options=[0, 7])
+        refine(Partition.trivial(model.admissible), model, options=[0, 7], delta=0.0)
     with pytest.raises(ModelError, match="no phase-1 partition for option"):
-        phase2(model, {0: phase1(model, 0, term[:, 0])}, [0, 1])
+        phase2(model, {0: phase1(model, 0, term[:, 0], delta=0.0)}, [0, 1], delta=0.0)
     with pytest.raises(ModelError, match="expected an SMDPModel"):
         exact_lumping(object())
 
@@ -78,7 +79,7 @@ def test_option_set_leaving_a_state_without_options():
     model = SMDPModel(R=np.zeros((S, 2)), F=F, admissible=adm)
     msg = r"leaves 1 state\(s\) with no admissible option \(first: state 2\)"
     with pytest.raises(ModelError, match=msg):
-        refine(Partition.trivial(adm), model, options=[0])
+        refine(Partition.trivial(adm), model, options=[0], delta=0.0)
     with pytest.raises(ModelError, match="no admissible option"):
         exact_lumping(model, options=[0])
-    assert refine(Partition.trivial(adm), model, options=[0, 1]).n_blocks >= 2
+    assert refine(Partition.trivial(adm), model, options=[0, 1], delta=0.0).n_blocks >= 2

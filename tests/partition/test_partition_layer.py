@@ -162,7 +162,7 @@ def test_terminal_block_matches_the_absorbing_state_construction(case):
 def test_terminal_mask_is_checked():
     model = SMDPModel(R=np.zeros((3, 1)), F=sp.csr_array((3, 3)), admissible=np.ones((3, 1), bool))
     with pytest.raises(ModelError, match="terminal mask must be a boolean mask of shape"):
-        MultiPhasePartitioner(model, np.zeros((3, 1), bool), terminal=[0, 1, 0])
+        MultiPhasePartitioner(model, np.zeros((3, 1), bool), delta=0.0, terminal=[0, 1, 0])
 
 
 # --------------------------------------------------------------------------- decision rewards

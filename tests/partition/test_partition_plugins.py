@@ -21,17 +21,19 @@ def test_criteria_are_registered_with_params():
     names = set(reg.names("partition-criterion"))
     assert {"bisimulation", "reward", "termination", "exact-lumping"} <= names
     spec = reg.get("partition-criterion", "bisimulation")
-    assert {p.name for p in spec.params} >= {"delta", "epsilon"}
+    assert {p.name for p in spec.params} >= {"delta", "reward-epsilon"}
 
 
 def test_criteria_refine_a_partition():
     model, _cells, term, _goal = slide_options([".....", ".#...", ".#..G", "....."])
     reg = _registry()
     start = Partition.trivial(model.admissible)
-    bis = reg.get("partition-criterion", "bisimulation").create({"delta": 0.5, "epsilon": 1.0})
-    part = bis.refine(start, model)
+    bis = reg.get("partition-criterion", "bisimulation").create(
+        {"delta": 0.5, "reward-epsilon": 1.0})
+    part = bis.refine(start, model, rewards=model.R)
     assert check_stability(part, model, delta=0.5, epsilon=1.0)
-    rew = reg.get("partition-criterion", "reward").create({"epsilon": 1.0}).refine(start, model)
+    rew = reg.get("partition-criterion", "reward").create({"reward-epsilon": 1.0}).refine(
+        start, model)
     assert check_stability(rew, model, delta=1.0, epsilon=1.0)
     term_part = reg.get("partition-criterion", "termination").create().refine(
         start, model, termination=term, options=[0])

@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 
 from adpart.envs.registry import get_domain
+from adpart.partition.settings import PartitionSettings
 from adpart.store import KnowledgeBase
 from adpart.workflows.options import options_for_subgoals
 from adpart.workflows.partitioning import environment_record, partition_environment, task_record
@@ -40,7 +41,8 @@ def layer_for(tmp_path, env_name, first_task, subgoals, task, **kwargs):
         policy = kb.put_policy(first, "given", pi=pi)
         subgoal_set = kb.put_subgoal_set(env, "given", list(subgoals), policy=policy)
         options_for_subgoals(kb, subgoal_set)
-        return partition_environment(kb, env_name, subgoal_set.ref, delta=0.3, epsilon=10.0,
+        return partition_environment(kb, env_name, subgoal_set.ref,
+                                     PartitionSettings(delta=0.3, reward_epsilon=10.0),
                                      task=task, **kwargs)
     finally:
         kb.close()

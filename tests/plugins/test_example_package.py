@@ -31,9 +31,9 @@ PACKAGE_DIR = ROOT / "examples" / "adpart-plugin-example"
 GUIDE = ROOT / "docs" / "plugin-authoring.md"
 DIST = "adpart-plugin-example"
 PLUGINS = [("environment", "three-rooms-line"), ("subgoal-detector", "doorways"),
-           ("learner", "sarsa")]
+           ("learner", "sarsa"), ("partition-criterion", "capped-blocks")]
 ENTRY_POINTS = {"plugin-example-environment", "plugin-example-detector",
-                "plugin-example-learner"}
+                "plugin-example-learner", "plugin-example-criterion"}
 DOORS = [35, 41]  # the door cells (5, 2) and (11, 2) of three-rooms-line
 
 
@@ -255,3 +255,50 @@ def test_the_guides_command_blocks_print_what_it_shows(tmp_path, monkeypatch):
                 command
         else:
             assert _shape(got, tmp_path) == _shape(expected, tmp_path), command
+
+
+def test_a_flat_option_is_checked_against_the_chosen_flat_learner(tmp_path):
+    """--flat-opt is checked against --flat-learner: q-learning's kernel is no sarsa parameter."""
+    result = run("pipeline", "three-rooms-line", "--tasks", "reach-east,reach-middle",
+                 "--flat-learner", "sarsa", "--flat-opt", "kernel=numba",
+                 "--kb", str(tmp_path / "kb"), "-q")
+    assert result.exit_code == 2, result.output
+    assert "learner 'sarsa' has no parameter --kernel" in result.output
+    assert not (tmp_path / "kb").exists()
+
+
+def _partition_stage(summary: dict) -> dict:
+    return next(s for s in summary["stages"] if s["stage"] == "partition")
+
+
+def test_a_third_party_criterion_changes_what_the_pipeline_builds(tmp_path):
+    """`--criterion capped-blocks` refines every phase with the example package's criterion:
+    the stored layer differs from the default's, and none of its blocks exceeds --size."""
+    from adpart.store import KnowledgeBase
+    from adpart.workflows.refs import parse_ref
+
+    common = ("pipeline", "three-rooms-line", "--tasks", "reach-east,reach-middle",
+              "--detector", "doorways", "--detector-opt", "min-size=3", "--hier-opt",
+              "mode=inconsistency", "--no-fallback", "--no-baseline", "--runs", "2",
+              "--first-episodes", "100", "--episodes", "20", "--eval-every", "10",
+              "--kb", str(tmp_path / "kb"), "--json", "-q")
+    default = run(*common, "--out", str(tmp_path / "a"))
+    capped = run(*common, "--criterion", "capped-blocks", "--criterion-opt", "size=4",
+                 "--out", str(tmp_path / "b"))
+    assert default.exit_code == 0, default.output
+    assert capped.exit_code == 0, capped.output
+    first, second = (_partition_stage(json.loads(r.output)) for r in (default, capped))
+    assert first["result"] != second["result"]
+    assert second["detail"]["final_blocks"] > first["detail"]["final_blocks"]
+    kb = KnowledgeBase.open(str(tmp_path / "kb"))
+    try:
+        record = kb.get("partition", parse_ref(second["result"], "partition"))
+        labels = kb.load(record, "labels")
+        assert record.provenance.parameters["criterion"] == "capped-blocks"
+        assert record.provenance.parameters["criterion_params"]["size"] == "4"
+    finally:
+        kb.close()
+    assert np.bincount(labels).max() <= 4
+    refused = run(*common, "--criterion", "capped-blocks", "--criterion-opt", "size=0",
+                  "--out", str(tmp_path / "c"))
+    assert refused.exit_code == 2 and "--size must be >= 1" in refused.output

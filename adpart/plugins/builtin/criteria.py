@@ -3,8 +3,11 @@
 Call signature (``register_partition_criteria``): ``cls(**params).refine(partition, model,
 **context) -> Partition`` where ``model`` is an :class:`~adpart.mdp.model.SMDPModel` of the options
 (or a FiniteMDP) and ``context`` may carry ``options`` (indices the partition must respect),
-``rewards`` (``(S, O)`` task rewards) and, for ``termination``, ``termination`` (``(S,)`` or
-``(S, O)`` beta = 1 mask). Each class is a thin layer over :mod:`adpart.partition`.
+``rewards`` (``(S, O)`` task rewards), ``phase`` (1-3, when the multi-phase partitioner calls),
+``require_admissible`` and, for ``termination``, ``termination`` (``(S,)`` or ``(S, O)`` beta = 1
+mask). Each class is a thin layer over :mod:`adpart.partition`. ``adpart partition`` and
+``adpart pipeline`` take any of them (``--criterion NAME``) to refine every phase of the
+multi-phase partitioner (:class:`~adpart.partition.multiphase.Criterion`).
 """
 
 from __future__ import annotations
@@ -14,32 +17,31 @@ from typing import Any
 import numpy as np
 
 from adpart.errors import ModelError
-from adpart.params import Param
+from adpart.params import Param, build_settings, settings_params
 from adpart.partition import DEFAULT_ATOL, Partition, exact_lumping, refine
 from adpart.partition.multiphase import initial_termination_labels
+from adpart.partition.settings import PartitionSettings, StabilityCriterion
 from adpart.plugins.hookspecs import hookimpl
 from adpart.plugins.registry import Registrar
 
 
-class BisimulationCriterion:
-    """epsilon,delta-approximate stochastic bisimulation homogeneity (definition 4.4)."""
+class BisimulationCriterion(StabilityCriterion):
+    """epsilon,delta-approximate stochastic bisimulation homogeneity (definition 4.4).
+
+    Its settings are :class:`~adpart.partition.settings.PartitionSettings` (the multi-phase
+    partitioner's default criterion): delta-stability (eq. 4.6) in every phase, and eq. 4.7
+    within ``reward-epsilon`` wherever the context carries ``rewards`` (phase 3).
+    """
 
     name = "bisimulation"
     description = "refine to delta-stability (eq. 4.6) and epsilon reward homogeneity (eq. 4.7)"
     params = (
-        Param("delta", "float", 0.3, "bound on block-mass differences, in [0, 1] (eq. 4.6)", min=0),
-        Param("epsilon", "float", -1.0,
-              "bound on reward differences (eq. 4.7); < 0 ignores rewards"),
+        *settings_params(PartitionSettings),
         Param("atol", "float", DEFAULT_ATOL, "rounding allowance added to both bounds", min=0),
     )
 
-    def __init__(self, delta: float = 0.3, epsilon: float = -1.0, atol: float = DEFAULT_ATOL):
-        self.delta, self.atol = delta, atol
-        self.epsilon = None if epsilon is not None and epsilon < 0 else epsilon
-
-    def refine(self, partition: Partition, model: object, **context: Any) -> Partition:
-        return refine(partition, model, options=context.get("options"), delta=self.delta,
-                      epsilon=self.epsilon, rewards=context.get("rewards"), atol=self.atol)
+    def __init__(self, atol: float = DEFAULT_ATOL, **values: Any) -> None:
+        super().__init__(build_settings(PartitionSettings, values), atol)
 
 
 class RewardCriterion:
@@ -47,15 +49,16 @@ class RewardCriterion:
 
     name = "reward"
     description = "split blocks by the task's rewards within epsilon (eq. 4.7), no delta refinement"
-    params = (Param("epsilon", "float", 0.0, "bound on reward differences (eq. 4.7)", min=0),)
+    params = tuple(p for p in settings_params(PartitionSettings) if p.name == "reward-epsilon")
 
-    def __init__(self, epsilon: float = 0.0) -> None:
-        self.epsilon = epsilon
+    def __init__(self, **values: Any) -> None:
+        self.epsilon = build_settings(PartitionSettings, values).reward_epsilon
 
     def refine(self, partition: Partition, model: object, **context: Any) -> Partition:
         # delta = 1 makes every mass criterion hold (masses lie in [0, 1]), so only eq. 4.7 splits
         return refine(partition, model, options=context.get("options"), delta=1.0,
-                      epsilon=self.epsilon, rewards=context.get("rewards"))
+                      epsilon=self.epsilon, rewards=context.get("rewards"),
+                      require_admissible=bool(context.get("require_admissible", True)))
 
 
 class TerminationCriterion:

@@ -9,7 +9,7 @@ from adpart.plugins import get_registry
 from adpart.testing import check_plugin
 
 PLUGINS = [("environment", "three-rooms-line"), ("subgoal-detector", "doorways"),
-           ("learner", "sarsa")]
+           ("learner", "sarsa"), ("partition-criterion", "capped-blocks")]
 
 
 def installed() -> bool:

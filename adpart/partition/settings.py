@@ -1,0 +1,48 @@
+"""The settings of multi-phase epsilon,delta-partitioning (section 4.2), and the built-in criterion.
+
+:class:`PartitionSettings` is the single declaration of the partition's ``delta`` (eq. 4.6) and
+reward ``epsilon`` (eq. 4.7, phase 3): its defaults, ranges and help. The command line
+(``adpart partition``, ``adpart pipeline``), the ``bisimulation`` partition-criterion plugin and
+the stored provenance are derived from it. :class:`StabilityCriterion` is the criterion those
+settings define - delta-stability in every phase, eq. 4.7 on the task's rewards in phase 3 - in
+the :class:`~adpart.partition.multiphase.Criterion` form a partitioner takes.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from adpart.params import setting, settings
+from adpart.partition._validate import DEFAULT_ATOL
+from adpart.partition.partition import Partition
+from adpart.partition.refine import refine
+
+__all__ = ["PartitionSettings", "StabilityCriterion"]
+
+
+@settings
+class PartitionSettings:
+    """Thresholds of the epsilon,delta-partition (definition 4.4)."""
+
+    delta: float = setting(0.3, min=0.0, max=1.0)
+    """delta of eq. 4.6: the largest difference of the mass two states of a block may send to
+    any block under any offered option, in [0, 1] (0: exact lumping)."""
+
+    reward_epsilon: float = setting(10.0, min=0.0)
+    """epsilon of eq. 4.7: the largest difference of the rewards (beyond the step reward) two
+    states of a block may have under an offered option (phase 3 only)."""
+
+
+class StabilityCriterion:
+    """Delta-stability (eq. 4.6) in phases 1-2, plus eq. 4.7 on the task's rewards in phase 3."""
+
+    def __init__(self, settings: PartitionSettings, atol: float = DEFAULT_ATOL) -> None:
+        self.settings, self.atol = settings, atol
+
+    def refine(self, partition: Partition, model: Any, **context: Any) -> Partition:
+        rewards = context.get("rewards")
+        return refine(partition, model, options=context.get("options"),
+                      delta=self.settings.delta,
+                      epsilon=self.settings.reward_epsilon if rewards is not None else None,
+                      rewards=rewards, atol=self.atol,
+                      require_admissible=bool(context.get("require_admissible", True)))
