@@ -7,8 +7,9 @@ refines). A failed check raises :class:`ConformanceError` naming the plugin and 
 a passing check returns nothing. :func:`check_plugin` dispatches on a registry entry's kind and
 :func:`check_registry` runs every installed plugin (adpart's CI runs it over the built-ins)::
 
-    from adpart.testing import check_learner
+    from adpart.testing import check_estimator, check_learner
     check_learner(MyLearner)                       # on two-rooms, 2 runs x 3 episodes
+    check_estimator(MyEstimator)                   # on four-rooms' two tasks and doorways
 
 The contracts themselves are :mod:`adpart.plugins.contracts`.
 """
@@ -23,14 +24,16 @@ from typing import Any
 import numpy as np
 
 from adpart.envs.base import Domain
-from adpart.errors import AdpartError
+from adpart.errors import AdpartError, ModelError
 from adpart.execution import Executor
+from adpart.hierarchy.layers import HierarchyInputs, HierarchyResult
+from adpart.hierarchy.tasks import task_from_model
 from adpart.learning.curves import LearningCurve, start_distribution
 from adpart.learning.result import LearnResult
 from adpart.mdp.model import FiniteMDP
-from adpart.mdp.solvers import solve
+from adpart.mdp.solvers import q_from_v, solve
 from adpart.params import Param
-from adpart.partition.partition import Partition
+from adpart.partition.partition import Partition, block_all
 from adpart.plugins.contracts import LEARNER_CONTEXT
 from adpart.subgoals.result import SubgoalResult
 
@@ -39,15 +42,19 @@ __all__ = [
     "check_criterion",
     "check_detector",
     "check_environment",
+    "check_estimator",
     "check_executor",
     "check_learner",
     "check_plugin",
     "check_plugin_class",
     "check_registry",
+    "estimator_inputs",
 ]
 
 #: The environment the checks run on when none is given (small, deterministic, two rooms).
 DEFAULT_ENV = "two-rooms"
+#: The environment the estimator checks run on when none is given (two tasks, four doorways).
+ESTIMATOR_ENV = "four-rooms"
 
 
 class ConformanceError(AdpartError, AssertionError):
@@ -219,6 +226,107 @@ def check_criterion(cls: type, mdp: FiniteMDP | None = None) -> None:
         _fail(cls, "a returned block mixes states of two input blocks (it must refine)")
 
 
+def estimator_inputs(env: str = ESTIMATOR_ENV) -> HierarchyInputs:
+    """Small real estimator inputs: every task of ``env`` learned exactly, options to its doors.
+
+    Each task's Q is value iteration's; the options lead to the domain's doorway and stair cells
+    (:func:`adpart.options.doorway_options`, none when it marks no doors). Task ids start at
+    101 and option ids at 201, so a result that confuses ids with positions is caught.
+    """
+    from adpart.envs.registry import get_domain
+    from adpart.options import doorway_options
+
+    domain = get_domain(env)
+    mdps = {name: domain.mdp(name) for name in domain.tasks()}
+    first = next(iter(mdps.values()))
+    try:
+        options = doorway_options(first)
+    except ModelError:  # no doorway or stair feature: the primitive actions only
+        options = []
+    tasks = [task_from_model(mdp, q_from_v(mdp, solve(mdp).V), options, threshold=0.0, name=name)
+             for name, mdp in mdps.items()]
+    inputs = HierarchyInputs.from_tasks(
+        first, tasks, options, environment=env, task_ids=range(101, 101 + len(tasks)),
+        option_ids=range(201, 201 + len(options)))
+    return inputs.with_threshold()
+
+
+def _fingerprint(inputs: HierarchyInputs) -> list[Any]:
+    """The inputs' contents, to see whether a build changed them."""
+    arrays = [inputs.admissible, inputs.termination]
+    for task in inputs.tasks:
+        arrays += [task.Q, task.occupancy] + ([] if task.labels is None else [task.labels])
+    for option in inputs.options:
+        arrays += [option.initiation, option.policy, option.beta]
+    return ([a.tobytes() for a in arrays] + [t.threshold for t in inputs.tasks]
+            + [list(inputs.task_ids), list(inputs.option_ids), list(inputs.to_subgoal),
+               list(inputs.action_names)])
+
+
+def check_estimator(cls: type, inputs: HierarchyInputs | None = None) -> None:
+    """An estimator returns an unstored layer over its inputs' columns, reproducibly, purely.
+
+    Run on ``inputs`` (default: :func:`estimator_inputs`). Checked: the result is a
+    :class:`HierarchyResult` named after the plugin; its partition labels every state and offers
+    per block the primitive actions then its ``option_ids`` - ids of ``inputs.option_ids``, each
+    once, in column order, with their names; every block offers a column all its states may
+    start (the hierarchical learner needs a decision in every block); ``task_ids`` are the
+    inputs'; ``partition_id`` is None (an estimator stores nothing); the estimate is finite and
+    ``>= 0``; the same inputs give the same layer; and the inputs are unchanged afterwards.
+    """
+    estimator = check_plugin_class(cls)
+    if not callable(getattr(estimator, "build", None)):
+        _fail(cls, "a hierarchy estimator has a method build(inputs)")
+    try:
+        inspect.signature(estimator.build).bind(inputs)
+    except TypeError as exc:
+        _fail(cls, f"build{inspect.signature(estimator.build)} cannot be called as build(inputs) "
+                   f"({exc}); an estimator is given the loaded inputs, not a knowledge base")
+    inputs = inputs if inputs is not None else estimator_inputs()
+    before = _fingerprint(inputs)
+    out = estimator.build(inputs)
+    if not isinstance(out, HierarchyResult):
+        _fail(cls, f"build() returned {type(out).__name__}, not an adpart HierarchyResult "
+                   "(adpart.hierarchy.layer_result builds one)")
+    if _fingerprint(inputs) != before:
+        _fail(cls, "build() changed its inputs; derive new ones instead "
+                   "(inputs.with_threshold, inputs.select_options)")
+    if out.estimator != cls.name:
+        _fail(cls, f"the result names estimator {out.estimator!r}, not the plugin's name")
+    part = out.partition
+    if not isinstance(part, Partition):
+        _fail(cls, f"result.partition is a {type(part).__name__}, not a Partition")
+    S, A = inputs.mdp.n_states, inputs.mdp.n_actions
+    if np.asarray(part.labels).shape != (S,):
+        _fail(cls, f"the partition's labels must have shape ({S},)")
+    position = {oid: k for k, oid in enumerate(inputs.option_ids)}
+    used = [position.get(oid, -1) for oid in out.option_ids]
+    if min(used, default=0) < 0 or used != sorted(set(used)):
+        _fail(cls, f"option_ids {list(out.option_ids)} must be ids of inputs.option_ids, each "
+                   "once, in column order")
+    cols = np.r_[np.arange(A), A + np.asarray(used, dtype=np.int64)]
+    if part.admissible.shape != (part.n_blocks, cols.size):
+        _fail(cls, f"the partition offers {part.admissible.shape[1]} columns; expected "
+                   f"{cols.size} (the {A} primitive actions, then option_ids)")
+    if list(out.column_names) != [inputs.action_names[c] for c in cols]:
+        _fail(cls, "column_names must name the primitive actions, then the options of option_ids")
+    if not part.admissible.any(axis=1).all():
+        _fail(cls, "a block offers no column (the learner needs a decision in every block)")
+    if (part.admissible & ~block_all(part.labels, part.n_blocks, inputs.admissible[:, cols])).any():
+        _fail(cls, "a block offers a column some of its states may not start")
+    if list(out.task_ids) != list(inputs.task_ids):
+        _fail(cls, f"task_ids {list(out.task_ids)} are not the inputs' {list(inputs.task_ids)}")
+    if out.partition_id is not None:
+        _fail(cls, "partition_id must be None: an estimator stores nothing (the workflow does)")
+    if out.estimate is not None and not (math.isfinite(out.estimate) and out.estimate >= 0):
+        _fail(cls, f"the estimate {out.estimate} must be a finite number >= 0")
+    again = estimator.build(inputs)
+    if not (np.array_equal(again.partition.labels, part.labels)
+            and np.array_equal(again.partition.admissible, part.admissible)
+            and list(again.option_ids) == list(out.option_ids)):
+        _fail(cls, "the same inputs gave another layer")
+
+
 def check_environment(cls: type) -> None:
     """An environment subclasses :class:`Domain`, builds by ``cls()``, and every task is an MDP.
 
@@ -256,6 +364,7 @@ _CHECKS = {
     "learner": check_learner,
     "subgoal-detector": check_detector,
     "partition-criterion": check_criterion,
+    "hierarchy-estimator": check_estimator,
     "environment": check_environment,
     "executor": check_executor,
 }
@@ -264,8 +373,9 @@ _CHECKS = {
 def check_plugin(spec: Any) -> None:
     """Run the check of a registry entry's kind (:class:`adpart.plugins.PluginSpec`).
 
-    ``hierarchy-estimator`` entries need a knowledge base with learned tasks; they get the
-    class-level checks here (declarations and a ``build`` method).
+    A plugin that only fits some environments names one in ``example_environment``: learners,
+    detectors and criteria then run on its default task, estimators on
+    :func:`estimator_inputs` of it.
     """
     example = getattr(spec.factory, "example_environment", None)
     if spec.kind in {"learner", "subgoal-detector", "partition-criterion"} and example:
@@ -273,13 +383,12 @@ def check_plugin(spec: Any) -> None:
 
         _CHECKS[spec.kind](spec.factory, get_domain(example).mdp())
         return
-    if spec.kind in _CHECKS:
-        _CHECKS[spec.kind](spec.factory)
+    if spec.kind == "hierarchy-estimator" and example:
+        check_estimator(spec.factory, estimator_inputs(example))
         return
-    estimator = check_plugin_class(spec.factory)
-    if not callable(getattr(estimator, "build", None)):
-        _fail(spec.factory,
-              "a hierarchy estimator has a method build(kb, environment, *, tasks, store)")
+    if spec.kind not in _CHECKS:
+        _fail(spec.factory, f"adpart.testing has no check for plugin kind {spec.kind!r}")
+    _CHECKS[spec.kind](spec.factory)
 
 
 def check_registry(registry: Any, kinds: Iterable[str] | None = None) -> list[str]:

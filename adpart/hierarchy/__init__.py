@@ -5,8 +5,8 @@
 * :mod:`adpart.hierarchy.estimator` - ``E[t_learn | P]`` of a layer (T_conv, P_refine);
 * :mod:`adpart.hierarchy.greedy` - Algorithm 3, the greedy construction;
 * :mod:`adpart.hierarchy.layers` - the decision layers Algorithm 3 and the all-subgoals heuristic
-  build from learned tasks and options (:mod:`adpart.workflows.hierarchy` reads them from a
-  knowledge base and stores the layer).
+  build from learned tasks and options, as pure functions of them
+  (:mod:`adpart.workflows.hierarchy` reads them from a knowledge base and stores the layer).
 """
 
 from adpart.hierarchy.estimator import (
@@ -22,6 +22,7 @@ from adpart.hierarchy.layers import (
     HierarchyResult,
     all_subgoals_layer,
     expected_time_layer,
+    layer_result,
 )
 from adpart.hierarchy.tasks import (
     LearnedTask,
@@ -45,6 +46,7 @@ __all__ = [
     "flat_time",
     "good_columns",
     "greedy_hierarchy",
+    "layer_result",
     "option_values",
     "t_conv",
     "task_from_model",

@@ -4,8 +4,9 @@
 and candidate options over one column set (the primitive actions, then the options).
 :func:`expected_time_layer` runs Algorithm 3 on them; :func:`all_subgoals_layer` is the seed's
 heuristic (every subgoal option in every block where it is admissible, then the multi-phase
-partition). Reading the inputs from a knowledge base and storing the layer is the job of
-:mod:`adpart.workflows.hierarchy`.
+partition); :func:`layer_result` wraps a layer as the :class:`HierarchyResult` an estimator plugin
+returns. Everything here is a function of the inputs: reading them from a knowledge base and
+storing the layer is the job of :mod:`adpart.workflows.hierarchy`.
 
 Interpretations (docs/hierarchy.md): the estimator's threshold ``L`` defaults to
 ``threshold_scale`` (1%) of the task's value range; blocks the construction left without any
@@ -16,8 +17,8 @@ columns some block offers are kept with the layer.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass, field
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -40,29 +41,106 @@ DEFAULT_DELTA = 0.3
 class HierarchyInputs:
     """Everything one construction needs: the learned tasks, the options, their columns.
 
+    Plain data (no store records): the workflow that loads them from a knowledge base fills in
+    the record ids, so a layer built from them can be stored with its lineage; anyone else builds
+    them with :meth:`from_tasks`.
+
     Attributes:
-        environment: the environment record.
-        task_records, policy_records: the tasks used and the policy standing for each.
-        tasks: the estimator's inputs, one per task record.
-        option_records, options: the candidate options (columns ``A..A+O-1``).
+        environment: the environment's name (for messages).
+        tasks: the estimator's inputs, one per learned task, over all ``A + O`` columns.
+        options: the candidate options (columns ``A..A+O-1``).
         action_names: names of all ``A + O`` columns.
         admissible: ``(S, A+O)`` where each column may start.
         termination: ``(S, A+O)`` beta = 1 (True for every primitive column).
         mdp: the MDP of the newest task (dynamics shared by all).
+        task_ids: one id per task (its record id when loaded from a knowledge base).
+        option_ids: one id per option (its record id), in column order.
+        to_subgoal: per option, whether it leads to a stored subgoal (the candidates of the
+            ``all-subgoals`` heuristic).
+        policy_ids: the stored policy standing for each task (empty when not loaded).
         parent_ids: partitions the used tasks were learned on (their runs') or built for.
     """
 
-    environment: Any
-    task_records: list[Any]
-    policy_records: list[Any]
+    environment: str
     tasks: list[LearnedTask]
-    option_records: list[Any]
     options: list[Option]
     action_names: list[str]
     admissible: np.ndarray
     termination: np.ndarray
     mdp: FiniteMDP
-    parent_ids: list[int]
+    task_ids: list[int]
+    option_ids: list[int]
+    to_subgoal: list[bool]
+    policy_ids: list[int] = field(default_factory=list)
+    parent_ids: list[int] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        n_opts = len(self.options)
+        shape = (self.mdp.n_states, self.mdp.n_actions + n_opts)
+        if self.admissible.shape != shape or self.termination.shape != shape:
+            raise TaskError(f"admissible and termination must be {shape} (states, A + options)")
+        if len(self.action_names) != shape[1]:
+            raise TaskError(f"{len(self.action_names)} column names for {shape[1]} columns")
+        if len(self.option_ids) != n_opts or len(self.to_subgoal) != n_opts:
+            raise TaskError(f"{len(self.option_ids)} option ids and {len(self.to_subgoal)} "
+                            f"subgoal flags for {n_opts} options; give one per option")
+        if len(self.task_ids) != len(self.tasks):
+            raise TaskError(f"{len(self.task_ids)} task ids for {len(self.tasks)} tasks")
+        for task in self.tasks:
+            if task.Q.shape != shape:
+                raise TaskError(f"task {task.name!r}: Q has shape {task.Q.shape}; expected {shape}")
+
+    @classmethod
+    def from_tasks(
+        cls, mdp: FiniteMDP, tasks: Sequence[LearnedTask], options: Sequence[Option] = (), *,
+        environment: str | None = None, task_ids: Sequence[int] | None = None,
+        option_ids: Sequence[int] | None = None, to_subgoal: Sequence[bool] | None = None,
+        policy_ids: Sequence[int] = (), parent_ids: Sequence[int] = (),
+    ) -> HierarchyInputs:
+        """Inputs over ``mdp``'s primitive actions, then ``options`` (tasks built with the same
+        options, e.g. by :func:`~adpart.hierarchy.tasks.task_from_model`).
+
+        Ids default to positions; an option leads to a subgoal when it has one
+        (``option.subgoal >= 0``).
+        """
+        S, A = mdp.n_states, mdp.n_actions
+        admissible = np.concatenate([mdp.admissible] + [o.initiation[:, None] for o in options],
+                                    axis=1)
+        termination = np.concatenate([np.ones((S, A), dtype=bool)]
+                                     + [(o.beta >= 1.0)[:, None] for o in options], axis=1)
+        return cls(
+            environment=environment or mdp.name, tasks=list(tasks), options=list(options),
+            action_names=list(mdp.action_names) + [o.name for o in options],
+            admissible=admissible, termination=termination, mdp=mdp,
+            task_ids=list(range(len(tasks)) if task_ids is None else task_ids),
+            option_ids=list(range(len(options)) if option_ids is None else option_ids),
+            to_subgoal=([o.subgoal >= 0 for o in options] if to_subgoal is None
+                        else [bool(x) for x in to_subgoal]),
+            policy_ids=list(policy_ids), parent_ids=list(parent_ids),
+        )
+
+    def with_threshold(self, threshold: float | None = None,
+                       threshold_scale: float = DEFAULT_THRESHOLD_SCALE) -> HierarchyInputs:
+        """The same inputs with every task's margin ``L = threshold``, or, with None,
+        ``threshold_scale`` times the task's value range (:meth:`LearnedTask.value_range`)."""
+        A = self.mdp.n_actions
+        tasks = [t.with_threshold(threshold_scale * t.value_range(A) if threshold is None
+                                  else threshold) for t in self.tasks]
+        return replace(self, tasks=tasks)
+
+    def select_options(self, keep: Sequence[bool] | np.ndarray) -> HierarchyInputs:
+        """The same inputs over the primitive actions and the options where ``keep`` is True."""
+        A = self.mdp.n_actions
+        kept = np.flatnonzero(np.asarray(keep, dtype=bool))
+        cols = np.r_[np.arange(A), A + kept]
+        return replace(
+            self, tasks=[t.with_columns(cols) for t in self.tasks],
+            options=[self.options[i] for i in kept],
+            action_names=[self.action_names[c] for c in cols],
+            admissible=self.admissible[:, cols], termination=self.termination[:, cols],
+            option_ids=[self.option_ids[i] for i in kept],
+            to_subgoal=[self.to_subgoal[i] for i in kept],
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -78,8 +156,10 @@ class HierarchyResult:
         estimate: ``E[t_learn]`` of the stored layer (after filling empty blocks).
         steps: Algorithm 3's accepted refinements (empty for ``all-subgoals``).
         task_ids: the learned tasks used.
-        partition_id: the stored ``hierarchy`` partition, or None when not stored.
-        seconds: ``{"inputs": ..., "construction": ...}``.
+        partition_id: the stored ``hierarchy`` partition, or None when not stored (an estimator
+            never stores; :func:`adpart.workflows.hierarchy.build_hierarchy` fills it in).
+        seconds: ``{"construction": ...}`` from the estimator; the workflow adds ``"inputs"``
+            and ``"store"``.
         parameters: the estimator's parameters (stored as provenance).
         flat_estimate: ``E[t_learn | flat]`` (the "no abstraction" candidate), None when not
             compared.
@@ -146,6 +226,28 @@ def prune_unused_options(partition: Partition, n_primitives: int) -> tuple[Parti
     used = np.flatnonzero(partition.admissible[:, n_primitives:].any(axis=0))
     cols = np.r_[np.arange(n_primitives), n_primitives + used]
     return partition.with_admissible(partition.admissible[:, cols]), used
+
+
+def layer_result(
+    inputs: HierarchyInputs, layer: Partition, *, estimator: str, trace: Sequence[float],
+    steps: Sequence[Step], estimate: float, parameters: Mapping[str, Any],
+    seconds: Mapping[str, float], flat: float | None = None,
+) -> HierarchyResult:
+    """Wrap a layer over ``inputs``' columns as an estimator's (unstored) result.
+
+    Option columns no block offers are dropped (:func:`prune_unused_options`); the result's
+    ``option_ids`` are the kept options' ids in column order. With ``flat``
+    (``E[t_learn | flat]``) the result says whether to fall back to flat learning
+    (``flat <= estimate``).
+    """
+    A = inputs.mdp.n_actions
+    pruned, used = prune_unused_options(layer, A)
+    option_ids = [inputs.option_ids[int(i)] for i in used]
+    names = inputs.action_names[:A] + [inputs.action_names[A + int(i)] for i in used]
+    fallback = flat is not None and flat <= estimate
+    return HierarchyResult(estimator, pruned, option_ids, names, list(trace), estimate,
+                           list(steps), list(inputs.task_ids), None, dict(seconds),
+                           dict(parameters), flat, fallback)
 
 
 def stable_option_splits(mdp: FiniteMDP, options: Sequence[Option], admissible: np.ndarray,
@@ -228,7 +330,7 @@ def all_subgoals_layer(
 
     if not inputs.options:
         raise TaskError(
-            f"environment {inputs.environment.name!r} has no stored subgoal options; build them "
+            f"environment {inputs.environment!r} has no stored subgoal options; build them "
             "with `adpart options` first"
         )
     smdp, partitioner = _option_partitioner(inputs.mdp, inputs.options, inputs.termination,

@@ -26,6 +26,7 @@ partition is given (then block Q values are occupancy-weighted means, see
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -94,6 +95,32 @@ class LearnedTask:
     @property
     def n_columns(self) -> int:
         return self.Q.shape[1]
+
+    def with_threshold(self, threshold: float) -> LearnedTask:
+        """The same task with significance margin ``L = threshold`` (nothing else recomputed)."""
+        if not (np.isfinite(threshold) and threshold >= 0):
+            raise TaskError(f"task {self.name!r}: threshold L = {threshold!r} must be >= 0")
+        out = copy.copy(self)
+        object.__setattr__(out, "threshold", float(threshold))
+        return out
+
+    def with_columns(self, columns: np.ndarray) -> LearnedTask:
+        """The same task over the candidate columns ``columns`` (indices into ``Q``'s columns).
+
+        A column's values depend on that column alone (:func:`option_values` solves per option),
+        so selecting columns is exact; occupancy, threshold and weight stay as they are.
+        """
+        out = copy.copy(self)
+        object.__setattr__(out, "Q", self.Q[:, np.asarray(columns, dtype=np.int64)])
+        return out
+
+    def value_range(self, n_primitives: int) -> float:
+        """``max V - min V`` of ``V = max_a Q(., a)`` over the primitive actions, taken over the
+        states with a finite value (terminal states and states without one are left out)."""
+        Q = self.Q[:, :n_primitives]
+        V = np.where(np.isfinite(Q), Q, -np.inf).max(axis=1, initial=-np.inf)
+        V = V[np.isfinite(V)]
+        return float(V.max() - V.min()) if V.size else 0.0
 
 
 STARTS = ("reachable", "start")

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, Protocol, runtime_checkable
 if TYPE_CHECKING:
     import numpy as np
 
-    from adpart.hierarchy.layers import HierarchyResult
+    from adpart.hierarchy.layers import HierarchyInputs, HierarchyResult
     from adpart.learning.result import LearnResult
     from adpart.mdp.model import FiniteMDP, SMDPModel
     from adpart.options.option import Option
@@ -102,18 +102,19 @@ class PartitionCriterion(Plugin, Protocol):
 
 @runtime_checkable
 class HierarchyEstimator(Plugin, Protocol):
-    """``cls(**params).build(knowledge_base, environment, *, tasks, store)`` -> HierarchyResult.
+    """``cls(**params).build(inputs)`` -> :class:`~adpart.hierarchy.layers.HierarchyResult`.
 
-    The decision layer for the next task of ``environment`` (its name in the knowledge base) from
-    the tasks learned there so far (section 4.4); :func:`adpart.workflows.hierarchy.load_inputs`
-    and :func:`adpart.workflows.hierarchy.finish` do the reading and storing.
+    The decision layer for the next task from the tasks learned so far (section 4.4), as a pure
+    function of ``inputs`` (:class:`~adpart.hierarchy.layers.HierarchyInputs`: the learned
+    tasks' values over the primitive actions and the candidate options, their occupancies and
+    weights, the options and their columns). An estimator reads no knowledge base and stores
+    nothing, and leaves ``inputs`` as it found them (derive with ``inputs.with_threshold`` or
+    ``inputs.select_options``). The result's partition is over the primitive actions followed by
+    the options ``option_ids`` it offers somewhere (a subsequence of ``inputs.option_ids``), every
+    block offers a column all its states may start, ``task_ids`` are ``inputs.task_ids`` and
+    ``partition_id`` is None; :func:`adpart.hierarchy.layers.layer_result` builds such a result
+    from a layer over all the input columns. The workflow
+    (:func:`adpart.workflows.hierarchy.build_hierarchy`) loads the inputs and stores the layer.
     """
 
-    def build(
-        self,
-        knowledge_base: Any,
-        environment: str,
-        *,
-        tasks: Sequence[str | int] | None = None,
-        store: bool = True,
-    ) -> HierarchyResult: ...
+    def build(self, inputs: HierarchyInputs) -> HierarchyResult: ...

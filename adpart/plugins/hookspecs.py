@@ -84,7 +84,9 @@ def register_partition_criteria(register: Registrar) -> None:
 def register_hierarchy_estimators(register: Registrar) -> None:
     """Register hierarchy estimator classes with ``register(cls)``.
 
-    Call signature: ``cls(**params).build(knowledge_base, environment, *, tasks=None,
-    store=True)`` returning an :class:`adpart.hierarchy.HierarchyResult` - the decision layer for
-    the next task built from the tasks learned so far (section 4.4 of the dissertation).
+    Call signature: ``cls(**params).build(inputs)`` returning an unstored
+    :class:`adpart.hierarchy.HierarchyResult` - the decision layer for the next task built from
+    ``inputs``, an :class:`adpart.hierarchy.HierarchyInputs` holding the tasks learned so far and
+    the candidate options (section 4.4 of the dissertation). A pure function of ``inputs``: the
+    workflow loads them from the knowledge base and stores the layer.
     """

@@ -2,12 +2,13 @@
 
 :func:`load_inputs` turns the tasks learned so far in one environment (their newest stored
 policy's Q) and the options stored for it into :class:`~adpart.hierarchy.layers.HierarchyInputs`;
-:func:`build_hierarchy` builds a layer from them through a ``hierarchy-estimator`` plugin and
-stores it as a ``hierarchy`` partition whose parents are the partitions the used tasks were
-learned on (:func:`finish`, shared by the estimator plugins). :func:`hierarchy_layer` is the
-get-or-build the pipeline uses: the layer an estimator built from exactly these tasks' current
-policies is reused when stored, and a layer that offers no option is stored again over the
-pipeline's options, so the learner's refinement has options to add.
+:func:`build_hierarchy` resolves a ``hierarchy-estimator`` plugin, loads the inputs, calls the
+plugin on them (a pure function: it never sees the knowledge base) and stores the layer it
+returns as a ``hierarchy`` partition whose parents are the partitions the used tasks were learned
+on (:func:`store_layer`). :func:`hierarchy_layer` is the get-or-build the pipeline uses: the
+layer an estimator built from exactly these tasks' current policies is reused when stored, and a
+layer that offers no option is stored again over the pipeline's options, so the learner's
+refinement has options to add.
 
 Interpretations (docs/hierarchy.md): a task is learned when it has a stored policy; its newest
 policy stands for it.
@@ -15,32 +16,31 @@ policy stands for it.
 
 from __future__ import annotations
 
+import inspect
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
-from adpart.errors import AdpartError, TaskError
-from adpart.hierarchy.greedy import Step
+from adpart.errors import AdpartError, PluginError, TaskError
 from adpart.hierarchy.layers import (
     DEFAULT_THRESHOLD_SCALE,
     HierarchyInputs,
     HierarchyResult,
-    prune_unused_options,
 )
 from adpart.hierarchy.tasks import task_from_model
 from adpart.mdp.model import FiniteMDP
-from adpart.partition.partition import Partition
-from adpart.store import KnowledgeBase
+from adpart.plugins import get_registry
 from adpart.workflows.options import load_options
 from adpart.workflows.resolve import resolve_domain
+from adpart.workflows.store import KnowledgeStore
 
 # --------------------------------------------------------------------------- reading
 
 
-def _task_mdp(kb: KnowledgeBase, domain: Any, task: Any) -> FiniteMDP:
+def _task_mdp(kb: KnowledgeStore, domain: Any, task: Any) -> FiniteMDP:
     """The task's MDP, rebuilt from its name or the request of one of its runs, hash-checked."""
     wanted = task.spec.get("model_hash")
     candidates = [task.spec.get("task"), task.name]
@@ -61,7 +61,7 @@ def _task_mdp(kb: KnowledgeBase, domain: Any, task: Any) -> FiniteMDP:
     )
 
 
-def _newest_policies(kb: KnowledgeBase, env: Any) -> dict[int, Any]:
+def _newest_policies(kb: KnowledgeStore, env: Any) -> dict[int, Any]:
     """Per learned task id, the policy that stands for it: its newest stored policy with a Q
     table over the environment's actions (a decision layer's Q over options does not count)."""
     policies: dict[int, Any] = {}
@@ -72,7 +72,7 @@ def _newest_policies(kb: KnowledgeBase, env: Any) -> dict[int, Any]:
 
 
 def _select_tasks(
-    kb: KnowledgeBase, env: Any, tasks: Sequence[str | int] | None
+    kb: KnowledgeStore, env: Any, tasks: Sequence[str | int] | None
 ) -> list[tuple[Any, Any]]:
     """``(task record, newest policy)`` of the chosen (default: all learned) tasks."""
     policies = _newest_policies(kb, env)
@@ -98,7 +98,7 @@ def _select_tasks(
 
 
 def load_inputs(
-    kb: KnowledgeBase,
+    kb: KnowledgeStore,
     environment_name: str,
     *,
     tasks: Sequence[str | int] | None = None,
@@ -106,7 +106,6 @@ def load_inputs(
     weights: Mapping[str, float] | Sequence[float] | None = None,
     threshold: float | None = None,
     threshold_scale: float = DEFAULT_THRESHOLD_SCALE,
-    subgoal_options_only: bool = False,
 ) -> HierarchyInputs:
     """Read the learned tasks and candidate options of ``environment_name`` (module docstring).
 
@@ -114,9 +113,9 @@ def load_inputs(
         tasks: task names, ``task:N`` refs or ids (default: every task with a stored policy).
         options: option record ids (default: every option stored for the environment).
         weights: importance ``U(T_i)`` by task name/ref, or one per selected task (default 1).
-        threshold: the estimator's ``L`` for every task (default: ``threshold_scale`` times each
-            task's value range over its non-terminal states).
-        subgoal_options_only: keep only options to subgoals (the ``all-subgoals`` heuristic).
+        threshold: ``L`` for every task (default: ``threshold_scale`` times each task's value
+            range over its non-terminal states); an estimator may set its own
+            (:meth:`~adpart.hierarchy.layers.HierarchyInputs.with_threshold`).
     """
 
     env = kb.find_environment(environment_name)
@@ -135,8 +134,6 @@ def load_inputs(
         for rec in option_records:
             if rec.environment_id != env.id:
                 raise TaskError(f"{rec.ref} belongs to another environment than {env.name!r}")
-    if subgoal_options_only:
-        option_records = [r for r in option_records if r.subgoal_id is not None]
     opts = load_options(kb, option_records)[0] if option_records else []
     if isinstance(weights, Mapping):
         w = [float(weights.get(t.name, weights.get(t.ref, 1.0))) for t, _ in chosen]
@@ -149,54 +146,44 @@ def load_inputs(
     learned, mdp = [], None
     for (task_rec, policy), wi in zip(chosen, w, strict=True):
         mdp = _task_mdp(kb, domain, task_rec)
-        Q = kb.load(policy, "q")
-        if threshold is None:
-            V = np.where(mdp.admissible & np.isfinite(Q), Q, -np.inf).max(axis=1)[~mdp.terminal]
-            V = V[np.isfinite(V)]
-            L = threshold_scale * float(V.max() - V.min()) if V.size else 0.0
-        else:
-            L = float(threshold)
-        learned.append(task_from_model(mdp, Q, opts, threshold=L, name=task_rec.name, weight=wi))
-    A = dyn.n_actions
-    S = dyn.n_states
-    dyn_adm = (
-        dyn.admissible
-        if dyn.admissible is not None
-        else np.ones((dyn.n_states, dyn.n_actions), dtype=bool)
-    )
-    adm = np.concatenate([dyn_adm] + [o.initiation[:, None] for o in opts], axis=1)
-    term = np.concatenate([np.ones((S, A), dtype=bool)]
-                          + [(o.beta >= 1.0)[:, None] for o in opts], axis=1)
+        learned.append(task_from_model(mdp, kb.load(policy, "q"), opts, threshold=0.0,
+                                       name=task_rec.name, weight=wi))
     task_ids = {t.id for t, _ in chosen}
     parents = {p.id for p in kb.records("partition", environment=env) if p.task_id in task_ids}
     for tid in task_ids:
         parents.update(r.partition_id for r in kb.runs_for(tid) if r.partition_id is not None)
-    return HierarchyInputs(
-        environment=env, task_records=[t for t, _ in chosen],
-        policy_records=[p for _, p in chosen], tasks=learned, option_records=option_records,
-        options=opts, action_names=list(dyn.action_names) + [o.name for o in opts],
-        admissible=adm, termination=term, mdp=mdp, parent_ids=sorted(parents),
+    inputs = HierarchyInputs.from_tasks(
+        mdp, learned, opts, environment=env.name, task_ids=[t.id for t, _ in chosen],
+        option_ids=[r.id for r in option_records],
+        to_subgoal=[r.subgoal_id is not None for r in option_records],
+        policy_ids=[p.id for _, p in chosen], parent_ids=sorted(parents),
     )
+    return inputs.with_threshold(threshold, threshold_scale)
 
 
-def store_layer(
-    kb: KnowledgeBase, inputs: HierarchyInputs, partition: Partition, *, estimator: str,
-    parameters: Mapping[str, Any],
-) -> tuple[Partition, list[int], int]:
-    """Prune unused options and store the layer as a ``hierarchy`` partition with its lineage."""
-    A = inputs.mdp.n_actions
-    pruned, used = prune_unused_options(partition, A)
-    option_ids = [inputs.option_records[int(i)].id for i in used]
+def store_layer(kb: KnowledgeStore, inputs: HierarchyInputs, result: HierarchyResult, *,
+                estimator: str) -> HierarchyResult:
+    """Store ``result`` (built from ``inputs``) as a ``hierarchy`` partition with its lineage.
+
+    The record's provenance is the estimator's name and parameters, the tasks and the policies
+    standing for them, the estimate and the fallback decision; returns ``result`` with its
+    ``partition_id``.
+    """
+    params = {**result.parameters, "tasks": list(result.task_ids),
+              "policies": list(inputs.policy_ids), "estimate": result.estimate,
+              "steps": len(result.steps), "flat_estimate": result.flat_estimate,
+              "fallback": result.fallback}
     rec = kb.put_partition(
-        inputs.environment, "hierarchy", pruned.labels,
-        options=option_ids, includes_primitives=True, block_actions=pruned.admissible,
-        parents=inputs.parent_ids, plugin=estimator, parameters=dict(parameters),
+        kb.find_environment(inputs.environment), "hierarchy", result.partition.labels,
+        options=list(result.option_ids), includes_primitives=True,
+        block_actions=result.partition.admissible, parents=inputs.parent_ids, plugin=estimator,
+        parameters=params,
     )
-    return pruned, option_ids, rec.id
+    return replace(result, partition_id=rec.id)
 
 
 def build_hierarchy(
-    kb: KnowledgeBase,
+    kb: KnowledgeStore,
     environment_name: str,
     *,
     estimator: str = "expected-learning-time",
@@ -206,51 +193,42 @@ def build_hierarchy(
 ) -> HierarchyResult:
     """Build the decision layer for the next task of ``environment_name`` with an estimator plugin.
 
+    Resolves the plugin, loads its inputs (:func:`load_inputs`), calls
+    ``plugin.build(inputs)`` and stores the layer it returns (:func:`store_layer`).
+
     Args:
-        kb: an open :class:`~adpart.store.KnowledgeBase`.
+        kb: an open knowledge base (:class:`~adpart.workflows.store.KnowledgeStore`).
         estimator: a ``hierarchy-estimator`` plugin (``expected-learning-time``,
             ``all-subgoals`` or a third-party one).
         tasks: learned tasks to use (names, ``task:N`` or ids; default all).
         params: the plugin's parameters (validated against its declaration).
         store: store the layer as a ``hierarchy`` partition.
     """
-    from adpart.plugins import get_registry  # the registry loads this module's callers
-
     spec = get_registry().get("hierarchy-estimator", estimator)
     plugin = spec.create(dict(params or {}))
-    return plugin.build(kb, environment_name, tasks=tasks, store=store)
-
-
-def finish(
-    kb: KnowledgeBase, inputs: HierarchyInputs, layer: Partition, *, estimator: str,
-    trace: list[float],
-    steps: list[Step], estimate: float, parameters: Mapping[str, Any], store: bool,
-    seconds: dict[str, float], flat: float | None = None,
-) -> HierarchyResult:
-    """Prune, optionally store, and wrap a built layer (shared by the estimator plugins).
-
-    With ``flat`` (``E[t_learn | flat]``) the result says whether to fall back to flat learning
-    (``flat <= estimate``); the decision is stored with the layer's parameters.
-    """
+    try:
+        inspect.signature(plugin.build).bind(None)
+    except TypeError as exc:
+        raise PluginError(
+            f"hierarchy estimator {estimator!r} ({spec.package}) has "
+            f"build{inspect.signature(plugin.build)}; the contract is build(inputs), a pure "
+            "function of the loaded inputs (docs/plugins.md)"
+        ) from exc
     t0 = time.perf_counter()
-    task_ids = [t.id for t in inputs.task_records]
-    fallback = flat is not None and flat <= estimate
-    params = {**parameters, "tasks": task_ids, "policies": [p.id for p in inputs.policy_records],
-              "estimate": estimate, "steps": len(steps), "flat_estimate": flat,
-              "fallback": fallback}
+    inputs = load_inputs(kb, environment_name, tasks=tasks)
+    t1 = time.perf_counter()
+    result = plugin.build(inputs)
+    if not isinstance(result, HierarchyResult):
+        raise PluginError(
+            f"hierarchy estimator {estimator!r} ({spec.package}) returned a "
+            f"{type(result).__name__}, not an adpart.hierarchy.HierarchyResult (build it with "
+            "adpart.hierarchy.layer_result)"
+        )
+    t2 = time.perf_counter()
     if store:
-        pruned, option_ids, pid = store_layer(kb, inputs, layer, estimator=estimator,
-                                              parameters=params)
-    else:
-        pruned, used = prune_unused_options(layer, inputs.mdp.n_actions)
-        option_ids, pid = [inputs.option_records[int(i)].id for i in used], None
-    A = inputs.mdp.n_actions
-    names = inputs.action_names[:A] + [
-        inputs.action_names[A + [r.id for r in inputs.option_records].index(i)]
-        for i in option_ids]
-    seconds = {**seconds, "store": time.perf_counter() - t0}
-    return HierarchyResult(estimator, pruned, option_ids, names, list(trace), estimate,
-                           list(steps), task_ids, pid, seconds, dict(parameters), flat, fallback)
+        result = store_layer(kb, inputs, result, estimator=estimator)
+    seconds = {"inputs": t1 - t0, **result.seconds, "store": time.perf_counter() - t2}
+    return replace(result, seconds=seconds)
 
 
 # --------------------------------------------------------------------------- reuse
@@ -278,7 +256,7 @@ class Layer:
 
 
 def _stored_hierarchy(
-    kb: Any, env: Any, estimator: str, params: dict[str, Any], task_ids: list[int]
+    kb: KnowledgeStore, env: Any, estimator: str, params: dict[str, Any], task_ids: list[int]
 ) -> Any:
     """A ``hierarchy`` partition built by ``estimator`` with ``params`` from exactly these
     tasks' current policies, or None - so a pipeline run again does not build it again."""
@@ -299,7 +277,8 @@ def _stored_hierarchy(
     return None
 
 
-def _with_options(kb: Any, env: Any, rec: Any, option_ids: list[int]) -> tuple[Any, bool]:
+def _with_options(kb: KnowledgeStore, env: Any, rec: Any, option_ids: list[int]
+                  ) -> tuple[Any, bool]:
     """``rec`` itself when it offers options; otherwise the same blocks over ``option_ids``.
 
     The hierarchical learner needs at least one option (its refinement may add any of them,
@@ -326,7 +305,7 @@ def _with_options(kb: Any, env: Any, rec: Any, option_ids: list[int]) -> tuple[A
 
 
 def hierarchy_layer(
-    kb: Any, env_name: str, estimator: str, params: dict[str, Any], task_ids: list[int],
+    kb: KnowledgeStore, env_name: str, estimator: str, params: dict[str, Any], task_ids: list[int],
     option_ids: list[int],
 ) -> Layer:
     """The layer ``estimator`` builds from the learned tasks ``task_ids`` (reused when stored).
@@ -334,8 +313,6 @@ def hierarchy_layer(
     ``option_ids`` are the options the learner may fall back on when the layer offers none
     (:func:`_with_options`).
     """
-    from adpart.plugins import get_registry
-
     resolved = get_registry().get("hierarchy-estimator", estimator).resolve_params(params)
     env = kb.find_environment(env_name)
     rec = _stored_hierarchy(kb, env, estimator, resolved, task_ids)

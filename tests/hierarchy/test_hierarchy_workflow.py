@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import numpy as np
 import pytest
 
@@ -92,8 +94,7 @@ def test_expected_learning_time_layer_is_stored_with_lineage(four_rooms_kb, esti
     assert stored == res.partition
     # every block offers a column every state of it may start (what the learner checks)
     inputs = load_inputs(kb, "four-rooms")
-    cols = list(range(4)) + [4 + [r.id for r in inputs.option_records].index(i)
-                              for i in res.option_ids]
+    cols = list(range(4)) + [4 + inputs.option_ids.index(i) for i in res.option_ids]
     allowed = block_all(stored.labels, stored.n_blocks, inputs.admissible[:, cols])
     assert stored.admissible.any(axis=1).all()
     assert not (stored.admissible & ~allowed).any()
@@ -164,10 +165,9 @@ def _full(res, inputs) -> Partition:
     """The result's layer over all input columns (pruned option columns put back as False)."""
     A = inputs.mdp.n_actions
     adm = np.zeros((res.n_blocks, inputs.admissible.shape[1]), dtype=bool)
-    ids = [r.id for r in inputs.option_records]
     adm[:, :A] = res.partition.admissible[:, :A]
     for k, oid in enumerate(res.option_ids):
-        adm[:, A + ids.index(oid)] = res.partition.admissible[:, A + k]
+        adm[:, A + inputs.option_ids.index(oid)] = res.partition.admissible[:, A + k]
     return Partition(res.partition.labels, adm)
 
 
@@ -230,3 +230,51 @@ def test_blocks_the_estimate_calls_consistent_lose_nothing(four_rooms_kb, estima
         pol = np.where(refined | (col < 0), prim, col)
         v = start_distribution(mdp) @ policy_evaluation(smdp, pol)
         assert v >= start_distribution(mdp) @ V - max(task.threshold, 1e-9) - 1e-9
+
+
+class _OneBlock:
+    """A third-party estimator: one block offering every option all its states may start."""
+
+    name = "one-block"
+    description = "one block (test plugin)"
+    params = ()
+    seen: ClassVar[list] = []
+
+    def build(self, inputs):
+        from adpart.hierarchy.layers import fill_empty_blocks, layer_result
+
+        _OneBlock.seen.append(inputs)
+        S = inputs.mdp.n_states
+        layer = fill_empty_blocks(Partition(np.zeros(S, dtype=np.int64),
+                                            inputs.admissible.all(axis=0, keepdims=True)),
+                                  inputs.admissible, inputs.mdp.n_actions)
+        return layer_result(inputs, layer, estimator=self.name, trace=[1.0], steps=[],
+                            estimate=1.0, parameters={}, seconds={"construction": 0.0})
+
+
+class _OldContract(_OneBlock):
+    name = "old-contract"
+
+    def build(self, knowledge_base, environment, *, tasks=None, store=True):
+        raise AssertionError("never called")
+
+
+def test_the_workflow_loads_calls_and_stores_a_third_party_estimator(four_rooms_kb,
+                                                                     estimator_registry):
+    from adpart.errors import PluginError
+    from adpart.plugins.registry import PluginSpec
+
+    kb, data = four_rooms_kb
+    for cls in (_OneBlock, _OldContract):
+        estimator_registry.add(PluginSpec("hierarchy-estimator", cls.name, cls, "test", "0"))
+    res = build_hierarchy(kb, "four-rooms", estimator="one-block", tasks=["G2"])
+    (inputs,) = _OneBlock.seen  # what the workflow loaded, nothing else
+    assert inputs.task_ids == [data["tasks"]["G2"].id]
+    assert inputs.option_ids == [r.id for r in data["options"]]
+    rec = kb.get("partition", res.partition_id)
+    assert rec.kind == "hierarchy" and rec.provenance.plugin == "one-block"
+    assert rec.n_blocks == 1 and list(rec.option_ids) == res.option_ids
+    assert rec.provenance.parameters["tasks"] == res.task_ids
+    assert list(res.seconds) == ["inputs", "construction", "store"]
+    with pytest.raises(PluginError, match=r"'old-contract' \(test\) has build\(knowledge_base"):
+        build_hierarchy(kb, "four-rooms", estimator="old-contract")

@@ -7,7 +7,7 @@ given options it does not accept, ends in one line naming the fix (exit 2), neve
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pytest
@@ -20,13 +20,16 @@ from adpart.params import Param
 from adpart.partition.partition import Partition
 from adpart.plugins import get_registry
 from adpart.plugins.builtin.detectors import Betweenness
+from adpart.plugins.builtin.estimators import AllSubgoals, ExpectedLearningTime
 from adpart.plugins.builtin.learners import QLearner
+from adpart.plugins.contracts import HierarchyEstimator
 from adpart.subgoals.result import SubgoalResult
 from adpart.testing import (
     ConformanceError,
     _start_value_by_iteration,
     check_criterion,
     check_detector,
+    check_estimator,
     check_executor,
     check_learner,
     check_plugin,
@@ -190,6 +193,71 @@ class Shuffling(Executor):
 def test_an_executor_out_of_order_is_caught():
     with pytest.raises(ConformanceError, match="results come back in item order"):
         check_executor(Shuffling)
+
+
+class StoresItsLayer(ExpectedLearningTime):
+    name = "stores-its-layer"
+
+    def build(self, inputs):
+        return replace(super().build(inputs), partition_id=7)
+
+
+class EditsItsInputs(ExpectedLearningTime):
+    name = "edits-its-inputs"
+
+    def build(self, inputs):
+        inputs.admissible[:, inputs.mdp.n_actions:] = False  # in place: no option anywhere
+        return super().build(inputs)
+
+
+class PositionsForIds(AllSubgoals):
+    name = "positions-for-ids"
+
+    def build(self, inputs):
+        out = super().build(inputs)
+        return replace(out, option_ids=list(range(len(out.option_ids))))
+
+
+class EmptyBlock(ExpectedLearningTime):
+    name = "empty-block"
+
+    def build(self, inputs):
+        out = super().build(inputs)
+        adm = out.partition.admissible.copy()
+        adm[0] = False
+        return replace(out, partition=out.partition.with_admissible(adm))
+
+
+class ReadsTheStore:
+    name = "reads-the-store"
+    description = "the former contract: reads and stores the knowledge base itself"
+    params = ()
+
+    def build(self, knowledge_base, environment, *, tasks=None, store=True):
+        raise AssertionError("never called")
+
+
+@pytest.mark.parametrize(("cls", "rule"), [
+    (StoresItsLayer, "partition_id must be None"),
+    (EditsItsInputs, r"build\(\) changed its inputs"),
+    (PositionsForIds, "must be ids of inputs.option_ids"),
+    (EmptyBlock, "a block offers no column"),
+    (ReadsTheStore, r"cannot be called as build\(inputs\)"),
+])
+def test_a_broken_estimator_is_caught(cls, rule):
+    with pytest.raises(ConformanceError, match=rule):
+        check_estimator(cls)
+
+
+def test_the_estimators_keep_the_protocol_and_leave_their_inputs_alone():
+    from adpart.testing import estimator_inputs
+
+    inputs = estimator_inputs()
+    for cls in (ExpectedLearningTime, AllSubgoals):
+        assert isinstance(cls(), HierarchyEstimator)
+        check_estimator(cls, inputs)  # the same inputs object twice: neither changed it
+    # ids are the inputs' (not positions); all-subgoals offers every doorway option somewhere
+    assert AllSubgoals().build(inputs).option_ids == [201, 202, 203, 204]
 
 
 # --------------------------------------------------------------------------- through the CLI

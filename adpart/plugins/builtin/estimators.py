@@ -1,33 +1,32 @@
 """Built-in hierarchy estimators ``expected-learning-time`` and ``all-subgoals`` (section 4.4).
 
-Call signature (``register_hierarchy_estimators``): ``cls(**params).build(knowledge_base,
-environment, *, tasks=None, store=True) -> HierarchyResult`` - the decision layer for the next task
-of ``environment`` (its name in the knowledge base) from the tasks learned there so far (``tasks``
-restricts them: names, ``task:N`` refs or ids), stored as a ``hierarchy`` partition unless
-``store=False``. Both read and store through :mod:`adpart.workflows.hierarchy` and build with
-:mod:`adpart.hierarchy.layers`; docs/hierarchy.md has the
-formulas and interpretations.
+Call signature (``register_hierarchy_estimators``): ``cls(**params).build(inputs) ->
+HierarchyResult`` - the decision layer for the next task from ``inputs``
+(:class:`~adpart.hierarchy.layers.HierarchyInputs`: the tasks learned so far, their values over the
+primitive actions and the candidate options, and the options), unstored. Both are pure functions
+of the inputs built with :mod:`adpart.hierarchy.layers`; :mod:`adpart.workflows.hierarchy` loads
+the inputs from a knowledge base and stores the layer. docs/hierarchy.md has the formulas and
+interpretations.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
-from typing import Any
 
 from adpart.errors import PluginError
 from adpart.hierarchy.layers import (
     DEFAULT_DELTA,
     DEFAULT_THRESHOLD_SCALE,
+    HierarchyInputs,
     HierarchyResult,
     all_subgoals_layer,
     expected_time_layer,
     flat_estimate,
+    layer_result,
 )
 from adpart.params import Param
 from adpart.plugins.hookspecs import hookimpl
 from adpart.plugins.registry import Registrar
-from adpart.workflows.hierarchy import finish, load_inputs
 
 _COMMON = (
     Param("c", "float", 1.0, "constant c of T_conv = c |P|^2 |O|", min=0.0),
@@ -69,24 +68,20 @@ class ExpectedLearningTime:
         self.c, self.threshold, self.threshold_scale = c, threshold, threshold_scale
         self.delta, self.max_steps, self.flat = delta, max_steps, flat
 
-    def build(self, knowledge_base: Any, environment: str, *,
-              tasks: Sequence[str | int] | None = None, store: bool = True) -> HierarchyResult:
+    def build(self, inputs: HierarchyInputs) -> HierarchyResult:
         t0 = time.perf_counter()
-        inputs = load_inputs(knowledge_base, environment, tasks=tasks,
-                             threshold=None if self.threshold < 0 else self.threshold,
-                             threshold_scale=self.threshold_scale)
-        t1 = time.perf_counter()
+        inputs = inputs.with_threshold(None if self.threshold < 0 else self.threshold,
+                                       self.threshold_scale)
         layer, trace, steps, estimate = expected_time_layer(
             inputs, delta=None if self.delta < 0 else self.delta, c=self.c,
             max_steps=self.max_steps or None)
-        t2 = time.perf_counter()
+        flat = flat_estimate(inputs, c=self.c) if self.flat else None
         params = {"c": self.c, "threshold": self.threshold,
                   "threshold_scale": self.threshold_scale, "delta": self.delta,
                   "max_steps": self.max_steps, "flat": self.flat}
-        return finish(knowledge_base, inputs, layer, estimator=self.name, trace=trace,
-                      steps=steps, estimate=estimate, parameters=params, store=store,
-                      seconds={"inputs": t1 - t0, "construction": t2 - t1},
-                      flat=flat_estimate(inputs, c=self.c) if self.flat else None)
+        return layer_result(inputs, layer, estimator=self.name, trace=trace, steps=steps,
+                            estimate=estimate, parameters=params, flat=flat,
+                            seconds={"construction": time.perf_counter() - t0})
 
 
 class AllSubgoals:
@@ -104,20 +99,16 @@ class AllSubgoals:
         self.c, self.threshold, self.threshold_scale = c, threshold, threshold_scale
         self.delta = delta
 
-    def build(self, knowledge_base: Any, environment: str, *,
-              tasks: Sequence[str | int] | None = None, store: bool = True) -> HierarchyResult:
+    def build(self, inputs: HierarchyInputs) -> HierarchyResult:
         t0 = time.perf_counter()
-        inputs = load_inputs(knowledge_base, environment, tasks=tasks,
-                             threshold=None if self.threshold < 0 else self.threshold,
-                             threshold_scale=self.threshold_scale, subgoal_options_only=True)
-        t1 = time.perf_counter()
+        inputs = inputs.select_options(inputs.to_subgoal).with_threshold(
+            None if self.threshold < 0 else self.threshold, self.threshold_scale)
         layer, estimate = all_subgoals_layer(inputs, delta=self.delta, c=self.c)
-        t2 = time.perf_counter()
         params = {"c": self.c, "threshold": self.threshold,
                   "threshold_scale": self.threshold_scale, "delta": self.delta}
-        return finish(knowledge_base, inputs, layer, estimator=self.name, trace=[estimate],
-                      steps=[], estimate=estimate, parameters=params, store=store,
-                      seconds={"inputs": t1 - t0, "construction": t2 - t1})
+        return layer_result(inputs, layer, estimator=self.name, trace=[estimate], steps=[],
+                            estimate=estimate, parameters=params,
+                            seconds={"construction": time.perf_counter() - t0})
 
 
 @hookimpl
