@@ -1,9 +1,10 @@
 """``adpart hierarchy``: build the decision layer for the next task from the tasks learned so far.
 
-A thin layer over :func:`adpart.hierarchy.build_hierarchy` (section 4.4, Algorithm 3): it parses
-the arguments, opens the knowledge base, stores the layer as a ``hierarchy`` partition and prints
-its blocks, the options it uses and the ``E[t_learn]`` trace (or JSON); ``--plot`` draws the
-layer on the domain's map and the trace beside it.
+A thin layer over :func:`adpart.workflows.hierarchy.build_hierarchy` (section 4.4, Algorithm 3),
+which loads the learned tasks, calls the estimator plugin on them and stores the layer it returns
+as a ``hierarchy`` partition: the command parses the arguments, opens the knowledge base and
+prints the layer's blocks, the options it uses and the ``E[t_learn]`` trace (or JSON); ``--plot``
+draws the layer on the domain's map and the trace beside it.
 """
 
 from __future__ import annotations

@@ -230,7 +230,7 @@ def prune_unused_options(partition: Partition, n_primitives: int) -> tuple[Parti
 
 def layer_result(
     inputs: HierarchyInputs, layer: Partition, *, estimator: str, trace: Sequence[float],
-    steps: Sequence[Step], estimate: float, parameters: Mapping[str, Any],
+    steps: Sequence[Step], estimate: float | None, parameters: Mapping[str, Any],
     seconds: Mapping[str, float], flat: float | None = None,
 ) -> HierarchyResult:
     """Wrap a layer over ``inputs``' columns as an estimator's (unstored) result.
@@ -244,7 +244,7 @@ def layer_result(
     pruned, used = prune_unused_options(layer, A)
     option_ids = [inputs.option_ids[int(i)] for i in used]
     names = inputs.action_names[:A] + [inputs.action_names[A + int(i)] for i in used]
-    fallback = flat is not None and flat <= estimate
+    fallback = flat is not None and estimate is not None and flat <= estimate
     return HierarchyResult(estimator, pruned, option_ids, names, list(trace), estimate,
                            list(steps), list(inputs.task_ids), None, dict(seconds),
                            dict(parameters), flat, fallback)
