@@ -34,6 +34,7 @@ from adpart.workflows import (
     write_learning_outputs,
 )
 from adpart.workflows.reports import folder_name
+from adpart.workflows.store import KnowledgeStore
 
 
 @click.command(name="learn", cls=plugin_options_command("learner"))
@@ -181,7 +182,7 @@ def learn_cmd(
         )
 
 
-def _check_stored(kb: Any, known: dict[str, Any]) -> None:
+def _check_stored(kb: KnowledgeStore, known: dict[str, Any]) -> None:
     """Refuse to report a damaged stored run as "already stored": say how to re-create it."""
     from adpart.store import StoreError
 

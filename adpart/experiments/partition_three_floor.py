@@ -35,13 +35,16 @@ there count as ``episodes + 1`` (censored, said in the findings).
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from adpart.experiments.base import ExperimentConfig, ExperimentReport, experiment
 from adpart.experiments.stats import compare, episodes_to_threshold
 from adpart.partition.settings import PartitionSettings
+
+if TYPE_CHECKING:
+    from adpart.workflows.store import KnowledgeStore
 
 ENV = "three-floor"
 SOURCE_TASK = "reach-goal"
@@ -57,7 +60,7 @@ def _settings(config: ExperimentConfig) -> dict[str, int]:
     return {"runs": config.runs, "episodes": 1500, "eval_every": 10, "horizon": 5000}
 
 
-def _store_options(kb: Any, env: Any, task_rec: Any, mdp: Any, states: np.ndarray,
+def _store_options(kb: KnowledgeStore, env: Any, task_rec: Any, mdp: Any, states: np.ndarray,
                    label: str) -> tuple[list[Any], list[Any], list[Any]]:
     """Options to ``states`` on ``mdp`` with exact models, stored (one record per option)."""
     from adpart.options.models import option_models

@@ -21,11 +21,14 @@ directly with the same settings.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from adpart.experiments.base import ExperimentConfig, ExperimentReport, experiment
+
+if TYPE_CHECKING:
+    from adpart.workflows.store import KnowledgeStore
 
 ENV = "urban"
 TASKS = ("navigate", "navigate-pickup", "navigate-2", "navigate-dropoff", "pickup-dropoff")
@@ -47,7 +50,7 @@ def _settings(config: ExperimentConfig) -> dict[str, Any]:
             "flat": {}, "hierarchical": {}}
 
 
-def _learn_on(kb: Any, ref: str, task: str, s: dict[str, Any], seed: int) -> Any:
+def _learn_on(kb: KnowledgeStore, ref: str, task: str, s: dict[str, Any], seed: int) -> Any:
     """Hierarchical learning of ``task`` on the stored layer ``ref`` (keeps the block counts)."""
     from adpart.partition import Partition
     from adpart.plugins import get_registry

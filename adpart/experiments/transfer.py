@@ -39,12 +39,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from adpart.experiments.base import ExperimentConfig, ExperimentReport, experiment
 from adpart.experiments.stats import compare
+
+if TYPE_CHECKING:
+    from adpart.workflows.store import KnowledgeStore
 
 DELTA = 0.3
 EPSILON = 10.0
@@ -98,7 +101,7 @@ def plot_blocks(blocks: dict[str, np.ndarray], path: Path, title: str) -> str:
     return str(path)
 
 
-def _stored_layer(kb: Any, pipe: Any) -> tuple[list[Any], list[Any], Any]:
+def _stored_layer(kb: KnowledgeStore, pipe: Any) -> tuple[list[Any], list[Any], Any]:
     """The options (with models) and the final partition the pipeline stored."""
     from adpart.partition import Partition
     from adpart.workflows.options import load_options

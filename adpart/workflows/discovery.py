@@ -12,6 +12,7 @@ from adpart.errors import TaskError
 from adpart.plugins import get_registry
 from adpart.subgoals.result import SubgoalResult
 from adpart.workflows.options import environment_and_mdp
+from adpart.workflows.store import KnowledgeStore
 
 
 @dataclass(frozen=True, eq=False)
@@ -25,7 +26,7 @@ class Discovery:
 
 
 def discover_subgoals(
-    kb: Any,
+    kb: KnowledgeStore,
     policy: Any,
     *,
     detector: str = "count-exhaustive",

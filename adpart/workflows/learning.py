@@ -21,6 +21,7 @@ from adpart.execution import Executor, SerialExecutor
 from adpart.learning.curves import LearningCurve
 from adpart.plugins import get_registry
 from adpart.workflows.resolve import resolve_domain
+from adpart.workflows.store import KnowledgeStore
 
 
 @dataclass(frozen=True)
@@ -195,7 +196,7 @@ def run_learning(
     *,
     executor: Executor | None = None,
     progress: Callable[[int, int], object] | None = None,
-    kb: Any = None,
+    kb: KnowledgeStore | None = None,
 ) -> LearnOutcome:
     """Validate ``request``, learn all its batches (on ``executor`` when there are several).
 
@@ -247,7 +248,7 @@ def run_learning(
     )
 
 
-def _decision_layer(kb: Any, request: LearnRequest) -> dict[str, Any]:
+def _decision_layer(kb: KnowledgeStore | None, request: LearnRequest) -> dict[str, Any]:
     """Options and partition named by ``request``, loaded from the knowledge base."""
     if request.options is None and request.partition is None:
         return {}
@@ -328,7 +329,7 @@ def write_learning_outputs(out: Path, outcome: LearnOutcome) -> dict[str, str]:
     return {name: str(out / name) for name in ("curve.parquet", "policy.parquet", "curve.png")}
 
 
-def record_learning(kb: Any, outcome: LearnOutcome) -> dict[str, Any]:
+def record_learning(kb: KnowledgeStore, outcome: LearnOutcome) -> dict[str, Any]:
     """Record environment, task, one policy per run and the run itself; return their ids.
 
     Everything is written in one knowledge-base transaction (``kb.transaction()``), so a kill
@@ -338,7 +339,7 @@ def record_learning(kb: Any, outcome: LearnOutcome) -> dict[str, Any]:
         return _record_learning(kb, outcome)
 
 
-def _record_learning(kb: Any, outcome: LearnOutcome) -> dict[str, Any]:
+def _record_learning(kb: KnowledgeStore, outcome: LearnOutcome) -> dict[str, Any]:
     request = outcome.request
     domain = resolve_domain(request.env)
     dyn = domain.dynamics()
@@ -437,7 +438,7 @@ def canonical_request(request: LearnRequest) -> dict[str, Any]:
     return json.loads(json.dumps(asdict(canonical), allow_nan=False))
 
 
-def find_learning(kb: Any, request: LearnRequest) -> dict[str, Any] | None:
+def find_learning(kb: KnowledgeStore, request: LearnRequest) -> dict[str, Any] | None:
     """The ids of a run already recorded for exactly ``request``, or None.
 
     Runs are matched on the request as recorded by :func:`record_learning` (environment, task,
@@ -465,7 +466,7 @@ def find_learning(kb: Any, request: LearnRequest) -> dict[str, Any] | None:
     return None
 
 
-def load_curve(kb: Any, run: Any) -> LearningCurve:
+def load_curve(kb: KnowledgeStore, run: Any) -> LearningCurve:
     """A stored run's learning curve, with ``v_star_start`` and the learner restored from the run.
 
     The knowledge base keeps a curve's columns; what is needed to read them (V* at the start

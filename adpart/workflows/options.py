@@ -26,6 +26,7 @@ from adpart.options.subgoal_options import (
     subgoal_options,
 )
 from adpart.workflows.resolve import resolve_domain
+from adpart.workflows.store import KnowledgeStore
 
 INITIATIONS = INITIATION_CHOICES
 
@@ -41,7 +42,7 @@ class StoredOptions:
 
 
 def environment_and_mdp(
-    kb: Any, environment_id: int, task_id: int | None
+    kb: KnowledgeStore, environment_id: int, task_id: int | None
 ) -> tuple[Any, Any, FiniteMDP]:
     """The environment record, its domain (checked against the stored dynamics) and the MDP."""
     env = kb.get("environment", environment_id)
@@ -58,14 +59,14 @@ def environment_and_mdp(
     return env, domain, domain.mdp(task_name)
 
 
-def source_task_id(kb: Any, subgoal_set: Any) -> int | None:
+def source_task_id(kb: KnowledgeStore, subgoal_set: Any) -> int | None:
     if subgoal_set.policy_id is None:
         return None
     return kb.get("policy", subgoal_set.policy_id).task_id
 
 
 def options_for_subgoals(
-    kb: Any,
+    kb: KnowledgeStore,
     subgoal_set: Any,
     *,
     initiation: str = "local",
@@ -125,7 +126,8 @@ def options_for_subgoals(
 
 
 def store_options(
-    kb: Any, env: Any, mdp: FiniteMDP, options: list[Option], models: list[OptionModel], *,
+    kb: KnowledgeStore, env: Any, mdp: FiniteMDP, options: list[Option],
+    models: list[OptionModel], *,
     plugin: str, parameters: Callable[[Option], dict[str, Any]],
     subgoal: Callable[[Option], int | None] = lambda option: None,
     name: Callable[[Option], str] = lambda option: option.name,
@@ -145,7 +147,7 @@ def store_options(
         ]
 
 
-def load_options(kb: Any, records: list[Any]) -> tuple[list[Option], list[OptionModel]]:
+def load_options(kb: KnowledgeStore, records: list[Any]) -> tuple[list[Option], list[OptionModel]]:
     """Options and their models back from their records (verified reads)."""
     options, models = [], []
     for rec in records:
@@ -190,7 +192,7 @@ class OptionSet:
         return [r.id for r in self.records]
 
 
-def resolve_option_set(kb: Any, text: str, environment_name: str) -> OptionSet:
+def resolve_option_set(kb: KnowledgeStore, text: str, environment_name: str) -> OptionSet:
     """Parse ``--options``: ``subgoal-set:N`` (its stored options), ``option:1,option:2``, or
     ``primitive`` (the environment's primitive actions as one-step options).
 

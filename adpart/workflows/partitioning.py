@@ -54,6 +54,7 @@ from adpart.partition.multiphase import Criterion
 from adpart.partition.settings import PartitionSettings
 from adpart.workflows.options import OptionSet, resolve_option_set
 from adpart.workflows.resolve import resolve_domain
+from adpart.workflows.store import KnowledgeStore
 
 PLUGIN = "adpart.partition"
 
@@ -204,7 +205,7 @@ def build_criterion(name: str, params: dict[str, Any] | None, settings: Partitio
         (k, v) for k, v in values.items()))}
 
 
-def environment_record(kb: Any, env_name: str) -> tuple[Any, Any]:
+def environment_record(kb: KnowledgeStore, env_name: str) -> tuple[Any, Any]:
     """The domain and its get-or-put environment record (keyed by the dynamics' hash)."""
     domain = resolve_domain(env_name)
     dyn = domain.dynamics()
@@ -218,7 +219,7 @@ def environment_record(kb: Any, env_name: str) -> tuple[Any, Any]:
     return domain, env
 
 
-def task_record(kb: Any, domain: Any, env: Any, task: str) -> tuple[Any, FiniteMDP, Any]:
+def task_record(kb: KnowledgeStore, domain: Any, env: Any, task: str) -> tuple[Any, FiniteMDP, Any]:
     """The task, its MDP and its get-or-put record (the same record ``adpart learn`` makes)."""
     task_obj = domain.task(task)
     task_mdp = domain.mdp(task_obj)
@@ -238,7 +239,7 @@ def _source_task(records: list[Any]) -> int | None:
 
 
 def _base_model(
-    kb: Any, domain: Any, env_name: str, options_text: str, task_mdp: FiniteMDP | None
+    kb: KnowledgeStore, domain: Any, env_name: str, options_text: str, task_mdp: FiniteMDP | None
 ) -> _Base:
     """Phases 1-2 work on the stored option models (primitives: the task's own MDP)."""
     option_set = resolve_option_set(kb, options_text, env_name)
@@ -281,7 +282,7 @@ def _mask_key(column: np.ndarray) -> str:
     return hashlib.sha256(np.ascontiguousarray(column, dtype=bool).tobytes()).hexdigest()
 
 
-def _find_phase1(kb: Any, env: Any, base: _Base, column: int, delta: float,
+def _find_phase1(kb: KnowledgeStore, env: Any, base: _Base, column: int, delta: float,
                  key: dict[str, Any], admissible: np.ndarray) -> Any | None:
     """A stored per-option partition of this column with this delta and model ``key``, or None.
 
@@ -316,7 +317,7 @@ def _same_key(parameters: dict[str, Any], key: dict[str, Any]) -> bool:
 
 
 def _find_later_phase(
-    kb: Any,
+    kb: KnowledgeStore,
     env: Any,
     base: _Base,
     kind: str,
@@ -349,7 +350,7 @@ def _find_later_phase(
 
 
 def _store(
-    kb: Any,
+    kb: KnowledgeStore,
     env: Any,
     base: _Base,
     kind: str,
@@ -390,7 +391,7 @@ def _store(
 
 
 def _later_phase(
-    kb: Any, env: Any, base: _Base, mp: MultiPhasePartitioner, kind: str,
+    kb: KnowledgeStore, env: Any, base: _Base, mp: MultiPhasePartitioner, kind: str,
     compute: Callable[[], Partition], columns: np.ndarray, *, parents: list[int], delta: float,
     epsilon: float, task: Any = None, key: dict[str, Any],
     parameters: Callable[[Partition], dict[str, Any]],
@@ -413,7 +414,7 @@ def _later_phase(
 
 
 def _phase1_all(
-    kb: Any, env: Any, base: _Base, mp: MultiPhasePartitioner, key: dict[str, Any]
+    kb: KnowledgeStore, env: Any, base: _Base, mp: MultiPhasePartitioner, key: dict[str, Any]
 ) -> tuple[dict[int, Partition], list[PhaseRecord], float]:
     """Phase 1 of every column on ``mp``'s model: loaded when stored, else computed and stored."""
     smdp = mp.layer_model
@@ -503,7 +504,7 @@ def _start_states(mdp: FiniteMDP) -> np.ndarray:
 
 
 def partition_environment(
-    kb: Any,
+    kb: KnowledgeStore,
     env_name: str,
     options: str,
     settings: PartitionSettings,

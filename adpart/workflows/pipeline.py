@@ -58,6 +58,7 @@ from adpart.workflows.options import options_for_subgoals
 from adpart.workflows.partitioning import DEFAULT_CRITERION, partition_environment
 from adpart.workflows.pipeline_figures import write_figures
 from adpart.workflows.refs import parse_ref
+from adpart.workflows.store import KnowledgeStore
 
 #: The hierarchical learner's mode in the pipeline (module docstring; docs/pipeline.md).
 DEFAULT_MODE = "reward-variation+inconsistency"
@@ -157,7 +158,8 @@ class PipelineReport:
         }
 
 
-def _learn(kb: Any, request: LearnRequest, report: PipelineReport, stage: str) -> tuple[dict, Any]:
+def _learn(kb: KnowledgeStore, request: LearnRequest, report: PipelineReport, stage: str
+           ) -> tuple[dict, Any]:
     start = time.perf_counter()
     ids = find_learning(kb, request)
     reused = ids is not None
@@ -174,8 +176,8 @@ def _learn(kb: Any, request: LearnRequest, report: PipelineReport, stage: str) -
 # --------------------------------------------------------------------------- hierarchy layers
 
 
-def _task_layer(kb: Any, config: PipelineConfig, subgoal_ref: str, task: str, learned: list[int],
-                option_ids: list[int], report: PipelineReport,
+def _task_layer(kb: KnowledgeStore, config: PipelineConfig, subgoal_ref: str, task: str,
+                learned: list[int], option_ids: list[int], report: PipelineReport,
                 say: Callable[[str], object]) -> Layer:
     """The layer ``task`` starts from: the multi-phase partition, or with ``config.hierarchy``
     the layer that estimator builds from the tasks ``learned`` before it (stage ``hierarchy``)."""
@@ -194,7 +196,7 @@ def _task_layer(kb: Any, config: PipelineConfig, subgoal_ref: str, task: str, le
     return layer
 
 
-def _partition_layer(kb: Any, config: PipelineConfig, subgoal_ref: str, task: str,
+def _partition_layer(kb: KnowledgeStore, config: PipelineConfig, subgoal_ref: str, task: str,
                      report: PipelineReport) -> Layer:
     """The multi-phase partition over the subgoal options for ``task`` (phases 1-3)."""
     part = partition_environment(
@@ -257,7 +259,7 @@ def learner_defaults(learner: str, defaults: dict[str, Any]) -> dict[str, Any]:
     return {k: v for k, v in defaults.items() if k in declared}
 
 
-def predict_fallback(kb: Any, env: str, task_ids: list[int], params: dict[str, Any]
+def predict_fallback(kb: KnowledgeStore, env: str, task_ids: list[int], params: dict[str, Any]
                      ) -> dict[str, Any]:
     """Whether the knowledge base predicts that abstraction will not pay for the next task.
 
@@ -274,7 +276,7 @@ def predict_fallback(kb: Any, env: str, task_ids: list[int], params: dict[str, A
 
 
 def run_pipeline(
-    kb: Any,
+    kb: KnowledgeStore,
     config: PipelineConfig,
     *,
     out: Path | None = None,

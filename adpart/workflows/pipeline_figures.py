@@ -16,9 +16,10 @@ from adpart.workflows.reports import folder_name
 
 if TYPE_CHECKING:
     from adpart.workflows.pipeline import PipelineConfig, PipelineReport
+    from adpart.workflows.store import KnowledgeStore
 
 
-def _maps(kb: Any, report: PipelineReport, config: PipelineConfig, out: Path) -> None:
+def _maps(kb: KnowledgeStore, report: PipelineReport, config: PipelineConfig, out: Path) -> None:
     """The subgoals found and every decision layer used, drawn on the map (Figs. 4.2, 4.5)."""
     from adpart.errors import ModelError
     from adpart.workflows.resolve import resolve_domain
@@ -50,7 +51,7 @@ def _maps(kb: Any, report: PipelineReport, config: PipelineConfig, out: Path) ->
         return  # a domain without a map (x, y features): nothing to draw
 
 
-def _draw_own_layer(kb: Any, report: PipelineReport, config: PipelineConfig, domain: Any,
+def _draw_own_layer(kb: KnowledgeStore, report: PipelineReport, config: PipelineConfig, domain: Any,
                     task: str, out: Path) -> Path:
     """The layer a reward-variation mode learns on: the multi-phase partition over the
     discovered options plus the options to ``task``'s reward states (the learner's own call)."""
@@ -72,7 +73,7 @@ def _draw_own_layer(kb: Any, report: PipelineReport, config: PipelineConfig, dom
     return path
 
 
-def write_figures(kb: Any, report: PipelineReport, config: PipelineConfig,
+def write_figures(kb: KnowledgeStore, report: PipelineReport, config: PipelineConfig,
                   out: Path | None) -> None:
     """One value-gap figure per task (every learner, the success bound) and the maps, in ``out``."""
     if out is not None:

@@ -6,6 +6,7 @@ import re
 from typing import Any
 
 from adpart.errors import AdpartError
+from adpart.workflows.store import KnowledgeStore
 
 _REF = re.compile(r"^(?:(?P<kind>[a-z][a-z-]*):)?(?P<id>[0-9]{1,18})$")
 
@@ -25,6 +26,6 @@ def parse_ref(text: str, kind: str) -> int:
     return int(match.group("id"))
 
 
-def get_ref(kb: Any, text: str, kind: str) -> Any:
+def get_ref(kb: KnowledgeStore, text: str, kind: str) -> Any:
     """The record of ``kind`` that ``text`` names (raises a StoreError when it does not exist)."""
     return kb.get(kind, parse_ref(text, kind))

@@ -48,6 +48,7 @@ from adpart.learning.curves import LearningCurve
 from adpart.plugins import PluginError, get_registry
 from adpart.workflows.learning import LearnOutcome, LearnRequest, record_learning, run_learning
 from adpart.workflows.resolve import resolve_domain
+from adpart.workflows.store import KnowledgeStore
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -307,7 +308,7 @@ def _resolve_tasks(env: EnvironmentSpec, key: str, src: str) -> tuple[str, ...]:
     return env.tasks
 
 
-def done_cells(kb: Any) -> dict[str, int]:
+def done_cells(kb: KnowledgeStore) -> dict[str, int]:
     """Cell key -> run id of every run in ``kb`` whose request is a sweep cell's.
 
     The key is read from ``parameters["sweep_cell"]``, or recomputed from the stored request.
@@ -461,7 +462,7 @@ def stream(
 
 def run_sweep(
     cells: Sequence[Cell],
-    kb: Any,
+    kb: KnowledgeStore,
     executor: Executor | None = None,
     *,
     progress: Progress | None = None,
@@ -514,7 +515,7 @@ def run_sweep(
     return SweepReport(ordered, time.perf_counter() - start)
 
 
-def _store(kb: Any, cell: Cell, data: Mapping[str, Any]) -> CellResult:
+def _store(kb: KnowledgeStore, cell: Cell, data: Mapping[str, Any]) -> CellResult:
     seconds = data.get("seconds")
     if "error" in data:
         return CellResult(cell, "failed", seconds=seconds, error=data["error"])
@@ -530,7 +531,7 @@ def _store(kb: Any, cell: Cell, data: Mapping[str, Any]) -> CellResult:
     )
 
 
-def preview(cells: Sequence[Cell], kb: Any) -> SweepReport:
+def preview(cells: Sequence[Cell], kb: KnowledgeStore | None) -> SweepReport:
     """The dry run: which cells are stored already (``skipped``) and which would run.
 
     ``kb`` None stands for a knowledge base that does not exist yet: every cell would run.
