@@ -118,12 +118,13 @@ class _Bounds:
     none: str | None = None
     check: Callable[[Any], Any] | None = None
     cli: bool = True
+    finite: bool = True
 
 
 def setting(default: Any, *, kind: str | None = None, min: float | None = None,
             max: float | None = None, choices: Sequence[str] | None = None,
             none: str | None = None, check: Callable[[Any], Any] | None = None,
-            cli: bool = True) -> Any:
+            cli: bool = True, finite: bool = True) -> Any:
     """A field of a :func:`settings` class: its default and how a value is checked.
 
     The field's help is the string literal written right below it in the class body (its
@@ -141,6 +142,8 @@ def setting(default: Any, *, kind: str | None = None, min: float | None = None,
             schedule's spelling).
         cli: False keeps the field out of the command line and the plugin parameters (a
             setting only Python callers give, such as an array).
+        finite: False lets Python callers give ``inf`` (e.g. a threshold that never fires);
+            the command line still takes finite numbers only.
     """
     if kind is None:
         if default is None:
@@ -150,7 +153,7 @@ def setting(default: Any, *, kind: str | None = None, min: float | None = None,
     if default is None and none is None and cli:
         raise TypeError("a setting whose default is None needs none= (its command-line word)")
     bounds = _Bounds(kind, min, max, tuple(choices) if choices is not None else None, none,
-                     check, cli)
+                     check, cli, finite)
     return field(default=default, metadata={_SETTING: bounds})
 
 
@@ -181,7 +184,7 @@ class SettingField:
 
         b = self.bounds
         if value is None:
-            if self.default is None:
+            if self.default is None or b.none is not None:
                 return None
             raise TaskError(f"{self.owner}: {self.name} = None; give a {b.kind}")
         if b.kind == "bool":
@@ -195,7 +198,7 @@ class SettingField:
                 raise TaskError(f"{self.owner}: {self.name} = {value!r} must be "
                                 f"{'an integer' if b.kind == 'int' else 'a number'}")
             value = int(value) if b.kind == "int" else float(value)
-            if not math.isfinite(value):
+            if math.isnan(value) or (b.finite and math.isinf(value)):
                 raise TaskError(f"{self.owner}: {self.name} = {value!r} must be finite")
             low = b.min if b.min is not None else -math.inf
             high = b.max if b.max is not None else math.inf

@@ -27,6 +27,7 @@ from adpart.envs.base import Domain
 from adpart.errors import AdpartError, ModelError
 from adpart.execution import Executor
 from adpart.hierarchy.layers import HierarchyInputs, HierarchyResult
+from adpart.hierarchy.settings import EstimateSettings
 from adpart.hierarchy.tasks import task_from_model
 from adpart.learning.curves import LearningCurve, start_distribution
 from adpart.learning.result import LearnResult
@@ -248,7 +249,8 @@ def estimator_inputs(env: str = ESTIMATOR_ENV) -> HierarchyInputs:
     inputs = HierarchyInputs.from_tasks(
         first, tasks, options, environment=env, task_ids=range(101, 101 + len(tasks)),
         option_ids=range(201, 201 + len(options)))
-    return inputs.with_threshold()
+    default = EstimateSettings()
+    return inputs.with_threshold(default.threshold, default.threshold_scale)
 
 
 def _fingerprint(inputs: HierarchyInputs) -> list[Any]:

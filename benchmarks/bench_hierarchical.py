@@ -28,17 +28,17 @@ Run with ``python -m benchmarks hierarchical``.
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 
 from adpart.envs.registry import get_domain
 from adpart.learning.decision_layer import reward_options
-from adpart.learning.hierarchical import (
-    REWARD_OPTION_MODES,
-    decision_layer,
-    hierarchical_learning,
-)
+from adpart.learning.hierarchical import decision_layer, hierarchical_learning
+from adpart.learning.hierarchical_settings import HierarchicalSettings
+from adpart.learning.settings import Run
 from adpart.options import option_models, subgoal_options
+from adpart.params import build_settings
 
 RUNS, EPISODES, REPEATS = 20, 300, 5
 DOORWAYS = [187, 545, 843, 1262, 1495, 2146, 2508, 2846]
@@ -73,22 +73,25 @@ def measure(mdp, opts, models, part, rules: dict[str, dict], *, runs: int = RUNS
     on the shared machine then hits every rule of a round alike), with its counts."""
     calls = {}
     for name, rule in rules.items():
-        kw = dict(models=models, delta=0.3, epsilon=10.0, runs=runs, episodes=episodes, seed=0,
-                  eval_every=50, alpha=1.0, max_steps_per_episode=5800, **rule)
+        settings = build_settings(HierarchicalSettings,
+                                  {"delta": 0.3, "partition_epsilon": 10.0, **rule})
+        run = Run(runs=runs, episodes=episodes, seed=0, eval_every=50, alpha=1.0,
+                  max_steps_per_episode=5800)
         # the reward-variation modes build their own layer, inside the call as the pipeline runs it
-        layer = None if rule.get("mode") in REWARD_OPTION_MODES else part
-        hierarchical_learning(mdp, opts, layer, **dict(kw, runs=1, episodes=2))  # compile
-        calls[name] = (layer, kw)
+        layer = None if settings.reward_options else part
+        hierarchical_learning(mdp, opts, layer, settings,  # compile
+                              replace(run, runs=1, episodes=2), models)
+        calls[name] = (layer, settings, run)
     times: dict[str, list[float]] = {name: [] for name in rules}
     results = {}
     for _ in range(REPEATS):
-        for name, (layer, kw) in calls.items():
+        for name, (layer, settings, run) in calls.items():
             t0 = time.perf_counter()
-            results[name] = hierarchical_learning(mdp, opts, layer, **kw)
+            results[name] = hierarchical_learning(mdp, opts, layer, settings, run, models)
             times[name].append(time.perf_counter() - t0)
     build = _layer_seconds(mdp, opts, models)
     rows = {}
-    for name, (layer, _) in calls.items():
+    for name, (layer, _, _) in calls.items():
         res = results[name]
         own = build if layer is None else 0.0  # taken out: the other rules get theirs ready-made
         learn = np.asarray(times[name]) - own

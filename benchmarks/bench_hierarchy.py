@@ -33,7 +33,8 @@ from adpart.hierarchy import (
     greedy_hierarchy,
     option_values,
 )
-from adpart.hierarchy.layers import DEFAULT_DELTA, stable_option_splits
+from adpart.hierarchy.layers import stable_option_splits
+from adpart.hierarchy.settings import EstimateSettings
 from adpart.mdp.solvers import q_from_v, solve
 from adpart.options import subgoal_options
 
@@ -96,7 +97,7 @@ def main(task_counts: tuple[int, ...] = (1, 5, 10, 20),
         cols = [*range(A), A + k]
         t = time.perf_counter()
         one = stable_option_splits(first, [opt], adm_all[:, cols], term_all[:, cols],
-                                   delta=DEFAULT_DELTA)
+                                   delta=EstimateSettings().delta)
         split_s[k] = time.perf_counter() - t
         splits[:A], splits[A + k] = one[:A], one[A]
     print(f"{'tasks':>5} {'options':>7} {'inputs s':>9} {'splits s':>9} {'greedy s':>9} "
@@ -111,10 +112,10 @@ def main(task_counts: tuple[int, ...] = (1, 5, 10, 20),
             adm = adm_all[:, :K]
             inputs_s = float(sum(occ_s[:T]) + sum(opt_s[i][:n_opt].sum() for i in range(T)))
             t = time.perf_counter()
-            res = greedy_hierarchy(tasks, adm, splits=splits[:K], n_primitives=A)
+            res = greedy_hierarchy(tasks, adm, splits=splits[:K], n_primitives=A, c=1.0)
             greedy_s = time.perf_counter() - t
             t = time.perf_counter()
-            expected_time(tasks, res.partition, n_primitives=A)
+            expected_time(tasks, res.partition, n_primitives=A, c=1.0)
             one = time.perf_counter() - t
             naive = one * res.candidates_evaluated
             row = {"tasks": T, "options": n_opt, "inputs_s": inputs_s,

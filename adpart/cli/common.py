@@ -131,12 +131,8 @@ def _plugin_options(reg: Registry, kind: str) -> list[click.Option]:
             declared.setdefault(p.name, []).append((spec.name, p))
     options = []
     for name, owners in declared.items():
-        types = {p.type for _, p in owners}
-        choices = {p.choices for _, p in owners}
-        if len(choices) == 1 and None not in choices:
-            metavar = "[" + "|".join(next(iter(choices))) + "]"
-        else:
-            metavar = _METAVARS.get(types.pop(), "TEXT") if len(types) == 1 else "TEXT"
+        metavars = {_setting_metavar(p) for _, p in owners}
+        metavar = metavars.pop() if len(metavars) == 1 else "TEXT"
         by_default: dict[str, list[str]] = {}
         for plugin, p in owners:
             shown = p.none if p.default is None and p.none is not None else p.default
@@ -277,8 +273,9 @@ class _SettingType(click.ParamType):
 
 
 def _setting_metavar(p: Param) -> str:
+    """``[a|b|auto]`` for choices, ``FLOAT|auto`` for a number that may be left to a rule."""
     if p.choices is not None:
-        return "[" + "|".join(p.choices) + "]"
+        return "[" + "|".join((*p.choices, p.none) if p.none else p.choices) + "]"
     base = _METAVARS.get(p.type, "TEXT")
     return f"{base}|{p.none}" if p.none is not None else base
 

@@ -52,6 +52,9 @@ def three_floor_arm_planned(config: ExperimentConfig) -> ExperimentReport:
     """navigate -> deliver; the stored layer learned without and with refinement (module doc)."""
     from adpart.learning.curves import plot_curves
     from adpart.learning.hierarchical import hierarchical_learning
+    from adpart.learning.hierarchical_settings import HierarchicalSettings
+    from adpart.learning.settings import Run
+    from adpart.params import build_settings
 
     b = budget(config, {"runs": config.runs, "first": 1500, "episodes": 2500, "horizon": 2000,
                          "known": PLANNED_KNOWN, "eval": 50},
@@ -70,14 +73,16 @@ def three_floor_arm_planned(config: ExperimentConfig) -> ExperimentReport:
     ]
     ctx = pipeline_layer(config, setup, report)
     mdp, pipe = ctx["mdp"], ctx["pipe"]
-    kw = {"models": ctx["models"], "delta": DELTA, "epsilon": EPSILON, **ctx["common"],
-          "explore_known": b["known"], "reference": "policy", "intra_option": True,
-          "refine": "block", "layer_values": "planned", "split_offered": True}
+    kw = {"delta": DELTA, "partition_epsilon": EPSILON, "explore_known": b["known"],
+          "reference": "policy", "intra_option": True, "refine": "block",
+          "layer_values": "planned", "split_offered": True}
+    run = Run(**ctx["common"])
     results = {}
     for label, threshold in zip(LEARNERS, (np.inf, None), strict=True):
         config.progress(f"three-floor-arm/deliver: {label}")
-        results[label] = hierarchical_learning(mdp, ctx["options"], ctx["partition"],
-                                               threshold=threshold, **kw)
+        settings = build_settings(HierarchicalSettings, {**kw, "threshold": threshold})
+        results[label] = hierarchical_learning(mdp, ctx["options"], ctx["partition"], settings,
+                                               run, ctx["models"])
     flat_label = next(k for k in pipe.curves[setup.new] if k.startswith("flat"))
     curves = {"flat Q": pipe.curves[setup.new][flat_label],
               **{label: r.curve for label, r in results.items()}}

@@ -239,11 +239,14 @@ def _parr(config: ExperimentConfig, *, mini: bool) -> ExperimentReport:
         flat_lower_bound,
         hierarchical_learning,
     )
+    from adpart.learning.hierarchical_settings import HierarchicalSettings
     from adpart.learning.maxq import get_graph, recursively_optimal
     from adpart.learning.qlearning import q_learning
+    from adpart.learning.settings import Run
     from adpart.learning.smdp_q import option_set, smdp_q_learning
     from adpart.options.models import option_models
     from adpart.options.subgoal_options import subgoal_options
+    from adpart.params import build_settings
     from adpart.subgoals import discover_monte_carlo
 
     out = Path(config.out)
@@ -325,9 +328,12 @@ def _parr(config: ExperimentConfig, *, mini: bool) -> ExperimentReport:
     config.progress("maze task: hierarchical learner on the multi-phase partition")
     layer, _full, layer_smdp = decision_layer(mdp, layer_options, delta=0.3, epsilon=10.0,
                                               models=layer_models)
-    hier = hierarchical_learning(mdp, layer_options, layer, models=layer_models, delta=0.3,
-                                 epsilon=10.0, epsilon_greedy=EPSILON, q_init=from_below,
-                                 primitive_exploration=LAYER_PRIMITIVE_EXPLORATION, **common)
+    hier = hierarchical_learning(
+        mdp, layer_options, layer,
+        build_settings(HierarchicalSettings, {
+            "delta": 0.3, "partition_epsilon": 10.0,
+            "primitive_exploration": LAYER_PRIMITIVE_EXPLORATION}),
+        Run(epsilon=EPSILON, q_init=from_below, **common), layer_models)
     config.progress("maze task: MAXQ-Q (hierarchical greedy rollouts)")
     g = get_graph("parr-maze").compile(mdp)
     m_steps, m_gaps, m_ev, m_done = _maxq_parr(mdp, g, s, config.seed, v_star)

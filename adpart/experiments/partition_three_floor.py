@@ -111,7 +111,9 @@ def _plot_curves(curves: dict[str, Any], column: str, path: Path, ylabel: str, t
 def _learn(mdp: Any, options: list[Any], models: list[Any], partition: Any, s: dict[str, int],
            seed: int, which: tuple[str, ...]) -> dict[str, Any]:
     from adpart.learning.hierarchical import hierarchical_learning
+    from adpart.learning.hierarchical_settings import HierarchicalSettings, Refinement
     from adpart.learning.qlearning import q_learning
+    from adpart.learning.settings import Run
     from adpart.learning.smdp_q import smdp_q_learning
 
     common = {"runs": s["runs"], "episodes": s["episodes"], "seed": seed,
@@ -123,7 +125,9 @@ def _learn(mdp: Any, options: list[Any], models: list[Any], partition: Any, s: d
         out["SMDP Q (options)"] = smdp_q_learning(mdp, options, models=models, **common)
     if "hier" in which:
         out["partition space"] = hierarchical_learning(
-            mdp, options, partition, models=models, delta=DELTA, epsilon=EPSILON, **common)
+            mdp, options, partition,
+            HierarchicalSettings(refinement=Refinement(delta=DELTA, partition_epsilon=EPSILON)),
+            Run(**common), models)
     return out
 
 

@@ -45,12 +45,18 @@ import numpy as np
 
 from adpart.experiments.base import ExperimentConfig, ExperimentReport, experiment
 from adpart.experiments.stats import compare
+from adpart.learning.hierarchical_settings import HierarchicalSettings
+from adpart.learning.settings import Run
+from adpart.params import build_settings
+from adpart.partition.settings import PartitionSettings
 
 if TYPE_CHECKING:
     from adpart.workflows.store import KnowledgeStore
 
-DELTA = 0.3
-EPSILON = 10.0
+#: The pipeline's partition (the package's defaults, section 5.1.2), and the thresholds the
+#: hierarchical learner refines the stored layer with: the same.
+PARTITION = PartitionSettings()
+DELTA, EPSILON = PARTITION.delta, PARTITION.reward_epsilon
 GAP_FRACTION = 0.05
 #: urban's first task. ``navigate`` is the seed's, but flat Q-learning never reaches its goal in
 #: 1,000 episodes here (the value gap stays at that of never arriving), so its learned policy has
@@ -72,6 +78,13 @@ class TransferSetup:
     horizon: int
     alpha: str
     eval_every: int = 10
+
+
+def layer_settings(**values: Any) -> HierarchicalSettings:
+    """The hierarchical learner's settings on the stored layer: refinement with the layer's own
+    thresholds (:data:`PARTITION`) and the flat ``values`` given."""
+    return build_settings(HierarchicalSettings, {"delta": DELTA, "partition_epsilon": EPSILON,
+                                                 **values})
 
 
 def curve_rows(task: str, curves: dict[str, Any]
@@ -142,7 +155,7 @@ def pipeline_layer(config: ExperimentConfig, setup: TransferSetup, report: Exper
     learner = {"alpha": s.alpha, "max-steps": s.horizon}
     pconfig = PipelineConfig(
         env=s.env, tasks=(s.first, s.new), detector=s.detector,
-        detector_params={"on_loop": "truncate"}, delta=DELTA, epsilon=EPSILON, runs=s.runs,
+        detector_params={"on_loop": "truncate"}, partition=PARTITION, runs=s.runs,
         episodes=s.episodes, first_episodes=s.first_episodes, seed=config.seed,
         eval_every=s.eval_every, flat_params=learner,
         hierarchical_params={**learner, "mode": "inconsistency", "delta": DELTA,
@@ -174,23 +187,23 @@ def _transfer(config: ExperimentConfig, setup: TransferSetup, report: Experiment
     s = setup
     ctx = pipeline_layer(config, setup, report)
     pipe, mdp, options, models = ctx["pipe"], ctx["mdp"], ctx["options"], ctx["models"]
-    partition, common = ctx["partition"], ctx["common"]
-    hier = {"models": models, "delta": DELTA, "epsilon": EPSILON, **common}
+    partition, run = ctx["partition"], Run(**ctx["common"])
     results: dict[str, Any] = {}
     config.progress(f"{s.env}/{s.new}: partition space without refinement")
-    results["no refinement"] = hierarchical_learning(mdp, options, partition, threshold=np.inf,
-                                                     **hier)
+    results["no refinement"] = hierarchical_learning(
+        mdp, options, partition, layer_settings(threshold=np.inf), run, models)
     config.progress(f"{s.env}/{s.new}: partition space with refinement")
-    results["refinement"] = hierarchical_learning(mdp, options, partition, **hier)
+    results["refinement"] = hierarchical_learning(mdp, options, partition, layer_settings(),
+                                                  run, models)
     config.progress(f"{s.env}/{s.new}: reward variation")
-    results["reward variation"] = hierarchical_learning(mdp, options, mode="reward-variation",
-                                                        **hier)
+    results["reward variation"] = hierarchical_learning(
+        mdp, options, None, layer_settings(mode="reward-variation"), run, models)
     flat_label = next(k for k in pipe.curves[s.new] if k.startswith("flat"))
     curves = {"flat Q": pipe.curves[s.new][flat_label],
               **{f"partition, {k}": r.curve for k, r in results.items()}}
     return {"pipe": pipe, "mdp": mdp, "options": options, "models": models,
             "partition": partition, "results": results, "curves": curves,
-            "common": common, "plot_curves": plot_curves}
+            "common": ctx["common"], "plot_curves": plot_curves}
 
 
 def _finish(config: ExperimentConfig, setup: TransferSetup, report: ExperimentReport,
@@ -328,9 +341,10 @@ def three_floor(config: ExperimentConfig) -> ExperimentReport:
     hand = doorway_options(mdp)
     hand_models = option_models(mdp, hand, duration=False)
     hand_part, _, _ = decision_layer(mdp, hand, delta=DELTA, epsilon=EPSILON, models=hand_models)
-    hier = {"models": hand_models, "delta": DELTA, "epsilon": EPSILON, **common}
-    hand_ref = hierarchical_learning(mdp, hand, hand_part, **hier)
-    hand_rv = hierarchical_learning(mdp, hand, mode="reward-variation", **hier)
+    run = Run(**common)
+    hand_ref = hierarchical_learning(mdp, hand, hand_part, layer_settings(), run, hand_models)
+    hand_rv = hierarchical_learning(mdp, hand, None, layer_settings(mode="reward-variation"),
+                                    run, hand_models)
     ctx["curves"]["SMDP Q (discovered + primitives)"] = smdp.curve
     ctx["curves"]["hand-designed, refinement"] = hand_ref.curve
     ctx["curves"]["hand-designed, reward variation"] = hand_rv.curve
@@ -390,13 +404,13 @@ def _directed(config: ExperimentConfig, ctx: dict[str, Any]) -> None:
     grounded model values against what the layer offers (module docstring)."""
     from adpart.learning.hierarchical import hierarchical_learning
 
-    kw = {"models": ctx["models"], "delta": DELTA, "epsilon": EPSILON, **ctx["common"],
-          "explore_known": ARM_KNOWN, "reference": "offered", "intra_option": True,
+    kw = {"explore_known": ARM_KNOWN, "reference": "offered", "intra_option": True,
           "refine": "block"}
     for label, threshold in zip(DIRECTED, (np.inf, None), strict=True):
         config.progress(f"three-floor-arm/deliver: {label}")
         result = hierarchical_learning(ctx["mdp"], ctx["options"], ctx["partition"],
-                                       threshold=threshold, **kw)
+                                       layer_settings(threshold=threshold, **kw),
+                                       Run(**ctx["common"]), ctx["models"])
         ctx["results"][label.removeprefix("partition, ")] = result
         ctx["curves"][label] = result.curve
 

@@ -91,13 +91,13 @@ def check_tasks(tasks: Sequence[LearnedTask], n_states: int, n_columns: int) -> 
     return w / w.sum()
 
 
-def t_conv(partition: Partition, c: float = 1.0) -> float:
+def t_conv(partition: Partition, c: float) -> float:
     """``c |P| sum_B max(1, |O_B|)`` (``= c |P|^2 |O|`` for uniform option sets)."""
     per_block = np.maximum(partition.admissible.sum(axis=1), 1)
     return float(c * partition.n_blocks * per_block.sum())
 
 
-def flat_time(primitive_admissible: np.ndarray, c: float = 1.0) -> float:
+def flat_time(primitive_admissible: np.ndarray, c: float) -> float:
     """``E[t_learn | flat] = c S sum_s max(1, |A(s)|)``: the flat MDP needs no refinement."""
     adm = np.asarray(primitive_admissible, dtype=bool)
     if adm.ndim != 2:
@@ -153,7 +153,7 @@ def committed_columns(values: np.ndarray, offered: np.ndarray) -> np.ndarray:
 
 
 def expected_time(
-    tasks: Sequence[LearnedTask], partition: Partition, *, n_primitives: int, c: float = 1.0
+    tasks: Sequence[LearnedTask], partition: Partition, *, n_primitives: int, c: float
 ) -> Estimate:
     """``E[t_learn | P]`` of ``partition`` (blocks and per-block columns) over ``tasks``.
 

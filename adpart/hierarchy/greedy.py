@@ -262,7 +262,7 @@ def greedy_hierarchy(
     *,
     n_primitives: int,
     splits: np.ndarray | None = None,
-    c: float = 1.0,
+    c: float,
     max_steps: int | None = None,
     rtol: float = DEFAULT_RTOL,
 ) -> GreedyResult:

@@ -31,11 +31,6 @@ from adpart.mdp.model import FiniteMDP
 from adpart.options.option import Option
 from adpart.partition.partition import Partition, block_all
 
-#: Default estimator threshold L as a fraction of each task's value range (module docstring).
-DEFAULT_THRESHOLD_SCALE = 0.01
-#: Default delta of eq. 4.6 for both layers: the all-subgoals partition and Algorithm 3's splits.
-DEFAULT_DELTA = 0.3
-
 
 @dataclass(frozen=True, eq=False)
 class HierarchyInputs:
@@ -119,8 +114,7 @@ class HierarchyInputs:
             policy_ids=list(policy_ids), parent_ids=list(parent_ids),
         )
 
-    def with_threshold(self, threshold: float | None = None,
-                       threshold_scale: float = DEFAULT_THRESHOLD_SCALE) -> HierarchyInputs:
+    def with_threshold(self, threshold: float | None, threshold_scale: float) -> HierarchyInputs:
         """The same inputs with every task's margin ``L = threshold``, or, with None,
         ``threshold_scale`` times the task's value range (:meth:`LearnedTask.value_range`)."""
         A = self.mdp.n_actions
@@ -290,8 +284,7 @@ def _option_partitioner(mdp: FiniteMDP, options: Sequence[Option], termination: 
 
 
 def expected_time_layer(
-    inputs: HierarchyInputs, *, delta: float | None = DEFAULT_DELTA, c: float = 1.0,
-    max_steps: int | None = None,
+    inputs: HierarchyInputs, *, delta: float | None, c: float, max_steps: int | None = None,
 ) -> tuple[Partition, list[float], list[Step], float]:
     """Algorithm 3 over ``inputs``; returns ``(filled layer, trace, steps, its estimate)``.
 
@@ -311,13 +304,13 @@ def expected_time_layer(
     return filled, result.trace, result.steps, est
 
 
-def flat_estimate(inputs: HierarchyInputs, *, c: float = 1.0) -> float:
+def flat_estimate(inputs: HierarchyInputs, *, c: float) -> float:
     """``E[t_learn | flat]`` over the inputs' primitive actions (the "no abstraction" layer)."""
     return flat_time(inputs.admissible[:, :inputs.mdp.n_actions], c)
 
 
 def all_subgoals_layer(
-    inputs: HierarchyInputs, *, delta: float = DEFAULT_DELTA, c: float = 1.0
+    inputs: HierarchyInputs, *, delta: float, c: float
 ) -> tuple[Partition, float]:
     """The seed's heuristic: multi-phase partition (phases 1-2) over every subgoal option.
 

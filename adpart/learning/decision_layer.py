@@ -145,8 +145,8 @@ class DecisionLayer:
 
 
 def build_decision_layer(
-    mdp: FiniteMDP, options: Sequence[Option], *, delta: float = 0.0,
-    epsilon: float | None = 0.0, models: Sequence[OptionModel] | None = None,
+    mdp: FiniteMDP, options: Sequence[Option], *, delta: float,
+    epsilon: float | None, models: Sequence[OptionModel] | None = None,
     reward_baseline: str | float | None = "mode",
 ) -> DecisionLayer:
     """The multi-phase partition (section 4.2.1.2) over ``options`` for the learner's columns.
@@ -188,8 +188,8 @@ def build_decision_layer(
 
 
 def decision_layer(
-    mdp: FiniteMDP, options: Sequence[Option], *, delta: float = 0.0,
-    epsilon: float | None = 0.0, models: Sequence[OptionModel] | None = None,
+    mdp: FiniteMDP, options: Sequence[Option], *, delta: float,
+    epsilon: float | None, models: Sequence[OptionModel] | None = None,
     reward_baseline: str | float | None = "mode",
 ) -> tuple[Partition, list[Option], SMDPModel]:
     """:func:`build_decision_layer` as ``(partition, learner options, stacked model)``."""

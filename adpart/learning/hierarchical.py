@@ -119,7 +119,7 @@ whose values lie in [-20, 0]. Theorem 4.5's bound is reported beside ``L``.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -143,10 +143,23 @@ from adpart.learning.decision_layer import (
     reward_options,
     reward_states,
 )
+from adpart.learning.hierarchical_settings import (
+    MODES,
+    PRIMITIVE_EXPLORATION,
+    REWARD_OPTION_MODES,
+    TESTING_MODES,
+    HierarchicalSettings,
+    InconsistencyTest,
+)
 from adpart.learning.result import LearnResult
-from adpart.learning.schedules import Schedule, constant, visit_count
-from adpart.learning.settings import count, run_settings
-from adpart.learning.smdp_q import drive, kernel_function, make_state, option_set
+from adpart.learning.settings import Run, run_settings
+from adpart.learning.smdp_q import (
+    InconsistencyArrays,
+    drive,
+    kernel_function,
+    make_state,
+    option_set,
+)
 from adpart.mdp.evaluation import greedy_policy, policy_evaluation
 from adpart.mdp.model import FiniteMDP, SMDPModel
 from adpart.mdp.solvers import q_from_v, solve
@@ -158,8 +171,10 @@ from adpart.partition.partition import Partition, block_all, row_codes
 __all__ = [
     "MODES",
     "REWARD_OPTION_MODES",
+    "TESTING_MODES",
     "DecisionLayer",
     "HierarchicalResult",
+    "HierarchicalSettings",
     "build_decision_layer",
     "child_values",
     "decision_layer",
@@ -170,25 +185,10 @@ __all__ = [
     "reward_states",
 ]
 
-MODES = ("inconsistency", "action-refinement", "reward-variation",
-         "reward-variation+inconsistency")
-#: The modes that add options to the task's reward states (4.3.1) and those that test (4.3.3).
-REWARD_OPTION_MODES = ("reward-variation", "reward-variation+inconsistency")
-TESTING_MODES = ("inconsistency", "reward-variation+inconsistency")
-#: What the grounded flat value must beat by L (module docstring).
-REFERENCES = ("model", "learned", "offered", "policy")
-#: Where an action added by a firing joins the layer (module docstring).
-REFINE_RULES = ("state", "block")
-#: When epsilon-exploration draws among the primitive actions alone (module docstring).
-PRIMITIVE_EXPLORATION = {"never": 0, "always": 1, "until-reward": 2}
-#: What the greedy policy is greedy on (module docstring).
-LAYER_VALUES = ("learned", "planned")
-#: Default fraction of |V*(start)| used as the inconsistency threshold (module docstring).
-THRESHOLD_SCALE = 0.025
-#: Default z of the lower confidence bound of stochastic flat pairs (module docstring).
-LCB_Z = 2.0
-#: Default minimum visits of the flat pair and of the block before the test may fire.
-MIN_VISITS = 2
+#: The test's defaults, read from the one declaration (:class:`InconsistencyTest`).
+THRESHOLD_SCALE = InconsistencyTest().threshold_scale
+LCB_Z = InconsistencyTest().lcb_z
+MIN_VISITS = InconsistencyTest().min_visits
 
 
 @dataclass(frozen=True, eq=False)
@@ -282,7 +282,7 @@ def theorem_bound(mdp: FiniteMDP, *, epsilon: float | None, delta: float) -> flo
     return float(theorem_4_5_bound(mdp.gamma, 0.0 if epsilon is None else epsilon, delta))
 
 
-def default_threshold(v_star_start: float, *, scale: float = THRESHOLD_SCALE) -> float:
+def default_threshold(v_star_start: float, *, scale: float) -> float:
     """``L = scale * |V*(start)|`` (module docstring)."""
     return float(scale * abs(v_star_start))
 
@@ -360,124 +360,57 @@ def hierarchical_learning(
     mdp: FiniteMDP,
     options: Sequence[Option],
     partition: Partition | None = None,
-    *,
-    mode: str = "inconsistency",
-    delta: float = 0.0,
-    epsilon: float | None = 0.0,
-    threshold: float | None = None,
-    threshold_scale: float = THRESHOLD_SCALE,
-    min_visits: int = MIN_VISITS,
-    lcb_z: float = LCB_Z,
-    flat_explore: bool = True,
-    reference: str | None = None,
+    settings: HierarchicalSettings | None = None,
+    run: Run | None = None,
     models: Sequence[OptionModel] | None = None,
-    runs: int = 10,
-    episodes: int = 500,
-    seed: int | None = None,
-    alpha: Schedule | str | float = visit_count(0.8),  # noqa: B008 (immutable)
-    epsilon_greedy: Schedule | str | float = constant(0.1),  # noqa: B008 (immutable)
-    max_steps_per_episode: int = 1000,
-    eval_every: int = 10,
-    reference_values: np.ndarray | None = None,
-    progress: Callable[[int, int], object] | None = None,
-    q_init: float | None = None,
-    kernel: str | None = None,
-    intra_option: bool = False,
-    refine: str = "state",
-    primitive_exploration: str = "until-reward",
-    explore_known: int = 0,
-    layer_values: str = "learned",
-    split_offered: bool = False,
 ) -> HierarchicalResult:
     """Learn ``mdp`` on a decision layer over ``options`` (section 4.3; module docstring).
 
     Args:
+        mdp: the task.
         options: the (subgoal) options of the decision layer.
         partition: the decision layer, over ``options`` (``(B, len(options))`` admissibility) or
             over the primitives then the options; built by :func:`decision_layer` when omitted.
             In the ``reward-variation`` modes a given layer is offered the reward-state options
             (module docstring); without one they build their own.
-        mode: ``inconsistency``, ``action-refinement``, ``reward-variation`` or
-            ``reward-variation+inconsistency`` (module docstring).
-        delta, epsilon: thresholds of eqs. 4.6-4.7 for building and refining blocks
-            (``epsilon=None``: no reward split).
-        threshold: the inconsistency threshold ``L``; default :func:`default_threshold`.
-        threshold_scale: the ``|V*(start)|`` fraction of the default threshold.
-        min_visits: visits of the flat pair and of the block before the test may fire.
-        lcb_z: standard errors subtracted from a stochastic pair's lower-bound flat value.
-        reference: what the grounded flat value is compared with: ``"learned"``, the block's
-            learned ``max_o Q_P(b, o)``; ``"model"``, its value ``V*_P(b)`` in the layer's point
-            model, recomputed after every refinement (every firing is then a real inconsistency
-            by the definition ``Q*(s, a*) - V*_P(B) > L``, at a measured cost); ``"offered"``,
-            the larger of that ``V*_P(b)`` and the best value the options offered in ``s``'s
-            block achieve from ``s`` itself
-            (:func:`~adpart.learning.decision_layer.offered_values`), recomputed after every
-            refinement: a firing then also certifies that ``a*`` beats everything the layer
-            offers at ``s``; ``"policy"``, the exact value from ``s`` of the layer's best block
-            policy (the point model's optimum, lifted to states, evaluated on the columns'
-            models), recomputed after every refinement: what the layer's policy achieves, never
-            above ``V*(s)`` (``V*_P(b)`` and the per-state best can be far above it:
-            docs/hierarchical-learning.md, session 12). Default (``None``): ``"offered"`` in
-            ``reward-variation+inconsistency`` mode, ``"learned"`` in ``inconsistency`` mode
-            (docs/hierarchical-learning.md).
-        flat_explore: at a greedy decision take the optimistic flat action where it beats
-            the block's best value (exploration for goals that are no subgoal; ``inconsistency``
-            mode only - the other modes make the goal reachable on the layer).
+        settings: the learner's settings (:class:`HierarchicalSettings`: the mode, exploration,
+            the inconsistency test and its reference, refinement, the layer's values; every
+            field documented there). Default: ``HierarchicalSettings()``.
+        run: runs, episodes, seed, schedules (``epsilon`` is the exploration schedule), step
+            limit, evaluation, ``q_init`` (default 0, or the lower bound ``r_min / (1 - gamma)``
+            with R-max exploration: a block the agent never visited must not look better to
+            the greedy policy than those it learned), kernel and progress
+            (:class:`~adpart.learning.settings.Run`). Default: ``Run()``.
         models: exact models of ``options`` (computed when omitted).
-        runs: as :func:`adpart.learning.smdp_q.smdp_q_learning`, and so are ``episodes``,
-            ``seed``, ``alpha``, ``max_steps_per_episode``, ``eval_every``,
-            ``reference_values``, ``progress`` and ``kernel``.
-        epsilon_greedy: the exploration schedule (``epsilon`` is the partition's).
-        intra_option: every option offered where the agent's steps follow its policy gets
-            the SMDP update it would have had had it been chosen there (virtual executions,
-            :mod:`adpart.learning._smdp_kernels`), so the layer learns from flat exploration.
-        refine: where an action added by a firing joins: ``"state"``, the firing state alone
-            (it becomes a block of its own), or ``"block"``, every state of its block (4.3.3 as
-            written); module docstring.
-        primitive_exploration: when epsilon-exploration draws among the primitive actions
-            alone: ``"until-reward"`` (until the run first collects a reward above ``r_min``),
-            ``"always"`` or ``"never"`` (``inconsistency`` mode only).
-        explore_known: R-max's ``m`` (0: off; ``inconsistency`` mode with ``flat_explore``):
-            the flat action explored is the optimistic model's, a pair known after ``m`` tries,
-            and the test reads the grounded values of the empirical model (module docstring).
-        layer_values: what the greedy policy (scored, and returned as ``Q``) is greedy on:
-            ``"learned"``, the layer's SMDP Q-values; ``"planned"`` (with ``explore_known``),
-            the optimum of the layer's point model on each run's grounded model
-            (:func:`~adpart.learning._rmax.counted_smdp`: the primitive columns from the counts,
-            the options' given models), certainty equivalence on the decision layer
-            (docs/hierarchical-learning.md, session 12).
-        split_offered: (reference ``"policy"``) the test also reads an action ``s``'s block
-            already offers, and where the grounded value of the best one beats what the layer's
-            policy gets from ``s`` by more than ``L``, ``s`` is split from its block with the
-            block's set (:func:`~adpart.learning.decision_layer.refine_block` with ``at``): the
-            block's point model chose for states that need another column (module docstring).
-        q_init: the starting values of the layer and the flat table. Default 0, or the lower
-            bound ``r_min / (1 - gamma)`` with ``explore_known``: exploration is then R-max's,
-            and a block the agent never visited must not look better to the greedy policy than
-            those it learned (module docstring).
 
     Returns:
         A :class:`HierarchicalResult`.
     """
-    cfg = run_settings("hierarchical_learning", mdp, runs=runs, episodes=episodes,
-                       eval_every=eval_every, max_steps_per_episode=max_steps_per_episode,
-                       seed=seed, alpha=alpha, epsilon=epsilon_greedy,
-                       q_init=0.0 if q_init is None else q_init, epsilon_name="epsilon_greedy")
+    settings = HierarchicalSettings() if settings is None else settings
+    run = Run() if run is None else run
+    if not isinstance(settings, HierarchicalSettings):
+        raise TaskError(f"settings must be a HierarchicalSettings, got {type(settings).__name__}")
+    explore, test, refinement = settings.exploration, settings.test, settings.refinement
+    mode = settings.mode
+    delta, epsilon = refinement.delta, refinement.partition_epsilon
+    threshold, threshold_scale = test.threshold, test.threshold_scale
+    lcb_z, V, split_offered = test.lcb_z, test.min_visits, test.split_offered
+    m_known, primitive_exploration = explore.explore_known, explore.primitive_exploration
+    refine, layer_values = refinement.refine, settings.layer_values
+    reference_values, progress, q_init = run.reference_values, run.progress, run.q_init
+    cfg = run_settings("hierarchical_learning", mdp, runs=run.runs, episodes=run.episodes,
+                       eval_every=run.eval_every,
+                       max_steps_per_episode=run.max_steps_per_episode, seed=run.seed,
+                       alpha=run.alpha, epsilon=run.epsilon,
+                       q_init=0.0 if q_init is None else q_init)
     K, N, M, H, root_seed = cfg.runs, cfg.episodes, cfg.eval_every, cfg.horizon, cfg.seed
     alpha_s, eps_s = cfg.alpha, cfg.epsilon
-    if mode not in MODES:
-        raise TaskError(f"mode = {mode!r}; choose one of {list(MODES)}")
-    V = count(min_visits, "min_visits") if min_visits != 0 else 0
-    m_known = count(explore_known, "explore_known") if explore_known != 0 else 0
-    if threshold is not None and not (isinstance(threshold, (int, float)) and threshold >= 0):
-        raise TaskError(
-            f"threshold = {threshold!r} must be a number >= 0 (or None for the default)")
-    kernel_name, step_kernel = kernel_function(kernel)
+    kernel_name, step_kernel = kernel_function(run.kernel)
     S, A = mdp.n_states, mdp.n_actions
     options = list(options)
 
     extra: list[Option] = []
-    if mode in REWARD_OPTION_MODES:
+    if settings.reward_options:
         extra = reward_options(mdp)
         if models is not None:
             models = list(models) + option_models(mdp, extra, duration=False)
@@ -498,32 +431,16 @@ def hierarchical_learning(
             b = int(part0.labels[s])
             if not part0.admissible[b, :A].all():
                 part0 = refine_block(part0, b, prims, refiner, delta=delta, epsilon=epsilon)
-    check = mode in TESTING_MODES
-    if reference is None:
-        reference = "offered" if mode == "reward-variation+inconsistency" else "learned"
+    check = settings.testing
+    reference = settings.test_reference
     mu = start_distribution(mdp)
     v_star = optimal_start_value(mdp, mu, reference_values)
     L = default_threshold(v_star, scale=threshold_scale) if threshold is None else float(threshold)
     B0 = part0.n_blocks
     lower = flat_lower_bound(mdp, H)
-    directed = bool(m_known and flat_explore and mode == "inconsistency")
+    directed = settings.directed
     q0 = cfg.q_init if q_init is not None else lower if directed else 0.0
     capacity = min(S, max(2 * B0, B0 + 64))
-    if reference not in REFERENCES:
-        raise TaskError(f"reference = {reference!r}; choose one of {list(REFERENCES)}")
-    if refine not in REFINE_RULES:
-        raise TaskError(f"refine = {refine!r}; choose one of {list(REFINE_RULES)}")
-    if layer_values not in LAYER_VALUES:
-        raise TaskError(f"layer_values = {layer_values!r}; choose one of {list(LAYER_VALUES)}")
-    if split_offered and reference != "policy":
-        raise TaskError("split_offered compares with what the layer's policy gets from each "
-                        "state: give reference = 'policy'")
-    if layer_values == "planned" and not directed:
-        raise TaskError("layer_values = 'planned' plans on the counts of R-max exploration: "
-                        "give explore_known >= 1 (inconsistency mode, flat_explore on)")
-    if primitive_exploration not in PRIMITIVE_EXPLORATION:
-        raise TaskError(f"primitive_exploration = {primitive_exploration!r}; choose one of "
-                        f"{list(PRIMITIVE_EXPLORATION)}")
 
     def point_optima(partition: Partition) -> np.ndarray:
         """``V*_P`` per block: the optimum of the layer's point model (section 4.2.2)."""
@@ -545,19 +462,21 @@ def hierarchical_learning(
         return np.where(shared[partition.labels], values, np.inf)
 
     vref0 = state_values(part0) if check and reference in ("offered", "policy") else None
-    st = make_state(
-        mdp, full, np.broadcast_to(part0.labels, (K, S)),
-        np.broadcast_to(part0.admissible, (K, B0, len(full))), episodes=N, horizon=H,
-        alpha=alpha_s, epsilon=eps_s, q_init=q0, mu=mu, capacity=capacity,
-        track_flat=True, threshold=L if check else np.inf, min_visits=V, prim_opt=prims,
-        intra=2 if intra_option else 0, lower_bound=lower, lcb_z=lcb_z,
-        flat_explore=flat_explore and mode == "inconsistency",
-        primitive_epsilon=PRIMITIVE_EXPLORATION[primitive_exploration] if check else 0,
+    test_arrays = InconsistencyArrays(
+        threshold=L if check else np.inf, min_visits=V, prim_opt=prims, floor=lower,
+        lcb_z=lcb_z, flat_explore=settings.flat_explore,
+        prim_eps=PRIMITIVE_EXPLORATION[primitive_exploration] if check else 0,
         r_min=reward_floor(mdp),
         block_values=point_optima(part0) if check and reference == "model" else None,
         state_values=vref0,
         offered_values=split_values(part0, vref0) if check and split_offered else None,
         explore_known=m_known,
+    )
+    st = make_state(
+        mdp, full, np.broadcast_to(part0.labels, (K, S)),
+        np.broadcast_to(part0.admissible, (K, B0, len(full))), episodes=N, horizon=H,
+        alpha=alpha_s, epsilon=eps_s, q_init=q0, mu=mu, capacity=capacity,
+        intra=2 if settings.intra_option else 0, test=test_arrays,
     )
     parts = [part0] * K
     events: list[dict[str, int]] = []
@@ -629,7 +548,7 @@ def hierarchical_learning(
         "threshold_rule": "given" if threshold is not None else
         f"{threshold_scale} x |V*(start)|",
         "theorem_4_5_bound": theorem_bound(mdp, epsilon=epsilon, delta=delta),
-        "lcb_z": float(lcb_z), "flat_explore": bool(flat_explore and mode == "inconsistency"),
+        "lcb_z": float(lcb_z), "flat_explore": settings.flat_explore,
         "test_reference": reference, "refine": refine,
         "primitive_exploration": primitive_exploration if check else "never",
         "explore_known": m_known if directed else 0, "layer_values": layer_values,
@@ -637,7 +556,7 @@ def hierarchical_learning(
         "flat_lower_bound": lower,
         "min_visits": V, "alpha": alpha_s.to_dict(), "epsilon_greedy": eps_s.to_dict(),
         "max_steps_per_episode": H, "eval_every": M, "q_init": float(q0),
-        "kernel": kernel_name, "intra_option": bool(intra_option), "options": list(names),
+        "kernel": kernel_name, "intra_option": settings.intra_option, "options": list(names),
         "extra_subgoals": [o.subgoal for o in extra],
         "initial_blocks": B0, "reference": "given" if reference_values is not None else "solved",
     }

@@ -6,12 +6,13 @@ Flat Q-learning, SMDP Q-learning and the hierarchical learner take the same expe
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from adpart.errors import ModelError, TaskError
-from adpart.learning.schedules import Schedule, parse_schedule
+from adpart.learning.schedules import Schedule, constant, parse_schedule, visit_count
 from adpart.mdp.model import FiniteMDP
 
 
@@ -71,3 +72,34 @@ def run_settings(
     if not isinstance(q_init, (int, float, np.number)) or not np.isfinite(q_init):
         raise TaskError(f"q_init = {q_init!r} must be a finite number")
     return RunSettings(K, N, M, H, seed_value, alpha_s, eps_s, float(q_init))
+
+
+@dataclass(frozen=True)
+class Run:
+    """How a learner's K runs go: what :func:`run_settings` checks, and the scoring hooks.
+
+    Attributes:
+        runs, episodes: K independent runs of N episodes each.
+        seed: the root seed (None: a fresh one from OS entropy, recorded in the result).
+        alpha, epsilon: the step-size and exploration schedules
+            (:func:`adpart.learning.schedules.parse_schedule` spellings or objects).
+        max_steps_per_episode: the primitive-step limit of one episode.
+        eval_every: exact scoring of the greedy policies every this many episodes.
+        q_init: the starting Q-values (None: the learner's rule).
+        kernel: ``"numba"`` or ``"python"`` (None: the default kernel).
+        reference_values: ``V*`` to score against (None: solved).
+        progress: called as ``progress(done, episodes)`` after every evaluation.
+    """
+
+    runs: int = 10
+    episodes: int = 500
+    seed: int | None = None
+    alpha: Schedule | str | float = field(default_factory=lambda: visit_count(0.8))
+    epsilon: Schedule | str | float = field(default_factory=lambda: constant(0.1))
+    max_steps_per_episode: int = 1000
+    eval_every: int = 10
+    q_init: float | None = None
+    kernel: str | None = None
+    reference_values: np.ndarray | None = field(default=None, compare=False, repr=False)
+    progress: Callable[[int, int], object] | None = field(default=None, compare=False,
+                                                         repr=False)

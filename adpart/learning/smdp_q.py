@@ -193,27 +193,69 @@ def _rmax_arrays(mdp: FiniteMDP, K: int, m: int, horizon: int, *, floor: float,
             if grounded else np.zeros((1, 1))}
 
 
+@dataclass(frozen=True)
+class InconsistencyArrays:
+    """What the hierarchical learner adds to the kernel state (section 4.3.3).
+
+    Attributes:
+        threshold: ``L``; ``inf`` keeps the flat table but never tests.
+        min_visits: visits of the flat pair and of the block before the test may fire.
+        prim_opt: ``(A,)`` the layer's column of each primitive action (-1: none).
+        floor: the grounded values' lower bound ``r_min / (1 - gamma)``.
+        lcb_z: standard errors off a stochastic pair's grounded value.
+        flat_explore: take the optimistic flat action where it beats the block's best.
+        prim_eps: epsilon draws among primitive actions: 0 never, 1 always, 2 until the first
+            reward above ``r_min``.
+        r_min: the step reward (:func:`~adpart.learning.decision_layer.reward_floor`).
+        block_values: ``(B,)`` the reference per block, or ``state_values`` ``(S,)`` per state
+            (at most one; neither: the block's learned values).
+        offered_values: ``(S,)`` the reference an action the block already offers must beat
+            (``+inf`` where the state cannot be split from its block), or None: not tested.
+        explore_known: R-max's m (0: off; with ``flat_explore`` the action explored is the
+            optimistic model's, :mod:`adpart.learning._rmax`).
+    """
+
+    threshold: float
+    min_visits: int
+    prim_opt: np.ndarray
+    floor: float
+    lcb_z: float
+    flat_explore: bool
+    prim_eps: int
+    r_min: float
+    block_values: np.ndarray | None
+    state_values: np.ndarray | None
+    offered_values: np.ndarray | None
+    explore_known: int
+
+    def __post_init__(self) -> None:
+        if self.block_values is not None and self.state_values is not None:
+            raise ValueError("give block_values or state_values, not both")
+
+    @classmethod
+    def off(cls, n_actions: int) -> InconsistencyArrays:
+        """No flat table and no test (plain SMDP Q-learning)."""
+        return cls(np.inf, 0, np.full(n_actions, -1, dtype=np.int64), -np.inf, 0.0, False, 0,
+                   np.inf, None, None, None, 0)
+
+
 def make_state(
     mdp: FiniteMDP, options: Sequence[Option], labels: np.ndarray, block_adm: np.ndarray,
     *, episodes: int, horizon: int, alpha: Schedule, epsilon: Schedule, q_init: float,
-    mu: np.ndarray, capacity: int, track_flat: bool = False, threshold: float = np.inf,
-    min_visits: int = 0, prim_opt: np.ndarray | None = None, intra: int = 0,
-    lower_bound: float = -np.inf, lcb_z: float = 0.0, flat_explore: bool = False,
-    primitive_epsilon: int = 0, r_min: float = np.inf,
-    block_values: np.ndarray | None = None, state_values: np.ndarray | None = None,
-    offered_values: np.ndarray | None = None, explore_known: int = 0,
+    mu: np.ndarray, capacity: int, intra: int, test: InconsistencyArrays | None = None,
 ) -> kernels.SMDPLockStepState:
     """Kernel state for K runs on decision layers ``labels`` (K, S) / ``block_adm`` (K, B, O).
 
-    The inconsistency test compares with ``block_values`` (B,) per block or ``state_values`` (S,)
-    per state when one is given (at most one), else with the block's learned values; with
-    ``offered_values`` (S,) it also reads an action the state's block already offers, against
-    that reference (+inf where the state cannot be split from its block). With
-    ``explore_known`` m > 0 (and ``flat_explore``) the flat action explored is R-max's, a pair
-    known after m tries (:mod:`adpart.learning._rmax`), instead of the optimistic flat table's.
+    ``test`` (the hierarchical learner's): the flat table beside the layer, the inconsistency
+    test and its reference, exploration by the flat values (:class:`InconsistencyArrays`);
+    None for plain SMDP Q-learning.
     """
-    if block_values is not None and state_values is not None:
-        raise ValueError("give block_values or state_values, not both")
+    track_flat = test is not None
+    t = test if test is not None else InconsistencyArrays.off(mdp.n_actions)
+    threshold, min_visits, prim_opt, lower_bound = t.threshold, t.min_visits, t.prim_opt, t.floor
+    lcb_z, flat_explore, primitive_epsilon, r_min = t.lcb_z, t.flat_explore, t.prim_eps, t.r_min
+    block_values, state_values, offered_values = t.block_values, t.state_values, t.offered_values
+    explore_known = t.explore_known
     K, S = labels.shape
     A = mdp.n_actions
     O = len(options)  # noqa: E741 (the thesis' symbol)
@@ -252,7 +294,7 @@ def make_state(
         check_on=check,
         threshold=float(threshold),
         min_visits=int(min_visits),
-        prim_opt=np.full(A, -1, dtype=np.int64) if prim_opt is None else prim_opt.astype(np.int64),
+        prim_opt=np.asarray(prim_opt, dtype=np.int64),
         prim_adm=np.ascontiguousarray(mdp.admissible, dtype=bool),
         fired=np.full((K, 3), -1, dtype=np.int64),
         intra=int(intra),

@@ -25,11 +25,8 @@ from typing import Any
 import numpy as np
 
 from adpart.errors import AdpartError, PluginError, TaskError
-from adpart.hierarchy.layers import (
-    DEFAULT_THRESHOLD_SCALE,
-    HierarchyInputs,
-    HierarchyResult,
-)
+from adpart.hierarchy.layers import HierarchyInputs, HierarchyResult
+from adpart.hierarchy.settings import EstimateSettings
 from adpart.hierarchy.tasks import task_from_model
 from adpart.mdp.model import FiniteMDP
 from adpart.plugins import get_registry
@@ -104,8 +101,7 @@ def load_inputs(
     tasks: Sequence[str | int] | None = None,
     options: Sequence[int] | None = None,
     weights: Mapping[str, float] | Sequence[float] | None = None,
-    threshold: float | None = None,
-    threshold_scale: float = DEFAULT_THRESHOLD_SCALE,
+    estimate: EstimateSettings | None = None,
 ) -> HierarchyInputs:
     """Read the learned tasks and candidate options of ``environment_name`` (module docstring).
 
@@ -113,8 +109,9 @@ def load_inputs(
         tasks: task names, ``task:N`` refs or ids (default: every task with a stored policy).
         options: option record ids (default: every option stored for the environment).
         weights: importance ``U(T_i)`` by task name/ref, or one per selected task (default 1).
-        threshold: ``L`` for every task (default: ``threshold_scale`` times each task's value
-            range over its non-terminal states); an estimator may set its own
+        estimate: the threshold ``L`` of every task (default ``EstimateSettings()``:
+            ``threshold_scale`` times each task's value range over its non-terminal states); an
+            estimator sets its own
             (:meth:`~adpart.hierarchy.layers.HierarchyInputs.with_threshold`).
     """
 
@@ -158,7 +155,8 @@ def load_inputs(
         to_subgoal=[r.subgoal_id is not None for r in option_records],
         policy_ids=[p.id for _, p in chosen], parent_ids=sorted(parents),
     )
-    return inputs.with_threshold(threshold, threshold_scale)
+    estimate = EstimateSettings() if estimate is None else estimate
+    return inputs.with_threshold(estimate.threshold, estimate.threshold_scale)
 
 
 def store_layer(kb: KnowledgeStore, inputs: HierarchyInputs, result: HierarchyResult, *,

@@ -122,10 +122,11 @@ def test_hierarchy_command_stores_the_layer_it_prints(pipeline_kb, tmp_path):
         (["--estimator", "no-such"], "no-such"),
         (["--tasks", "not-learned"], "not-learned"),
         (["--c", "-1"], "--c must be >= 0.0"),
-        (["--delta", "1.5"], "--delta '1.5': delta = 1.5 is above 1"),
+        (["--delta", "1.5"], "--delta must be <= 1.0; got 1.5"),
         (["--estimator", "all-subgoals", "--delta", "-0.1"], "--delta must be >= 0.0"),
-        (["--estimator", "all-subgoals", "--max-steps", "3"],
-         "--max-steps is not a parameter of hierarchy-estimator 'all-subgoals'"),
+        (["--estimator", "all-subgoals", "--delta", "none"], "all-subgoals refines"),
+        (["--estimator", "all-subgoals", "--max-refinements", "3"],
+         "--max-refinements is not a parameter of hierarchy-estimator 'all-subgoals'"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(pipeline_kb, args, needle):

@@ -162,9 +162,10 @@ def test_parr_layer_from_below_settles_at_its_ceiling_where_the_defaults_never_a
     from adpart.experiments.maxq_parr import ALPHA, EPSILON, LAYER_PRIMITIVE_EXPLORATION
     from adpart.experiments.protocol import layer_ceiling
     from adpart.learning.curves import start_distribution
-    from adpart.learning.hierarchical import decision_layer, hierarchical_learning
+    from adpart.learning.hierarchical import decision_layer
     from adpart.options.models import option_models
     from adpart.options.subgoal_options import subgoal_options
+    from tests.learning.hierarchical_run import hierarchical_run
 
     maze = ParrMaze(mini=True)
     mdp = maze.mdp()
@@ -173,17 +174,17 @@ def test_parr_layer_from_below_settles_at_its_ceiling_where_the_defaults_never_a
     models = option_models(mdp, options, duration=False)
     layer, _full, smdp = decision_layer(mdp, options, delta=0.3, epsilon=10.0, models=models)
     never = -1.0 / (1.0 - mdp.gamma)
-    common = {"models": models, "delta": 0.3, "epsilon": 10.0, "runs": 6, "episodes": 300,
-              "seed": 0, "alpha": ALPHA, "epsilon_greedy": EPSILON, "eval_every": 50,
+    common = {"models": models, "delta": 0.3, "partition_epsilon": 10.0, "runs": 6, "episodes": 300,
+              "seed": 0, "alpha": ALPHA, "epsilon": EPSILON, "eval_every": 50,
               "max_steps_per_episode": 5000}
-    tuned = hierarchical_learning(mdp, options, layer, q_init=never,
+    tuned = hierarchical_run(mdp, options, layer, q_init=never,
                                   primitive_exploration=LAYER_PRIMITIVE_EXPLORATION, **common)
     final = float(tuned.v_star_start) - tuned.curve.matrix("value_gap")[:, -1]
     ceiling = np.array([layer_ceiling(p, smdp, start_distribution(mdp))
                         for p in tuned.partitions])
     assert np.all(final > never + 1.0), final
     assert np.sum(ceiling - final <= 2.0) >= 4, (final, ceiling)
-    default = hierarchical_learning(mdp, options, layer, **common)
+    default = hierarchical_run(mdp, options, layer, **common)
     final = float(default.v_star_start) - default.curve.matrix("value_gap")[:, -1]
     assert np.all(final < never + 1e-6), final
 

@@ -13,9 +13,10 @@ from adpart.experiments.transfer import (  # three_floor registers the three
     grounded_policy_gaps,
     three_floor,  # noqa: F401
 )
-from adpart.learning.hierarchical import decision_layer, hierarchical_learning
+from adpart.learning.hierarchical import decision_layer
 from adpart.mdp.generate import random_grid_mdp
 from adpart.options import subgoal_option
+from tests.learning.hierarchical_run import hierarchical_run
 from tests.learning.test_hierarchical import DELTA, SETTINGS, goal_grid
 
 LEARNERS = {"flat Q", "partition, no refinement", "partition, refinement",
@@ -94,9 +95,9 @@ def test_the_grounded_policy_of_a_learner_that_tried_every_pair_is_optimal():
     part, _, _ = decision_layer(mdp, opts, delta=DELTA, epsilon=0.0)
     kw = dict(SETTINGS, runs=2, episodes=200, explore_known=1)
     np.testing.assert_allclose(
-        grounded_policy_gaps(hierarchical_learning(mdp, opts, part, **kw), mdp), 0.0, atol=1e-9)
+        grounded_policy_gaps(hierarchical_run(mdp, opts, part, **kw), mdp), 0.0, atol=1e-9)
     assert grounded_policy_gaps(
-        hierarchical_learning(mdp, opts, part, threshold=np.inf, **kw), mdp) is None
+        hierarchical_run(mdp, opts, part, threshold=np.inf, **kw), mdp) is None
 
 
 @pytest.mark.slow

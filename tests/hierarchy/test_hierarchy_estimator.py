@@ -53,21 +53,21 @@ def test_block_lacking_the_best_action_pays_the_refinement_term():
 def test_commitment_the_block_value_picks_the_column():
     # one block offering both columns commits to column 0 (weighted value 3.7 vs 2.63): no loss
     p = layer([0, 0, 0, 0], [[True, True]])
-    est = expected_time([task(Q, D)], p, n_primitives=A)
+    est = expected_time([task(Q, D)], p, n_primitives=A, c=1.0)
     assert est.committed[0, 0] == 0 and est.p_refine[0, 0] == 0
     # a task where column 0 wins on average but loses 3 in state 3: the block must be refined,
     # although the seed's any-column test finds column 1 good there
     Q2 = [[5.0, 1.0], [4.0, 1.0], [3.0, 1.0], [2.0, 5.0]]
-    est2 = expected_time([task(Q2, D)], p, n_primitives=A)
+    est2 = expected_time([task(Q2, D)], p, n_primitives=A, c=1.0)
     assert est2.committed[0, 0] == 0 and est2.p_refine[0, 0] == 1
     assert est2.total == pytest.approx(1 * 2 + 4**2 * (2 + A))
 
 
 def test_threshold_decides_what_is_significant():
     p = layer([0, 0, 0, 0], [[False, True]])
-    assert expected_time([task(Q, D, threshold=4.5)], p, n_primitives=A).total == pytest.approx(
-        1.0)
-    small = expected_time([task(Q, D, threshold=0.05)], p, n_primitives=A)
+    assert expected_time([task(Q, D, threshold=4.5)], p, n_primitives=A,
+                         c=1.0).total == pytest.approx(1.0)
+    small = expected_time([task(Q, D, threshold=0.05)], p, n_primitives=A, c=1.0)
     # states 0 and 1 lose more than L under column 1: refined once, n = 4, |O_B| + A = 2
     assert small.total == pytest.approx(1.0 + 16 * 2)
 
@@ -75,7 +75,7 @@ def test_threshold_decides_what_is_significant():
 def test_unoccupied_states_do_not_force_refinement():
     p = layer([0, 0, 0, 0], [[False, True]])
     d = [0.0, 0.4, 0.3, 0.3]  # state 0 (where column 1 loses 4) is never met
-    assert expected_time([task(Q, d)], p, n_primitives=A).total == pytest.approx(1.0)
+    assert expected_time([task(Q, d)], p, n_primitives=A, c=1.0).total == pytest.approx(1.0)
 
 
 def test_block_without_options_always_refines_where_the_task_goes():
@@ -90,7 +90,7 @@ def test_flat_time_is_the_flat_layers_estimate():
     adm = np.array([[True, False], [True, True], [True, True], [True, False]])
     flat = layer([0, 1, 2, 3], adm)
     Qa = np.where(adm, np.asarray(Q), -np.inf)
-    est = expected_time([task(Qa, D)], flat, n_primitives=2)
+    est = expected_time([task(Qa, D)], flat, n_primitives=2, c=1.0)
     assert not est.p_refine.any()
     assert flat_time(adm, c=2.0) == pytest.approx(2.0 * est.total) == pytest.approx(2 * 4 * 6)
 
@@ -107,9 +107,9 @@ def test_importance_weights_average_the_tasks():
     p = layer([0, 0, 1, 1], [[False, True], [True, False]])
     a = task(Q, D, weight=3.0)
     b = task(np.fliplr(np.asarray(Q)), D, weight=1.0)  # column 1 now best: block 1 lacks it
-    ea = expected_time([a], p, n_primitives=A).total
-    eb = expected_time([b], p, n_primitives=A).total
-    assert expected_time([a, b], p, n_primitives=A).total == pytest.approx((3 * ea + eb) / 4)
+    ea = expected_time([a], p, n_primitives=A, c=1.0).total
+    eb = expected_time([b], p, n_primitives=A, c=1.0).total
+    assert expected_time([a, b], p, n_primitives=A, c=1.0).total == pytest.approx((3 * ea + eb) / 4)
 
 
 def test_t_conv_matches_c_p2_o_for_uniform_sets():
@@ -120,11 +120,11 @@ def test_t_conv_matches_c_p2_o_for_uniform_sets():
 def test_errors_name_the_problem():
     p = layer([0, 0, 1, 1], [[True, False], [True, False]])
     with pytest.raises(TaskError, match="same columns"):
-        expected_time([task(np.zeros((4, 3)), D)], p, n_primitives=A)
+        expected_time([task(np.zeros((4, 3)), D)], p, n_primitives=A, c=1.0)
     with pytest.raises(TaskError, match="at least one"):
-        expected_time([], p, n_primitives=A)
+        expected_time([], p, n_primitives=A, c=1.0)
     with pytest.raises(TaskError, match="n_primitives"):
-        expected_time([task(Q, D)], p, n_primitives=3)
+        expected_time([task(Q, D)], p, n_primitives=3, c=1.0)
     with pytest.raises(TaskError, match="occupancy"):
         task(Q, [0.0, 0.0, 0.0, 0.0])
     with pytest.raises(TaskError, match="positive"):

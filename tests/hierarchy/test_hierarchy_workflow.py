@@ -135,9 +135,9 @@ def test_refined_with_an_option_means_its_own_delta_stable_partition(four_rooms_
         assert report.ok, report.violations[:3]
         # a refinement of phase 1's blocks: each own block lies in one phase-1 block
         assert all(len(np.unique(phase1[o][splits[o] == b])) == 1 for b in range(own.n_blocks))
-    layer, _, steps, _ = expected_time_layer(inputs, delta=0.3)
+    layer, _, steps, _ = expected_time_layer(inputs, delta=0.3, c=1.0)
     assert steps
-    former, _, _, _ = expected_time_layer(inputs, delta=None)  # `--delta -1`: phase 1 alone
+    former, _, _, _ = expected_time_layer(inputs, delta=None, c=1.0)  # `--delta none`: phase 1
     for built, by in ((layer, splits), (former, phase1)):
         for b, row in enumerate(built.admissible):  # every offered option's split went through b
             members = built.labels == b
@@ -154,7 +154,7 @@ def test_task_selection_weights_and_errors(four_rooms_kb, estimator_registry):
     res = build_hierarchy(kb, "four-rooms", tasks=["task:1"], store=False)
     assert res.task_ids == [data["tasks"]["G1"].id]
     assert res.estimate == pytest.approx(expected_time(one.tasks, _full(res, one),
-                                                       n_primitives=4).total)
+                                                       n_primitives=4, c=1.0).total)
     with pytest.raises(TaskError, match="no learned task"):
         load_inputs(kb, "four-rooms", tasks=["nope"])
     with pytest.raises(TaskError, match="one per task"):
@@ -220,7 +220,7 @@ def test_blocks_the_estimate_calls_consistent_lose_nothing(four_rooms_kb, estima
     A = inputs.mdp.n_actions
     for task in inputs.tasks:
         mdp = data["domain"].mdp(task.name)
-        est = estimate([task], layer, n_primitives=A)
+        est = estimate([task], layer, n_primitives=A, c=1.0)
         _, smdp = option_set(mdp, inputs.options, include_primitives=True)
         V = solve(mdp, 1e-10).V
         Q = smdp.R + (smdp.F @ V).reshape(smdp.n_actions, -1).T

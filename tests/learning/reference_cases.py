@@ -64,9 +64,10 @@ def _four_rooms(kernel: str, intra: bool = False):
 
 
 def _hierarchical(kernel: str, **rule):
-    from adpart.learning.hierarchical import decision_layer, hierarchical_learning
+    from adpart.learning.hierarchical import decision_layer
     from adpart.options import subgoal_option
 
+    from .hierarchical_run import hierarchical_run
     from .test_hierarchical import SETTINGS, SIDE, goal_grid
 
     mdp = goal_grid()
@@ -74,7 +75,7 @@ def _hierarchical(kernel: str, **rule):
     opts = [subgoal_option(mdp, c, initiation="reachable") for c in corners]
     part, _full, _smdp = decision_layer(mdp, opts, delta=SETTINGS["delta"], epsilon=0.0)
     kw = dict(SETTINGS, runs=2, episodes=150, eval_every=50)
-    return hierarchical_learning(mdp, opts, part, kernel=kernel, **kw, **rule)
+    return hierarchical_run(mdp, opts, part, kernel=kernel, **kw, **rule)
 
 
 #: name -> (learner taking a kernel name, kernels that must reproduce the pinned arrays).

@@ -16,20 +16,22 @@ from adpart.learning.hierarchical import (
     decision_layer,
     default_threshold,
     flat_lower_bound,
-    hierarchical_learning,
     refine_block,
     refinement_model,
     reward_states,
 )
+from adpart.learning.hierarchical_settings import InconsistencyTest
 from adpart.mdp.model import FiniteMDP
 from adpart.options import subgoal_option
 from adpart.partition import theorem_4_5_bound
 
+from .hierarchical_run import hierarchical_run
+
 SIDE = 5
 DELTA = 0.2
-SETTINGS = {"delta": DELTA, "epsilon": 0.0, "runs": 4, "episodes": 600, "seed": 3,
+SETTINGS = {"delta": DELTA, "partition_epsilon": 0.0, "runs": 4, "episodes": 600, "seed": 3,
             "eval_every": 100,
-                "epsilon_greedy": 0.3}
+                "epsilon": 0.3}
 
 
 def goal_grid(side: int = SIDE, gamma: float = 0.9) -> FiniteMDP:
@@ -77,8 +79,8 @@ def test_the_decision_layer_lumps_the_goal_neighbours(setup):
 
 def test_without_refinement_the_goal_is_never_reached_with_refinement_it_is(setup):
     mdp, opts, part, _ = setup
-    off = hierarchical_learning(mdp, opts, part, threshold=np.inf, **SETTINGS)
-    on = hierarchical_learning(mdp, opts, part, **SETTINGS)
+    off = hierarchical_run(mdp, opts, part, threshold=np.inf, **SETTINGS)
+    on = hierarchical_run(mdp, opts, part, **SETTINGS)
     np.testing.assert_allclose(final_gap(off), off.v_star_start)  # value 0: never gets there
     assert (off.n_refinements == 0).all() and (off.blocks == part.n_blocks).all()
     assert (on.n_refinements > 0).all()
@@ -102,8 +104,8 @@ def test_with_refinement_every_run_ends_within_the_bound_without_it_none_arrives
     domain) every run's greedy policy ends within 5 % of V* (the pipeline's success bound)."""
     mdp, opts, part, _ = setup
     kw = dict(SETTINGS, alpha=1.0, episodes=1000)
-    off = hierarchical_learning(mdp, opts, part, threshold=np.inf, **kw)
-    on = hierarchical_learning(mdp, opts, part, **kw)
+    off = hierarchical_run(mdp, opts, part, threshold=np.inf, **kw)
+    on = hierarchical_run(mdp, opts, part, **kw)
     np.testing.assert_allclose(final_gap(off), off.v_star_start)
     assert (final_gap(on) <= 0.05 * on.v_star_start).all()
 
@@ -111,9 +113,9 @@ def test_with_refinement_every_run_ends_within_the_bound_without_it_none_arrives
 def test_same_seed_same_results_and_kernels_agree(setup):
     mdp, opts, part, _ = setup
     kw = dict(SETTINGS, runs=2, episodes=150, eval_every=50)
-    a = hierarchical_learning(mdp, opts, part, kernel="numba", **kw)
-    b = hierarchical_learning(mdp, opts, part, kernel="numba", **kw)
-    c = hierarchical_learning(mdp, opts, part, kernel="python", **kw)
+    a = hierarchical_run(mdp, opts, part, kernel="numba", **kw)
+    b = hierarchical_run(mdp, opts, part, kernel="numba", **kw)
+    c = hierarchical_run(mdp, opts, part, kernel="python", **kw)
     for other in (b, c):
         np.testing.assert_array_equal(a.Q, other.Q)
         np.testing.assert_array_equal(a.Q_flat, other.Q_flat)
@@ -167,14 +169,14 @@ def test_the_state_rule_adds_the_action_to_the_firing_state_alone_and_stays_stab
 def test_the_former_rule_stays_selectable_and_the_settings_are_checked(setup):
     mdp, opts, part, _ = setup
     kw = dict(SETTINGS, runs=2, episodes=100, eval_every=50)
-    old = hierarchical_learning(mdp, opts, part, refine="block", primitive_exploration="never",
+    old = hierarchical_run(mdp, opts, part, refine="block", primitive_exploration="never",
                                 **kw)
     assert old.parameters["refine"] == "block"
     assert old.parameters["primitive_exploration"] == "never"
     with pytest.raises(TaskError, match="refine"):
-        hierarchical_learning(mdp, opts, part, refine="cell", **kw)
+        hierarchical_run(mdp, opts, part, refine="cell", **kw)
     with pytest.raises(TaskError, match="primitive_exploration"):
-        hierarchical_learning(mdp, opts, part, primitive_exploration="sometimes", **kw)
+        hierarchical_run(mdp, opts, part, primitive_exploration="sometimes", **kw)
 
 
 def test_split_children_start_their_primitives_grounded():
@@ -204,7 +206,7 @@ def test_split_children_start_their_primitives_grounded():
 
 def test_children_inherit_q_in_the_learner(setup):
     mdp, opts, part, _ = setup
-    res = hierarchical_learning(mdp, opts, part, **dict(SETTINGS, runs=1, episodes=100))
+    res = hierarchical_run(mdp, opts, part, **dict(SETTINGS, runs=1, episodes=100))
     assert res.refinements
     P = res.partitions[0]
     lifted = res.block_Q[0][P.labels]
@@ -213,8 +215,8 @@ def test_children_inherit_q_in_the_learner(setup):
 
 def test_alternatives_action_refinement_and_reward_variation(setup):
     mdp, opts, part, _ = setup
-    act = hierarchical_learning(mdp, opts, part, mode="action-refinement", **SETTINGS)
-    var = hierarchical_learning(mdp, opts, mode="reward-variation", **SETTINGS)
+    act = hierarchical_run(mdp, opts, part, mode="action-refinement", **SETTINGS)
+    var = hierarchical_run(mdp, opts, mode="reward-variation", **SETTINGS)
     assert not act.refinements and not var.refinements
     goal_near = np.flatnonzero(reward_states(mdp))
     for P in act.partitions:  # the rewarding blocks got every primitive action
@@ -228,7 +230,7 @@ def test_reward_variation_on_a_given_layer_offers_the_reward_options_in_every_bl
     """A given layer (as Algorithm 3 builds one) keeps its blocks' splits and options; each block
     is offered the reward-state options where all its states may start them (split by that)."""
     mdp, opts, part, _ = setup
-    res = hierarchical_learning(mdp, opts, part, mode="reward-variation",
+    res = hierarchical_run(mdp, opts, part, mode="reward-variation",
                                 **dict(SETTINGS, runs=2, alpha=1.0))
     layer = res.partitions[0]
     n_given = mdp.n_actions + len(opts)
@@ -247,9 +249,9 @@ def test_default_threshold_is_half_the_success_tolerance(setup):
     mdp, opts, part, _ = setup
     # seed-like settings: epsilon = 20, gamma = 0.9 -> theorem 4.5 gives 362, far above V <= 1
     assert theorem_4_5_bound(0.9, 20.0, 0.3) > 300
-    assert default_threshold(-40.0) == pytest.approx(1.0)
+    assert default_threshold(-40.0, scale=InconsistencyTest().threshold_scale) == pytest.approx(1.0)
     assert default_threshold(2.0, scale=0.5) == pytest.approx(1.0)
-    res = hierarchical_learning(mdp, opts, part, **dict(SETTINGS, runs=1, episodes=10))
+    res = hierarchical_run(mdp, opts, part, **dict(SETTINGS, runs=1, episodes=10))
     assert res.parameters["threshold"] == pytest.approx(0.025 * abs(res.v_star_start))
     assert res.parameters["theorem_4_5_bound"] == pytest.approx(theorem_4_5_bound(0.9, 0, DELTA))
     assert flat_lower_bound(mdp, 100) == 0.0  # no negative reward: 0 is a lower bound
@@ -268,7 +270,7 @@ def test_every_firing_is_a_real_inconsistency(setup):
     from adpart.mdp.solvers import q_from_v, solve
 
     mdp, opts, part, _ = setup
-    on = hierarchical_learning(mdp, opts, part, **SETTINGS)
+    on = hierarchical_run(mdp, opts, part, **SETTINGS)
     _, smdp = option_set(mdp, opts, include_primitives=True)
     adm = part.admissible[part.labels] & smdp.admissible  # primitives first, offered nowhere
     layer = SMDPModel(R=np.where(adm, smdp.R, 0.0), F=smdp.F,
@@ -283,9 +285,9 @@ def test_every_firing_is_a_real_inconsistency(setup):
 def test_bad_inputs(setup):
     mdp, opts, part, _ = setup
     with pytest.raises(TaskError, match="mode"):
-        hierarchical_learning(mdp, opts, part, mode="magic")
+        hierarchical_run(mdp, opts, part, mode="magic")
     with pytest.raises(TaskError, match="options"):
-        hierarchical_learning(mdp, opts[:2], part, runs=1, episodes=1)
+        hierarchical_run(mdp, opts[:2], part, runs=1, episodes=1)
 
 
 def test_firings_on_three_floor_are_real_against_the_current_layer():
@@ -315,7 +317,7 @@ def test_firings_on_three_floor_are_real_against_the_current_layer():
     refiner = refinement_model(mdp, smdp)
 
     def real_fraction(**rule: str) -> float:
-        res = hierarchical_learning(mdp, opts, part, models=models, delta=0.3, epsilon=10.0,
+        res = hierarchical_run(mdp, opts, part, models=models, delta=0.3, partition_epsilon=10.0,
                                     runs=2, episodes=300, seed=1, eval_every=100, alpha=1.0,
                                     max_steps_per_episode=3000, reference_values=v_star, **rule)
         L = res.parameters["threshold"]
@@ -386,7 +388,7 @@ def test_the_offered_reference_fires_only_where_the_layer_cannot_do_as_well(setu
     from adpart.partition.bpsmdp import point_model, point_policy
 
     mdp, opts, part, smdp = setup
-    res = hierarchical_learning(mdp, opts, part, reference=reference,
+    res = hierarchical_run(mdp, opts, part, reference=reference,
                                 **dict(SETTINGS, alpha=1.0, episodes=1000))
     assert res.parameters["test_reference"] == reference
     assert (final_gap(res) <= 0.05 * res.v_star_start).all()
@@ -417,7 +419,7 @@ def test_reward_variation_with_the_test_learns_the_task_and_fires_only_on_real_e
     run ends within the bound; the test (``offered`` reference) does not fire where an offered
     option already achieves the optimum, and optimistic flat exploration is off."""
     mdp, opts, _, _ = setup
-    res = hierarchical_learning(mdp, opts, mode="reward-variation+inconsistency",
+    res = hierarchical_run(mdp, opts, mode="reward-variation+inconsistency",
                                 **dict(SETTINGS, alpha=1.0))
     p = res.parameters
     assert p["test_reference"] == "offered" and p["flat_explore"] is False

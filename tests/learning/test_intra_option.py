@@ -104,8 +104,8 @@ def test_block_layer_virtual_executions_by_hand():
     "tail" (offered on 3..5) is never chosen, but the steps from 3 follow its policy, so it is
     executed virtually from 3 and gets the SMDP return of its three steps, -(1 + g + g^2).
     """
-    from adpart.learning.hierarchical import hierarchical_learning
     from adpart.partition import Partition
+    from tests.learning.hierarchical_run import hierarchical_run
 
     mdp = right_chain()
     whole = go_right(mdp, "whole", [0, 1, 2, 3, 4, 5])
@@ -113,13 +113,13 @@ def test_block_layer_virtual_executions_by_hand():
     admissible = np.stack([whole.initiation, tail.initiation], axis=1)
     admissible[6] = True
     layer = Partition(np.arange(7), admissible)
-    kw = {"runs": 1, "episodes": 1, "seed": 0, "alpha": 1.0, "epsilon_greedy": 0.0,
+    kw = {"runs": 1, "episodes": 1, "seed": 0, "alpha": 1.0, "epsilon": 0.0,
           "eval_every": 1, "threshold": np.inf, "flat_explore": False}
-    res = hierarchical_learning(mdp, [whole, tail], layer, intra_option=True, **kw)
+    res = hierarchical_run(mdp, [whole, tail], layer, intra_option=True, **kw)
     Q = res.block_Q[0]
     A = mdp.n_actions
     assert Q[0, A] == pytest.approx(truncated_cost(6))  # the option run
     assert Q[3, A + 1] == pytest.approx(truncated_cost(3))  # its virtual execution from 3
     assert Q[4, A + 1] == 0.0 and Q[5, A + 1] == 0.0  # one virtual run at a time
-    plain = hierarchical_learning(mdp, [whole, tail], layer, intra_option=False, **kw)
+    plain = hierarchical_run(mdp, [whole, tail], layer, intra_option=False, **kw)
     assert plain.block_Q[0][3, A + 1] == 0.0

@@ -21,11 +21,12 @@ from adpart.learning._rmax import (
     sweep,
     value_ceiling,
 )
-from adpart.learning.hierarchical import flat_lower_bound, hierarchical_learning
+from adpart.learning.hierarchical import flat_lower_bound
 from adpart.mdp.model import FiniteMDP, SMDPModel
 from adpart.mdp.solvers import q_from_v, solve
 from adpart.partition.bpsmdp import point_model
 
+from .hierarchical_run import hierarchical_run
 from .test_hierarchical import DELTA, SETTINGS, final_gap, goal_grid, setup  # noqa: F401
 
 TOL = 1e-11
@@ -141,8 +142,8 @@ def test_on_a_deterministic_mdp_the_grounded_values_never_exceed_q_star(seed, st
 def test_with_directed_exploration_refinement_reaches_the_goal_and_kernels_agree(setup):  # noqa: F811
     mdp, opts, part, smdp = setup
     kw = dict(SETTINGS, episodes=300, explore_known=1)
-    on = hierarchical_learning(mdp, opts, part, **kw)
-    off = hierarchical_learning(mdp, opts, part, threshold=np.inf, **kw)
+    on = hierarchical_run(mdp, opts, part, **kw)
+    off = hierarchical_run(mdp, opts, part, threshold=np.inf, **kw)
     np.testing.assert_allclose(final_gap(off), off.v_star_start)  # still never arrives
     assert (on.n_refinements > 0).all()
     assert (final_gap(on) <= 0.05 * on.v_star_start).all()
@@ -154,7 +155,7 @@ def test_with_directed_exploration_refinement_reaches_the_goal_and_kernels_agree
         np.testing.assert_allclose(run[live], Q_star[live], atol=1e-6)
     assert off.Q_grounded is None  # no test, no grounded values
     # planned on the grounded model, the refined layer's greedy policy is its exact optimum
-    plan = hierarchical_learning(mdp, opts, part, layer_values="planned", **kw)
+    plan = hierarchical_run(mdp, opts, part, layer_values="planned", **kw)
     assert plan.parameters["layer_values"] == "planned"
     for k, layer in enumerate(plan.partitions):
         exact = point_model(layer, smdp)
@@ -164,14 +165,14 @@ def test_with_directed_exploration_refinement_reaches_the_goal_and_kernels_agree
     # exploration is R-max's: the layer starts at the lower bound, not at optimistic zeros
     costly = mdp.with_rewards(mdp.R - 0.1)  # a step costs 0.1: the bound is -0.1 / (1 - 0.9)
     quick = dict(SETTINGS, episodes=1, runs=1)
-    assert hierarchical_learning(costly, opts, part, explore_known=1, **quick
+    assert hierarchical_run(costly, opts, part, explore_known=1, **quick
                                  ).parameters["q_init"] == pytest.approx(-0.1 / (1 - 0.9))
-    assert hierarchical_learning(costly, opts, part, **quick).parameters["q_init"] == 0.0
-    assert hierarchical_learning(costly, opts, part, explore_known=1, q_init=-3.0, **quick
+    assert hierarchical_run(costly, opts, part, **quick).parameters["q_init"] == 0.0
+    assert hierarchical_run(costly, opts, part, explore_known=1, q_init=-3.0, **quick
                                  ).parameters["q_init"] == -3.0
     small = dict(kw, runs=2, episodes=60, eval_every=20)
-    a = hierarchical_learning(mdp, opts, part, kernel="numba", **small)
-    b = hierarchical_learning(mdp, opts, part, kernel="python", **small)
+    a = hierarchical_run(mdp, opts, part, kernel="numba", **small)
+    b = hierarchical_run(mdp, opts, part, kernel="python", **small)
     np.testing.assert_array_equal(a.Q, b.Q)
     np.testing.assert_array_equal(a.Q_flat, b.Q_flat)
     assert a.refinements == b.refinements
@@ -181,7 +182,7 @@ def test_with_directed_exploration_refinement_reaches_the_goal_and_kernels_agree
 def test_a_bad_known_count_is_refused(setup, bad):  # noqa: F811
     mdp, opts, part, _ = setup
     with pytest.raises(TaskError, match="explore_known"):
-        hierarchical_learning(mdp, opts, part, explore_known=bad, **SETTINGS)
+        hierarchical_run(mdp, opts, part, explore_known=bad, **SETTINGS)
 
 
 @given(st.integers(0, 500), st.booleans())
@@ -214,7 +215,7 @@ def test_the_counted_layer_model_is_the_task_model_where_counts_are_its_probabil
 def test_planned_layer_values_need_directed_exploration(setup):  # noqa: F811
     mdp, opts, part, _ = setup
     with pytest.raises(TaskError, match="explore_known"):
-        hierarchical_learning(mdp, opts, part, layer_values="planned", **SETTINGS)
+        hierarchical_run(mdp, opts, part, layer_values="planned", **SETTINGS)
     with pytest.raises(TaskError, match="layer_values"):
-        hierarchical_learning(mdp, opts, part, layer_values="guessed", explore_known=1,
+        hierarchical_run(mdp, opts, part, layer_values="guessed", explore_known=1,
                               **SETTINGS)

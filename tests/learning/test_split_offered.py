@@ -16,7 +16,6 @@ import pytest
 from adpart.errors import TaskError
 from adpart.learning.hierarchical import (
     flat_lower_bound,
-    hierarchical_learning,
     refine_block,
     refinement_model,
 )
@@ -26,10 +25,12 @@ from adpart.mdp.solvers import q_from_v, solve
 from adpart.partition import Partition
 from adpart.partition.bpsmdp import point_policy
 
+from .hierarchical_run import hierarchical_run
 from .test_hierarchical import DELTA, setup  # noqa: F401
 
 CELLS, GOAL, HORIZON = 7, 3, 50
-RUN = {"delta": 1.0, "epsilon": None, "runs": 3, "episodes": 60, "seed": 0, "eval_every": 10,
+RUN = {"delta": 1.0, "partition_epsilon": None, "runs": 3, "episodes": 60, "seed": 0,
+       "eval_every": 10,
        "explore_known": 1, "reference": "policy", "refine": "block", "layer_values": "planned",
        "max_steps_per_episode": HORIZON}
 
@@ -62,7 +63,7 @@ def test_the_block_policy_fails_half_the_corridor_and_the_seeds_test_cannot_see_
     values = policy_evaluation(smdp, best, never=lower)
     assert len(set(best[np.arange(CELLS) != GOAL].tolist())) == 1  # one move for the block
     assert np.isclose(values, lower).sum() == 3  # the three cells on the other side never arrive
-    off = hierarchical_learning(mdp, [], one_block(), **RUN)
+    off = hierarchical_run(mdp, [], one_block(), **RUN)
     assert off.refinements == []  # both moves are offered: the seed's test never fires
     assert (final_gap(off) > 0.05 * abs(off.v_star_start)).all()
 
@@ -73,7 +74,7 @@ def test_splitting_where_an_offered_action_beats_the_layer_policy_reaches_the_op
     the final layer's best policy is optimal and every run's greedy policy exact."""
     mdp = corridor()
     smdp = mdp.as_smdp()
-    on = hierarchical_learning(mdp, [], one_block(), split_offered=True, **RUN)
+    on = hierarchical_run(mdp, [], one_block(), split_offered=True, **RUN)
     assert on.parameters["split_offered"] is True
     np.testing.assert_allclose(final_gap(on), 0.0, atol=1e-9)
     q_star = q_from_v(mdp, solve(mdp, 1e-12).V)
@@ -96,8 +97,8 @@ def test_splitting_where_an_offered_action_beats_the_layer_policy_reaches_the_op
 def test_the_kernels_agree_when_splitting_offered_actions():
     mdp = corridor()
     kw = dict(RUN, split_offered=True, runs=2, episodes=30)
-    a = hierarchical_learning(mdp, [], one_block(), kernel="numba", **kw)
-    b = hierarchical_learning(mdp, [], one_block(), kernel="python", **kw)
+    a = hierarchical_run(mdp, [], one_block(), kernel="numba", **kw)
+    b = hierarchical_run(mdp, [], one_block(), kernel="python", **kw)
     assert a.refinements == b.refinements and a.refinements
     np.testing.assert_array_equal(a.Q, b.Q)
     np.testing.assert_array_equal(a.blocks, b.blocks)
@@ -126,6 +127,6 @@ def test_refine_block_at_a_state_with_an_offered_column_splits_it_off_with_the_b
 
 
 def test_split_offered_needs_the_policy_reference():
-    with pytest.raises(TaskError, match="reference = 'policy'"):
-        hierarchical_learning(corridor(), [], one_block(), **dict(RUN, reference="offered"),
+    with pytest.raises(TaskError, match="give reference = policy"):
+        hierarchical_run(corridor(), [], one_block(), **dict(RUN, reference="offered"),
                               split_offered=True)

@@ -22,7 +22,7 @@ from hypothesis import strategies as st
 
 from adpart.errors import ModelError
 from adpart.learning.curves import start_distribution
-from adpart.learning.hierarchical import build_decision_layer, hierarchical_learning
+from adpart.learning.hierarchical import build_decision_layer
 from adpart.mdp.model import FiniteMDP, SMDPModel
 from adpart.options.models import option_models
 from adpart.options.smdp import stack_models
@@ -36,6 +36,7 @@ from adpart.partition.layer import (
     step_baseline,
 )
 from adpart.partition.partition import canonical_labels
+from tests.learning.hierarchical_run import hierarchical_run
 from tests.partition.test_partition_properties import brute_force_bisimulation, planted_mdps
 
 # --------------------------------------------------------------------------- reachability
@@ -273,7 +274,7 @@ def test_unreachable_states_are_one_block_outside_the_layer_and_learners_still_r
     assert layer.partition.admissible[layer.partition.labels[20], :2].all()
     assert check_stability(layer.phases.decision_view, layer.model, delta=0.3, epsilon=10.0,
                            rewards=layer.phases.rewards).ok
-    result = hierarchical_learning(mdp, options, layer.partition, delta=0.3, epsilon=10.0,
+    result = hierarchical_run(mdp, options, layer.partition, delta=0.3, partition_epsilon=10.0,
                                    runs=1, episodes=3, seed=0, eval_every=3,
                                    max_steps_per_episode=200)
     assert result.curve.n_runs == 1
