@@ -179,43 +179,44 @@ class SettingField:
                      choices=b.choices, min=b.min, max=b.max, none=b.none, check=b.check)
 
     def validate(self, value: Any) -> Any:
-        """``value`` checked against the declaration; raises TaskError naming the field."""
+        """``value`` checked against the declaration; raises TaskError naming the field and its
+        command-line option."""
         from adpart.errors import TaskError
 
         b = self.bounds
+        def fail(problem: str) -> TaskError:
+            return TaskError(f"{self.owner}: {self.name} = {value!r}{problem} ({self.option})")
+
         if value is None:
             if self.default is None or b.none is not None:
                 return None
-            raise TaskError(f"{self.owner}: {self.name} = None; give a {b.kind}")
+            raise fail(f"; give a {b.kind}")
         if b.kind == "bool":
             if not isinstance(value, (bool, np_bool())):
-                raise TaskError(f"{self.owner}: {self.name} = {value!r} must be true or false")
+                raise fail(" must be true or false")
             return bool(value)
         if b.kind in ("int", "float"):
             ok = isinstance(value, (int, float)) and not isinstance(value, bool)
             ok = ok or _is_numpy_number(value)
             if not ok or (b.kind == "int" and int(value) != value):
-                raise TaskError(f"{self.owner}: {self.name} = {value!r} must be "
-                                f"{'an integer' if b.kind == 'int' else 'a number'}")
+                raise fail(f" must be {'an integer' if b.kind == 'int' else 'a number'}")
             value = int(value) if b.kind == "int" else float(value)
             if math.isnan(value) or (b.finite and math.isinf(value)):
-                raise TaskError(f"{self.owner}: {self.name} = {value!r} must be finite")
+                raise fail(" must be finite")
             low = b.min if b.min is not None else -math.inf
             high = b.max if b.max is not None else math.inf
             if not low <= value <= high:
-                raise TaskError(f"{self.owner}: {self.name} = {value!r} is outside "
-                                f"[{_fmt(low)}, {_fmt(high)}]; {self.help}")
+                raise fail(f" is outside [{_fmt(low)}, {_fmt(high)}]: {self.help}")
             return value
         if not isinstance(value, str):
-            raise TaskError(f"{self.owner}: {self.name} = {value!r} must be a string")
+            raise fail(" must be a string")
         if b.choices is not None and value not in b.choices:
-            raise TaskError(f"{self.owner}: {self.name} = {value!r}; choose one of "
-                            f"{', '.join(b.choices)}")
+            raise fail(f"; choose one of {', '.join(b.choices)}")
         if b.check is not None:
             try:
                 b.check(value)
             except AdpartError as exc:
-                raise TaskError(f"{self.owner}: {self.name} = {value!r}: {exc}") from None
+                raise fail(f": {exc}") from None
         return value
 
 

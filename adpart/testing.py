@@ -212,7 +212,7 @@ def check_criterion(cls: type, mdp: FiniteMDP | None = None) -> None:
     from adpart.options.smdp import options_smdp
 
     mdp = mdp if mdp is not None else _default_mdp()
-    model, _ = options_smdp(mdp, primitive_options(mdp))
+    model, _ = options_smdp(mdp, primitive_options(mdp), include_primitives=False)
     start = Partition.from_labels(mdp.terminal.astype(np.int64), model.admissible)
     out = criterion.refine(start, model, options=np.arange(model.n_actions), rewards=model.R,
                            termination=np.ones(model.admissible.shape, dtype=bool))

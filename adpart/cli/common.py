@@ -302,10 +302,11 @@ def settings_options(cls: type, keyword: str):  # type: ignore[no-untyped-def]
                 option = click.option(f"{name}/--no-{p.name}", f"{keyword}__{p.keyword}",
                                       default=p.default, show_default=True, help=p.help)
             else:
-                shown = p.none if p.default is None else p.default
                 option = click.option(name, f"{keyword}__{p.keyword}",
                                       type=_SettingType(p, _setting_metavar(p)),
-                                      default=p.default, show_default=str(shown), help=p.help)
+                                      default=p.default,
+                                      show_default=True if p.default is not None else p.none,
+                                      help=p.help)
             command = option(command)
         return command
 

@@ -6,11 +6,11 @@ import time
 
 import click
 
-from adpart.cli.common import FiniteFloat, echo_json, kb_location_options, registry
+from adpart.cli.common import echo_json, kb_location_options, registry, settings_options
 from adpart.errors import TaskError
-from adpart.options.subgoal_options import LOCAL_RADIUS
+from adpart.options.subgoal_options import InitiationSettings
 from adpart.store.location import KBLocation
-from adpart.workflows.options import INITIATIONS, options_for_subgoals
+from adpart.workflows.options import options_for_subgoals
 from adpart.workflows.refs import get_ref
 
 
@@ -23,22 +23,7 @@ from adpart.workflows.refs import get_ref
     metavar="ID",
     help="The subgoal set (subgoal-set:N or N), from `adpart discover`.",
 )
-@click.option(
-    "--initiation",
-    type=click.Choice(INITIATIONS),
-    default="local",
-    show_default=True,
-    help="Initiation set: local (the basin's states within --radius steps of the subgoal), "
-    "the whole basin, or every state that can reach it.",
-)
-@click.option(
-    "--radius",
-    type=FiniteFloat(min=1.0, what="steps of a local initiation set"),
-    default=LOCAL_RADIUS,
-    show_default=True,
-    help="Steps of a local initiation set: states whose option reaches the subgoal with "
-    "E[gamma^tau] >= gamma^radius.",
-)
+@settings_options(InitiationSettings, "initiation")
 @click.option(
     "--cover/--no-cover",
     default=True,
@@ -57,8 +42,7 @@ from adpart.workflows.refs import get_ref
 def options_cmd(
     env: str,
     subgoals_ref: str,
-    initiation: str,
-    radius: float,
+    initiation: InitiationSettings,
     cover: bool,
     executor: str,
     as_json: bool,
@@ -86,8 +70,8 @@ def options_cmd(
             )
         start = time.perf_counter()
         with registry().get("executor", executor).create() as ex:
-            stored = options_for_subgoals(kb, subgoal_set, initiation=initiation,
-                                          radius=radius, cover=cover, executor=ex)
+            stored = options_for_subgoals(kb, subgoal_set, initiation, cover=cover,
+                                          executor=ex)
         seconds = time.perf_counter() - start
     finally:
         kb.close()
@@ -104,9 +88,9 @@ def options_cmd(
     result = {
         "env": env,
         "subgoal_set": subgoal_set.ref,
-        "initiation": initiation,
-        "radius": radius if initiation == "local" else None,
-        "cover": cover if initiation == "local" else None,
+        "initiation": initiation.initiation,
+        "radius": initiation.radius if initiation.initiation == "local" else None,
+        "cover": cover if initiation.initiation == "local" else None,
         "reused": stored.reused,
         "seconds": round(seconds, 3),
         "options": rows,

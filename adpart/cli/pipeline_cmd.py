@@ -11,7 +11,6 @@ import click
 
 from adpart.cli.common import (
     CLIError,
-    FiniteFloat,
     check_criterion,
     dumps,
     echo_json,
@@ -22,8 +21,7 @@ from adpart.cli.common import (
     settings_options,
 )
 from adpart.errors import AdpartError
-from adpart.options.subgoal_options import INITIATION_CHOICES as INITIATIONS
-from adpart.options.subgoal_options import LOCAL_RADIUS
+from adpart.options.subgoal_options import InitiationSettings
 from adpart.partition.settings import PartitionSettings
 from adpart.store.location import KBLocation
 from adpart.workflows.partitioning import DEFAULT_CRITERION
@@ -116,20 +114,7 @@ def _say(quiet: bool):  # type: ignore[no-untyped-def]
     metavar="KEY=VALUE",
     help="A detector parameter (repeatable), e.g. --detector-opt p=0.025.",
 )
-@click.option(
-    "--initiation",
-    type=click.Choice(INITIATIONS),
-    default="local",
-    show_default=True,
-    help="Initiation sets of the subgoal options (see `adpart options --help`).",
-)
-@click.option(
-    "--radius",
-    type=FiniteFloat(min=1.0, what="steps of a local initiation set"),
-    default=LOCAL_RADIUS,
-    show_default=True,
-    help="Steps of a local initiation set.",
-)
+@settings_options(InitiationSettings, "initiation")
 @settings_options(PartitionSettings, "partition")
 @click.option(
     "--criterion",
@@ -207,8 +192,7 @@ def pipeline_cmd(
     tasks: str,
     detector: str,
     detector_opt: tuple[str, ...],
-    initiation: str,
-    radius: float,
+    initiation: InitiationSettings,
     partition: PartitionSettings,
     criterion: str,
     criterion_opt: tuple[str, ...],
@@ -258,7 +242,6 @@ def pipeline_cmd(
         detector=detector,
         detector_params=key_values(detector_opt, "--detector-opt"),
         initiation=initiation,
-        radius=radius,
         partition=partition,
         criterion=criterion,
         criterion_params=key_values(criterion_opt, "--criterion-opt"),

@@ -243,7 +243,7 @@ def _parr(config: ExperimentConfig, *, mini: bool) -> ExperimentReport:
     from adpart.learning.maxq import get_graph, recursively_optimal
     from adpart.learning.qlearning import q_learning
     from adpart.learning.settings import Run
-    from adpart.learning.smdp_q import option_set, smdp_q_learning
+    from adpart.learning.smdp_q import SMDPQSettings, option_set, smdp_q_learning
     from adpart.options.models import option_models
     from adpart.options.subgoal_options import subgoal_options
     from adpart.params import build_settings
@@ -319,8 +319,8 @@ def _parr(config: ExperimentConfig, *, mini: bool) -> ExperimentReport:
               "eval_every": s["eval_every"], "max_steps_per_episode": s["horizon"],
               "alpha": ALPHA}
     config.progress("maze task: SMDP Q on the discovered options")
-    smdp = smdp_q_learning(mdp, options, include_primitives=True, models=models,
-                           epsilon=EPSILON, q_init=from_below, **common)
+    smdp = smdp_q_learning(mdp, options, SMDPQSettings(include_primitives=True),
+                           Run(epsilon=EPSILON, q_init=from_below, **common), models)
     v_star = float(smdp.v_star_start)
     smdp_final = smdp.curve.matrix("value_gap")[:, -1]
     never_gap = v_star - from_below

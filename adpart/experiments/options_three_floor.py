@@ -92,7 +92,8 @@ def options_three_floor(config: ExperimentConfig) -> ExperimentReport:
     """Discover subgoals on reach-goal, learn options, learn reach-top-west flat and on SMDPs."""
     from adpart.learning.curves import plot_curves
     from adpart.learning.qlearning import q_learning
-    from adpart.learning.smdp_q import option_set, smdp_q_learning
+    from adpart.learning.settings import Run
+    from adpart.learning.smdp_q import SMDPQSettings, option_set, smdp_q_learning
     from adpart.mdp.solvers import solve
     from adpart.subgoals import discover_exhaustive
     from adpart.workflows.resolve import resolve_domain as get_domain
@@ -162,8 +163,8 @@ def options_three_floor(config: ExperimentConfig) -> ExperimentReport:
     results: dict[str, Any] = {FLAT: q_learning(mdp, **common)}
     for name, (options, models, prims) in built.items():
         config.progress(f"learning {NEW_TASK}: SMDP Q over {name}")
-        results[f"SMDP Q, {name}"] = smdp_q_learning(mdp, options, models=models,
-                                                     include_primitives=prims, **common)
+        results[f"SMDP Q, {name}"] = smdp_q_learning(
+            mdp, options, SMDPQSettings(include_primitives=prims), Run(**common), models)
     curves = {k: r.curve for k, r in results.items()}
     v_start = float(results[FLAT].v_star_start)
     never = -1.0 / (1.0 - mdp.gamma)  # the value of a policy that never reaches the goal

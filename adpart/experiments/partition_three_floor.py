@@ -122,7 +122,7 @@ def _learn(mdp: Any, options: list[Any], models: list[Any], partition: Any, s: d
     if "flat" in which:
         out["flat Q-learning"] = q_learning(mdp, **common)
     if "smdp" in which:
-        out["SMDP Q (options)"] = smdp_q_learning(mdp, options, models=models, **common)
+        out["SMDP Q (options)"] = smdp_q_learning(mdp, options, None, Run(**common), models)
     if "hier" in which:
         out["partition space"] = hierarchical_learning(
             mdp, options, partition,

@@ -129,6 +129,7 @@ def _plot_blocks(blocks: dict[str, np.ndarray], path: Path) -> str:
 )
 def task_sequence(config: ExperimentConfig) -> ExperimentReport:
     """Five urban tasks on automatically built layers vs flat; task five vs all-subgoals."""
+    from adpart.options.subgoal_options import InitiationSettings
     from adpart.workflows.hierarchy import hierarchy_layer
     from adpart.workflows.knowledge import working_kb
     from adpart.workflows.pipeline import PipelineConfig, run_pipeline
@@ -145,7 +146,8 @@ def task_sequence(config: ExperimentConfig) -> ExperimentReport:
          "for all-subgoals; after learning both end with a similar number of blocks."),
     ]
     pcfg = PipelineConfig(
-        env=ENV, tasks=TASKS, detector_params={"on-loop": "truncate"}, initiation="reachable",
+        env=ENV, tasks=TASKS, detector_params={"on-loop": "truncate"},
+        initiation=InitiationSettings(initiation="reachable"),
         runs=s["runs"], episodes=s["episodes"], first_episodes=s["first_episodes"],
         seed=config.seed, eval_every=s["eval_every"],
         flat_params=s["flat"], hierarchical_params=s["hierarchical"],

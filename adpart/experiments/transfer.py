@@ -313,7 +313,7 @@ def budget(config: ExperimentConfig, full: dict[str, int], quick: dict[str, int]
 def three_floor(config: ExperimentConfig) -> ExperimentReport:
     """Pipeline (discovered) plus hand-designed subgoals, SMDP Q, refinement vs reward variation."""
     from adpart.learning.hierarchical import decision_layer, hierarchical_learning
-    from adpart.learning.smdp_q import smdp_q_learning
+    from adpart.learning.smdp_q import SMDPQSettings, smdp_q_learning
     from adpart.options.handmade import doorway_options
     from adpart.options.models import option_models
     from adpart.workflows.partitioning import plot_partition
@@ -335,8 +335,8 @@ def three_floor(config: ExperimentConfig) -> ExperimentReport:
     ctx = _transfer(config, setup, report)
     mdp, common = ctx["mdp"], ctx["common"]
     config.progress("three-floor: SMDP Q over the discovered options + primitives")
-    smdp = smdp_q_learning(mdp, ctx["options"], include_primitives=True, models=ctx["models"],
-                           **common)
+    smdp = smdp_q_learning(mdp, ctx["options"], SMDPQSettings(include_primitives=True),
+                           Run(**common), ctx["models"])
     config.progress("three-floor: hand-designed doorway options")
     hand = doorway_options(mdp)
     hand_models = option_models(mdp, hand, duration=False)

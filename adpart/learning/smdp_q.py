@@ -53,15 +53,16 @@ from adpart.learning.curves import (
 )
 from adpart.learning.qlearning import BLOCK_ROWS
 from adpart.learning.result import LearnResult
-from adpart.learning.schedules import Schedule, constant, visit_count
-from adpart.learning.settings import run_settings
+from adpart.learning.schedules import Schedule
+from adpart.learning.settings import Run, run_settings
 from adpart.mdp.evaluation import greedy_policy
 from adpart.mdp.model import FiniteMDP, SMDPModel
 from adpart.options.models import OptionModel, option_models
 from adpart.options.option import Option, primitive_options
 from adpart.options.smdp import stack_models
+from adpart.params import setting, settings
 
-__all__ = ["SMDPQResult", "compile_options", "option_set", "smdp_q_learning"]
+__all__ = ["SMDPQResult", "SMDPQSettings", "compile_options", "option_set", "smdp_q_learning"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -394,39 +395,36 @@ def drive(
     return eval_value
 
 
+@settings
+class SMDPQSettings:
+    """The settings of SMDP Q-learning over options (section 3.1) beyond its run."""
+
+    include_primitives: bool = setting(False)
+    """offer the primitive actions beside the options (their one-step options first)."""
+
+    intra_option: bool = setting(False)
+    """also update every option consistent with each primitive step (intra-option Q-learning,
+    Sutton, Precup & Singh 1999)."""
+
+
 def smdp_q_learning(
     mdp: FiniteMDP,
     options: Sequence[Option] = (),
-    *,
-    include_primitives: bool = False,
+    settings: SMDPQSettings | None = None,
+    run: Run | None = None,
     models: Sequence[OptionModel] | None = None,
-    runs: int = 10,
-    episodes: int = 500,
-    seed: int | None = None,
-    alpha: Schedule | str | float = visit_count(0.8),  # noqa: B008 (immutable)
-    epsilon: Schedule | str | float = constant(0.1),  # noqa: B008 (immutable)
-    max_steps_per_episode: int = 1000,
-    eval_every: int = 10,
-    reference_values: np.ndarray | None = None,
-    progress: Callable[[int, int], object] | None = None,
-    q_init: float = 0.0,
-    kernel: str | None = None,
-    intra_option: bool = False,
 ) -> SMDPQResult:
-    """Learn ``mdp`` over ``options`` with ``runs`` independent SMDP Q-learners in lock-step.
+    """Learn ``mdp`` over ``options`` with ``run.runs`` independent SMDP Q-learners in lock-step.
 
     Args:
         mdp: the task.
-        options: the options (section 3.1); see ``include_primitives``.
-        include_primitives: put the primitive actions' one-step options first.
+        options: the options (section 3.1); see ``settings.include_primitives``.
+        settings: :class:`SMDPQSettings` (default ``SMDPQSettings()``).
+        run: runs, episodes, seed, schedules (``alpha`` counts updates of ``(s, o)``,
+            ``epsilon`` decisions in ``s``), step limit, evaluation, ``q_init`` (default 0),
+            kernel (``numba`` or ``python``, identical results) and progress
+            (:class:`~adpart.learning.settings.Run`; default ``Run()``).
         models: exact models of ``options`` (same order), for scoring; computed when omitted.
-        runs: as :func:`adpart.learning.q_learning`, and so are ``episodes``, ``seed``,
-            ``alpha`` (it counts updates of ``(s, o)``), ``epsilon`` (decisions in ``s``),
-            ``max_steps_per_episode``, ``eval_every``, ``reference_values``, ``progress`` and
-            ``q_init``.
-        kernel: ``"numba"`` or ``"python"`` (identical results).
-        intra_option: also update every option consistent with each primitive step
-            (intra-option Q-learning, Sutton, Precup & Singh 1999; :mod:`._smdp_kernels`).
 
     Returns:
         An :class:`SMDPQResult`.
@@ -434,12 +432,18 @@ def smdp_q_learning(
     Raises:
         TaskError: a setting out of range. ModelError: bad options or MDP.
     """
-    cfg = run_settings("smdp_q_learning", mdp, runs=runs, episodes=episodes,
-                       eval_every=eval_every, max_steps_per_episode=max_steps_per_episode,
-                       seed=seed, alpha=alpha, epsilon=epsilon, q_init=q_init)
+    settings = SMDPQSettings() if settings is None else settings
+    run = Run() if run is None else run
+    include_primitives, intra_option = settings.include_primitives, settings.intra_option
+    q_init = 0.0 if run.q_init is None else run.q_init
+    reference_values, progress = run.reference_values, run.progress
+    cfg = run_settings("smdp_q_learning", mdp, runs=run.runs, episodes=run.episodes,
+                       eval_every=run.eval_every,
+                       max_steps_per_episode=run.max_steps_per_episode, seed=run.seed,
+                       alpha=run.alpha, epsilon=run.epsilon, q_init=q_init)
     K, N, M, H, root_seed = cfg.runs, cfg.episodes, cfg.eval_every, cfg.horizon, cfg.seed
     alpha_s, eps_s = cfg.alpha, cfg.epsilon
-    name, step_kernel = kernel_function(kernel)
+    name, step_kernel = kernel_function(run.kernel)
     full, smdp = option_set(mdp, options, include_primitives=include_primitives, models=models)
     S = mdp.n_states
     state_adm = smdp.admissible  # terminal rows: every option, never chosen (episode over)

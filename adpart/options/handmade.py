@@ -26,7 +26,12 @@ from scipy.sparse import csgraph
 
 from adpart.errors import ModelError
 from adpart.options.option import Option
-from adpart.options.subgoal_options import policy_to, subgoal_options, transition_graph
+from adpart.options.subgoal_options import (
+    InitiationSettings,
+    policy_to,
+    subgoal_options,
+    transition_graph,
+)
 
 if TYPE_CHECKING:
     from adpart.envs.grid import GridDomain
@@ -121,7 +126,12 @@ def wall_options(domain: GridDomain, mdp: FiniteMDP | None = None) -> list[Optio
     return options
 
 
-def doorway_options(mdp: FiniteMDP, *, initiation: str = "basin",
+#: The hand-designed doorway options start anywhere in their doorway's basin (Fig. 5.1: "from
+#: anywhere in the room"), not in the discovered options' local ball.
+DOORWAY_INITIATION = InitiationSettings(initiation="basin")
+
+
+def doorway_options(mdp: FiniteMDP, *, initiation: InitiationSettings = DOORWAY_INITIATION,
                     pseudo_gamma: float | None = None) -> list[Option]:
     """Options to every doorway and stair cell (three-floor's hand-designed subgoals, Fig. 5.1)."""
     feats = mdp.features
@@ -132,5 +142,5 @@ def doorway_options(mdp: FiniteMDP, *, initiation: str = "basin",
     for key in (door_key, "stair"):
         if key in feats:
             hubs |= np.asarray(feats[key]) == 1
-    return subgoal_options(mdp, hubs, initiation=initiation,
-                           pseudo_gamma=pseudo_gamma)
+    return subgoal_options(mdp, hubs, initiation=initiation.initiation,
+                           radius=initiation.radius, pseudo_gamma=pseudo_gamma)

@@ -35,7 +35,7 @@ if TYPE_CHECKING:
 
 
 def stack_models(
-    mdp: FiniteMDP, models: list[OptionModel], *, include_primitives: bool | str = False
+    mdp: FiniteMDP, models: list[OptionModel], *, include_primitives: bool | str
 ) -> SMDPModel:
     """The SMDP whose actions are the primitive actions (optionally) followed by ``models``.
 
@@ -103,7 +103,7 @@ def options_smdp(
     mdp: FiniteMDP,
     options: list[Option],
     *,
-    include_primitives: bool = False,
+    include_primitives: bool,
     executor: ItemMapper | None = None,
 ) -> tuple[SMDPModel, list[OptionModel]]:
     """Exact models of ``options`` (through ``executor``) stacked into an SMDP."""

@@ -14,9 +14,9 @@ For a subgoal ``g`` the option is built in three parts:
     horizon, so a state whose route is long *or* unreliable is left out. This is the seed's
     "options terminate when they reach the subgoal in the same room" (chapter 6) without a
     map: an option is offered only where its subgoal is near. ``radius`` defaults to
-    :data:`LOCAL_RADIUS`, chosen by measurement (docs/options.md: three-floor, Parr's maze,
-    urban). The whole basin was measured to make SMDP Q-learning 11.9x slower than flat on
-    three-floor: there an untried option (Q = 0 is optimistic against -1 a step) carries the
+    :class:`InitiationSettings`' radius, chosen by measurement (docs/options.md: three-floor,
+    Parr's maze, urban). The whole basin was measured to make SMDP Q-learning 11.9x slower than
+    flat on three-floor: there an untried option (Q = 0 is optimistic against -1 a step) carries the
     agent 25-67 steps back towards the old task's subgoal.
   - ``"basin"``: the states, other than ``g`` and not terminal, from which ``g`` can be
     reached (with positive probability, under some policy) by a path whose intermediate states
@@ -48,10 +48,11 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
-from adpart.errors import ModelError
+from adpart.errors import ModelError, TaskError
 from adpart.mdp.model import FiniteMDP
 from adpart.mdp.solvers import solve
 from adpart.options.option import Option
+from adpart.params import setting, settings
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -61,8 +62,6 @@ UNDISCOUNTED_PSEUDO_GAMMA = 0.99
 #: Solver accuracy of the pseudo-reward task (its values lie in [0, 1]).
 PSEUDO_EPSILON = 1e-10
 INITIATION_CHOICES = ("local", "basin", "reachable")
-#: Default radius (steps) of ``"local"`` initiation sets (module docstring; docs/options.md).
-LOCAL_RADIUS = 30
 #: Relative slack of the ``"local"`` test ``V_g >= gamma**radius``, so that a state exactly
 #: ``radius`` steps away is kept despite the solver's rounding.
 RADIUS_RTOL = 1e-9
@@ -144,17 +143,6 @@ def pseudo_discount(mdp: FiniteMDP, pseudo_gamma: float | None = None) -> float:
     return g
 
 
-def check_radius(radius: object) -> float:
-    """``radius`` as a float >= 1 (``inf`` allowed), else a :class:`ModelError` naming it."""
-    try:
-        r = float(radius)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
-        r = float("nan")
-    if not r >= 1.0:  # NaN fails too
-        raise ModelError(f"radius = {radius!r} must be a number of steps >= 1 (--radius)")
-    return r
-
-
 def policy_to(
     mdp: FiniteMDP,
     subgoal: int,
@@ -206,13 +194,36 @@ def start_value(mdp: FiniteMDP, subgoal: int, V: np.ndarray,
     return _reach_q(mdp, subgoal, V, pseudo_discount(mdp, pseudo_gamma)).max(axis=1)
 
 
+@settings
+class InitiationSettings:
+    """Where an option to a subgoal may start (module docstring; docs/options.md)."""
+
+    initiation: str = setting("local", choices=INITIATION_CHOICES)
+    """initiation sets of the subgoal options: the states of the subgoal's basin within radius
+    steps of it (local), the basin bounded by the other subgoals (basin), or every state that
+    can reach it (reachable)."""
+
+    radius: float = setting(30.0, min=1.0, finite=False)
+    """steps of a local initiation set (a number >= 1; inf is the basin)."""
+
+
+def resolve_initiation(initiation: str | None, radius: float | None) -> tuple[str, float]:
+    """``(initiation, radius)`` with None read from :class:`InitiationSettings`, checked there."""
+    given = {k: v for k, v in (("initiation", initiation), ("radius", radius)) if v is not None}
+    try:
+        chosen = InitiationSettings(**given)
+    except TaskError as exc:
+        raise ModelError(str(exc)) from None
+    return chosen.initiation, chosen.radius
+
+
 def subgoal_option(
     mdp: FiniteMDP,
     subgoal: int,
     *,
     subgoals: object = (),
-    initiation: str | np.ndarray = "local",
-    radius: float = LOCAL_RADIUS,
+    initiation: str | np.ndarray | None = None,
+    radius: float | None = None,
     pseudo_gamma: float | None = None,
     name: str | None = None,
 ) -> Option:
@@ -221,8 +232,9 @@ def subgoal_option(
     Args:
         subgoals: all subgoals (ids or mask); with ``"basin"`` and ``"local"`` the others bound
             the basin.
-        initiation: ``"local"``, ``"basin"``, ``"reachable"`` or an ``(S,)`` bool mask.
-        radius: steps of a ``"local"`` initiation set (a number >= 1; ``inf`` is the basin).
+        initiation: ``"local"``, ``"basin"``, ``"reachable"`` or an ``(S,)`` bool mask (None:
+            :class:`InitiationSettings`' default).
+        radius: steps of a ``"local"`` initiation set (None: :class:`InitiationSettings`').
 
     Raises:
         ModelError: unknown ``initiation``, a bad ``radius``, an empty initiation set, or (with a
@@ -235,7 +247,8 @@ def subgoal_option(
     label = name or f"to-{subgoal}"
     others = _subgoal_mask(subgoals, S)
     others[subgoal] = False
-    radius = check_radius(radius)
+    if initiation is None or isinstance(initiation, str):  # a mask needs no radius
+        initiation, radius = resolve_initiation(initiation, radius)
     if isinstance(initiation, str):
         if initiation in ("basin", "local"):
             init = basin(mdp, subgoal, others)
@@ -296,8 +309,8 @@ def subgoal_options(
     mdp: FiniteMDP,
     subgoals: Sequence[int] | np.ndarray,
     *,
-    initiation: str = "local",
-    radius: float = LOCAL_RADIUS,
+    initiation: str | None = None,
+    radius: float | None = None,
     cover: bool = False,
     pseudo_gamma: float | None = None,
 ) -> list[Option]:
@@ -314,13 +327,13 @@ def subgoal_options(
     """
     mask = _subgoal_mask(subgoals, mdp.n_states)
     goals = np.flatnonzero(mask)
-    if not (cover and isinstance(initiation, str) and initiation == "local"):
+    initiation, radius = resolve_initiation(initiation, radius)
+    if not (cover and initiation == "local"):
         return [
             subgoal_option(mdp, int(g), subgoals=mask, initiation=initiation, radius=radius,
                            pseudo_gamma=pseudo_gamma)
             for g in goals
         ]
-    radius = check_radius(radius)
     parts = [_basin_parts(mdp, int(g), mask, pseudo_gamma) for g in goals]
     if not parts:
         return []

@@ -547,7 +547,7 @@ class KnowledgeBase(Queries, Tables, Maintenance):
 
     def put_partition(self, environment: E.Environment | int, kind: str, labels: Any, *,
                       options: Sequence[E.Option | int] = (), includes_primitives: bool = True,
-                      epsilon: float = 0.0, delta: float = 0.0, block_actions: Any = None,
+                      epsilon: float, delta: float, block_actions: Any = None,
                       parents: Iterable[E.Partition | int] = (), task: E.Task | int | None = None,
                       plugin: str = "", plugin_version: str = "",
                       parameters: Mapping[str, Any] | None = None) -> E.Partition:

@@ -174,6 +174,7 @@ def store_layer(kb: KnowledgeStore, inputs: HierarchyInputs, result: HierarchyRe
     rec = kb.put_partition(
         kb.find_environment(inputs.environment), "hierarchy", result.partition.labels,
         options=list(result.option_ids), includes_primitives=True,
+        epsilon=0.0, delta=0.0,  # Algorithm 3's layer claims no bound of eqs. 4.6-4.7
         block_actions=result.partition.admissible, parents=inputs.parent_ids, plugin=estimator,
         parameters=params,
     )
@@ -296,6 +297,7 @@ def _with_options(kb: KnowledgeStore, env: Any, rec: Any, option_ids: list[int]
     adm = np.concatenate([adm, np.zeros((adm.shape[0], len(option_ids)), dtype=bool)], axis=1)
     padded = kb.put_partition(
         env, "hierarchy", labels, options=list(option_ids), includes_primitives=True,
+        epsilon=rec.epsilon, delta=rec.delta,
         block_actions=adm, parents=[rec.id], plugin="adpart.workflows.pipeline",
         parameters={"from": rec.ref, "reason": "options offered in no block, for refinement"},
     )

@@ -14,21 +14,14 @@ from typing import Any
 
 import numpy as np
 
-from adpart.errors import ModelError, TaskError
+from adpart.errors import TaskError
 from adpart.execution import Executor
 from adpart.mdp.model import FiniteMDP
 from adpart.options.models import OptionModel, option_models
 from adpart.options.option import Option
-from adpart.options.subgoal_options import (
-    INITIATION_CHOICES,
-    LOCAL_RADIUS,
-    check_radius,
-    subgoal_options,
-)
+from adpart.options.subgoal_options import InitiationSettings, subgoal_options
 from adpart.workflows.resolve import resolve_domain
 from adpart.workflows.store import KnowledgeStore
-
-INITIATIONS = INITIATION_CHOICES
 
 
 @dataclass(frozen=True, eq=False)
@@ -68,9 +61,8 @@ def source_task_id(kb: KnowledgeStore, subgoal_set: Any) -> int | None:
 def options_for_subgoals(
     kb: KnowledgeStore,
     subgoal_set: Any,
+    initiation: InitiationSettings | None = None,
     *,
-    initiation: str = "local",
-    radius: float = LOCAL_RADIUS,
     cover: bool = True,
     executor: Executor | None = None,
 ) -> StoredOptions:
@@ -84,14 +76,10 @@ def options_for_subgoals(
 
     Options already in the knowledge base for these subgoals with the same initiation rule (and,
     for ``local``, the same radius and cover) are loaded instead of rebuilt (``reused=True``).
+    ``initiation`` defaults to ``InitiationSettings()``.
     """
-    if initiation not in INITIATIONS:
-        raise TaskError(
-            f"initiation {initiation!r} is not one of {', '.join(INITIATIONS)} (--initiation)")
-    try:
-        radius = check_radius(radius)
-    except ModelError as exc:
-        raise TaskError(str(exc)) from None
+    chosen = InitiationSettings() if initiation is None else initiation
+    initiation, radius = chosen.initiation, chosen.radius
     rule: dict[str, Any] = {"initiation": initiation}
     if initiation == "local":
         rule["radius"] = radius

@@ -43,7 +43,7 @@ import numpy as np
 from adpart.errors import TaskError
 from adpart.learning.comparison import best_final_run, ratio_to_flat, task_row
 from adpart.learning.curves import LearningCurve
-from adpart.options.subgoal_options import LOCAL_RADIUS
+from adpart.options.subgoal_options import InitiationSettings
 from adpart.partition.settings import PartitionSettings
 from adpart.workflows.discovery import discover_subgoals
 from adpart.workflows.hierarchy import Layer, hierarchy_layer
@@ -72,8 +72,9 @@ class PipelineConfig:
         env: environment name.
         tasks: the task sequence; the first is learned flat, the others on the decision layer.
         detector, detector_params: the subgoal detector plugin and its parameters.
-        initiation, radius: initiation sets of the subgoal options (``local`` with its radius in
-            steps, ``basin`` or ``reachable``; :mod:`adpart.options.subgoal_options`).
+        initiation: initiation sets of the subgoal options (``local`` with its radius in steps,
+            ``basin`` or ``reachable``;
+            :class:`~adpart.options.subgoal_options.InitiationSettings`).
         partition: the partition's delta (eq. 4.6) and reward epsilon (eq. 4.7).
         criterion, criterion_params: the ``partition-criterion`` plugin that refines every
             phase, and its parameters (:func:`adpart.workflows.partitioning.build_criterion`).
@@ -97,8 +98,7 @@ class PipelineConfig:
     tasks: tuple[str, ...]
     detector: str = "count-exhaustive"
     detector_params: dict[str, Any] = field(default_factory=dict)
-    initiation: str = "local"
-    radius: float = LOCAL_RADIUS
+    initiation: InitiationSettings = field(default_factory=InitiationSettings)
     partition: PartitionSettings = field(default_factory=PartitionSettings)
     criterion: str = DEFAULT_CRITERION
     criterion_params: dict[str, Any] = field(default_factory=dict)
@@ -362,8 +362,7 @@ def run_pipeline(
     else:
         say(f"learning options to {found.result.subgoals.size} subgoals")
         start = time.perf_counter()
-        stored = options_for_subgoals(kb, found.record, initiation=config.initiation,
-                                      radius=config.radius)
+        stored = options_for_subgoals(kb, found.record, config.initiation)
         report.stages.append(
             Stage(
                 "options",

@@ -116,7 +116,7 @@ class KnowledgeStore(Protocol):
 
     def put_partition(self, environment: E.Environment | int, kind: str, labels: Any, *,
                       options: Sequence[E.Option | int] = (), includes_primitives: bool = True,
-                      epsilon: float = 0.0, delta: float = 0.0, block_actions: Any = None,
+                      epsilon: float, delta: float, block_actions: Any = None,
                       parents: Iterable[E.Partition | int] = (), task: E.Task | int | None = None,
                       plugin: str = "", parameters: Mapping[str, Any] | None = None,
                       ) -> E.Partition:

@@ -81,7 +81,8 @@ def test_learn_on_stored_options_with_smdp_q_and_hierarchical(kb_with_subgoals, 
     assert built.exit_code == 0, built.output
     smdp = CliRunner().invoke(cli, [
         "learn", "two-rooms", "--learner", "smdp-q", "--options", subgoal_set.ref,
-        "--primitives", "true", "--runs", "2", "--episodes", "30", "--out", str(tmp_path / "s"),
+        "--include-primitives", "true", "--runs", "2", "--episodes", "30",
+        "--out", str(tmp_path / "s"),
         "--kb", str(kb_dir), "--json"])
     assert smdp.exit_code == 0, smdp.output
     summary = json.loads(smdp.output)

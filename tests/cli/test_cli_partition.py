@@ -195,7 +195,7 @@ def test_options_phases_stored_phase1_reused_and_checked(kb_with_options):
         kb.close()
     # independent re-check of the stored partition against the options' model
     mdp = resolve_domain("two-rooms").mdp("reach-goal")
-    smdp = stack_models(mdp, models)
+    smdp = stack_models(mdp, models, include_primitives=False)
     stored = Partition(labels, block_actions)
     assert check_stability(stored, smdp, delta=0.3, epsilon=10.0).ok
     assert stored.admissible.sum() > 0 and stored.admissible.any(axis=1).all()

@@ -199,9 +199,9 @@ def test_parr_smdp_q_from_below_over_basin_options_reaches_the_goal_in_every_run
     the negative control the experiment's constant was chosen against (docs/maxq.md)."""
     from adpart.envs.domains.parr_maze import ParrMaze
     from adpart.experiments.maxq_parr import ALPHA, EPSILON, SMDP_INITIATION
-    from adpart.learning.smdp_q import smdp_q_learning
     from adpart.options.models import option_models
     from adpart.options.subgoal_options import subgoal_options
+    from tests.learning.hierarchical_run import smdp_q_run
 
     maze = ParrMaze(mini=True)
     mdp = maze.mdp()
@@ -211,12 +211,12 @@ def test_parr_smdp_q_from_below_over_basin_options_reaches_the_goal_in_every_run
               "max_steps_per_episode": 5000}
     never = -1.0 / (1.0 - mdp.gamma)
     basin = subgoal_options(mdp, states, initiation=SMDP_INITIATION)
-    below = smdp_q_learning(mdp, basin, models=option_models(mdp, basin, duration=False),
+    below = smdp_q_run(mdp, basin, models=option_models(mdp, basin, duration=False),
                             q_init=never, **common)
     final = float(below.v_star_start) - below.curve.matrix("value_gap")[:, -1]
     assert np.all(final > never + 1.0), final
     local = subgoal_options(mdp, states, initiation="local")
-    optimistic = smdp_q_learning(mdp, local, models=option_models(mdp, local, duration=False),
+    optimistic = smdp_q_run(mdp, local, models=option_models(mdp, local, duration=False),
                                  **common)
     final = float(optimistic.v_star_start) - optimistic.curve.matrix("value_gap")[:, -1]
     assert np.all(final < never + 1e-6), final

@@ -82,7 +82,7 @@ def test_expected_learning_time_layer_is_stored_with_lineage(four_rooms_kb, esti
     g1 = data["tasks"]["G1"]
     labels = np.arange(kb.get("environment", data["env"].id).n_states) % 3
     learned_on = kb.put_partition(data["env"], "learned", labels, task=g1,
-                                  block_actions=np.ones((3, 4), dtype=bool))
+                                  block_actions=np.ones((3, 4), dtype=bool), epsilon=0.0, delta=0.0)
     res = build_hierarchy(kb, "four-rooms")
     assert res.partition_id is not None
     rec = kb.get("partition", res.partition_id)

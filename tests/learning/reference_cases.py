@@ -54,11 +54,12 @@ def _slippery(kernel: str):
 
 def _four_rooms(kernel: str, intra: bool = False):
     from adpart.envs.registry import get_domain
-    from adpart.learning.smdp_q import smdp_q_learning
     from adpart.options import hallway_options
 
+    from .hierarchical_run import smdp_q_run
+
     mdp = get_domain("four-rooms").mdp("G1")
-    return smdp_q_learning(mdp, hallway_options(mdp), include_primitives=True, runs=2,
+    return smdp_q_run(mdp, hallway_options(mdp), include_primitives=True, runs=2,
                            episodes=15, seed=4, eval_every=5, alpha="1/n^0.8",
                            epsilon="0.3/n^0.5,0.05", intra_option=intra, kernel=kernel)
 

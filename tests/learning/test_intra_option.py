@@ -7,10 +7,10 @@ import pytest
 
 from adpart.envs.registry import get_domain
 from adpart.learning import q_learning
-from adpart.learning.smdp_q import smdp_q_learning
 from adpart.mdp.model import FiniteMDP
 from adpart.options import Option, hallway_options, primitive_options
 from tests.learning.conftest import corridor, slippery_grid
+from tests.learning.hierarchical_run import smdp_q_run
 
 GAMMA = 0.9
 
@@ -51,7 +51,7 @@ def test_hand_computed_values_after_each_episode(episodes):
     mdp = right_chain()
     run_it = go_right(mdp, "whole", [0, 1, 2, 3, 4, 5])
     bystander = go_right(mdp, "tail", [3, 4, 5])
-    res = smdp_q_learning(mdp, [run_it, bystander], runs=1, episodes=episodes, seed=0,
+    res = smdp_q_run(mdp, [run_it, bystander], runs=1, episodes=episodes, seed=0,
                           alpha=1.0, epsilon=0.0, eval_every=episodes, intra_option=True)
     Q = res.Q[0]
     for s in range(6):
@@ -65,7 +65,7 @@ def test_hand_computed_values_after_each_episode(episodes):
 
 def test_without_intra_only_the_start_pair_learns():
     mdp = right_chain()
-    res = smdp_q_learning(mdp, [go_right(mdp, "whole", [0, 1, 2, 3, 4, 5]),
+    res = smdp_q_run(mdp, [go_right(mdp, "whole", [0, 1, 2, 3, 4, 5]),
                                 go_right(mdp, "tail", [3, 4, 5])],
                           runs=1, episodes=3, seed=0, alpha=1.0, epsilon=0.0, eval_every=3)
     Q = res.Q[0]
@@ -78,7 +78,7 @@ def test_primitive_options_with_intra_are_still_flat_q_learning(make):
     """A primitive action's one-step option is the only option consistent with its step."""
     mdp = make()
     flat = q_learning(mdp, runs=3, episodes=25, seed=11, eval_every=5)
-    intra = smdp_q_learning(mdp, primitive_options(mdp), runs=3, episodes=25, seed=11,
+    intra = smdp_q_run(mdp, primitive_options(mdp), runs=3, episodes=25, seed=11,
                             eval_every=5, intra_option=True)
     np.testing.assert_array_equal(intra.Q, flat.Q)
     np.testing.assert_array_equal(intra.curve["steps"], flat.curve["steps"])
@@ -89,11 +89,11 @@ def test_kernels_agree_with_intra_option_updates():
     opts = hallway_options(mdp)
     kw = {"include_primitives": True, "runs": 2, "episodes": 15, "seed": 4, "eval_every": 5,
           "intra_option": True}
-    a = smdp_q_learning(mdp, opts, kernel="python", **kw)
-    b = smdp_q_learning(mdp, opts, kernel="numba", **kw)
+    a = smdp_q_run(mdp, opts, kernel="python", **kw)
+    b = smdp_q_run(mdp, opts, kernel="numba", **kw)
     np.testing.assert_array_equal(a.Q, b.Q)
     np.testing.assert_array_equal(a.visits, b.visits)
-    plain = smdp_q_learning(mdp, opts, kernel="numba", **{**kw, "intra_option": False})
+    plain = smdp_q_run(mdp, opts, kernel="numba", **{**kw, "intra_option": False})
     assert a.visits.sum() > plain.visits.sum()  # options learn from steps they did not take
 
 

@@ -8,9 +8,9 @@ import pytest
 from adpart.errors import ModelError, TaskError
 from adpart.learning import q_learning
 from adpart.learning.settings import run_settings
-from adpart.learning.smdp_q import smdp_q_learning
 
 from .conftest import corridor
+from .hierarchical_run import smdp_q_run
 
 
 @pytest.mark.parametrize(
@@ -24,7 +24,7 @@ from .conftest import corridor
      ({"epsilon": "2"}, "epsilon"),
      ({"q_init": float("nan")}, "q_init = nan must be a finite number")],
 )
-@pytest.mark.parametrize("learner", [q_learning, smdp_q_learning])
+@pytest.mark.parametrize("learner", [q_learning, smdp_q_run])
 def test_learners_reject_the_same_bad_settings(learner, kwargs, needle):
     mdp = corridor()
     with pytest.raises(TaskError) as err:

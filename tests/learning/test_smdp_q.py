@@ -9,18 +9,19 @@ from adpart.envs.registry import get_domain
 from adpart.errors import ModelError, UnknownNameError
 from adpart.learning import q_learning
 from adpart.learning.curves import start_distribution, start_values
-from adpart.learning.smdp_q import compile_options, option_set, smdp_q_learning
+from adpart.learning.smdp_q import compile_options, option_set
 from adpart.mdp.evaluation import policy_evaluation
 from adpart.mdp.solvers import solve
 from adpart.options import Option, hallway_options, primitive_options
 from tests.learning.conftest import corridor, slippery_grid
+from tests.learning.hierarchical_run import smdp_q_run
 
 
 @pytest.mark.parametrize("make", [corridor, slippery_grid])
 def test_primitive_options_reproduce_flat_q_learning_bit_for_bit(make):
     mdp = make()
     flat = q_learning(mdp, runs=3, episodes=25, seed=11, eval_every=5)
-    smdp = smdp_q_learning(mdp, primitive_options(mdp), runs=3, episodes=25, seed=11, eval_every=5)
+    smdp = smdp_q_run(mdp, primitive_options(mdp), runs=3, episodes=25, seed=11, eval_every=5)
     np.testing.assert_array_equal(smdp.Q, flat.Q)
     for col in ("steps", "return", "discounted_return"):
         np.testing.assert_array_equal(smdp.curve[col], flat.curve[col])
@@ -31,9 +32,9 @@ def test_primitive_options_reproduce_flat_q_learning_bit_for_bit(make):
 def test_python_and_numba_kernels_agree_with_options():
     mdp = get_domain("four-rooms").mdp("G1")
     opts = hallway_options(mdp)
-    a = smdp_q_learning(mdp, opts, include_primitives=True, runs=2, episodes=15, seed=4,
+    a = smdp_q_run(mdp, opts, include_primitives=True, runs=2, episodes=15, seed=4,
                         eval_every=5, kernel="python")
-    b = smdp_q_learning(mdp, opts, include_primitives=True, runs=2, episodes=15, seed=4,
+    b = smdp_q_run(mdp, opts, include_primitives=True, runs=2, episodes=15, seed=4,
                         eval_every=5, kernel="numba")
     np.testing.assert_array_equal(a.Q, b.Q)
     np.testing.assert_array_equal(a.curve["decisions"], b.curve["decisions"])
@@ -48,7 +49,7 @@ def test_stochastic_option_policy_is_sampled_like_its_probabilities():
     pol_act, pol_cdf, _ = compile_options([opt], mdp.n_actions)
     assert (pol_act <= -2).all() and np.allclose(pol_cdf[:, 0], 0.25)
     assert (pol_cdf[:, 1] == 2.0).all()
-    res = smdp_q_learning(mdp, [opt], runs=2, episodes=5, seed=1, eval_every=5)
+    res = smdp_q_run(mdp, [opt], runs=2, episodes=5, seed=1, eval_every=5)
     assert np.isfinite(res.curve["value_gap"][-1])
 
 
@@ -65,7 +66,7 @@ def test_options_converge_faster_in_decisions_than_flat_q():
     mdp = get_domain("four-rooms").mdp("G1")
     opts = hallway_options(mdp)
     flat = q_learning(mdp, runs=10, episodes=1000, seed=1, eval_every=10)
-    over = smdp_q_learning(mdp, opts, runs=10, episodes=1000, seed=1, eval_every=10)
+    over = smdp_q_run(mdp, opts, runs=10, episodes=1000, seed=1, eval_every=10)
 
     def decisions_to(result, gap):
         ep = result.curve.episodes_to_gap(gap)
@@ -79,7 +80,7 @@ def test_options_converge_faster_in_decisions_than_flat_q():
 @pytest.mark.slow
 def test_hallway_options_plus_primitives_reach_the_optimal_value():
     mdp = get_domain("four-rooms").mdp("G1")
-    res = smdp_q_learning(mdp, hallway_options(mdp), include_primitives=True, runs=3,
+    res = smdp_q_run(mdp, hallway_options(mdp), include_primitives=True, runs=3,
                           episodes=20_000, seed=2, eval_every=1000)
     assert res.curve.matrix("value_gap")[:, -1].max() < 0.01
 
@@ -87,8 +88,8 @@ def test_hallway_options_plus_primitives_reach_the_optimal_value():
 def test_bad_inputs_raise_adpart_errors():
     mdp = corridor()
     with pytest.raises(ModelError, match="no options"):
-        smdp_q_learning(mdp, [])
+        smdp_q_run(mdp, [])
     with pytest.raises(UnknownNameError, match="kernel"):
-        smdp_q_learning(mdp, primitive_options(mdp), kernel="cuda")
+        smdp_q_run(mdp, primitive_options(mdp), kernel="cuda")
     with pytest.raises(ModelError, match="Option objects"):
-        smdp_q_learning(mdp, ["left"])
+        smdp_q_run(mdp, ["left"])

@@ -28,7 +28,7 @@ from adpart.options import (
 @pytest.mark.parametrize("name", ["four-rooms", "two-rooms"])
 def test_primitive_options_give_the_mdps_optimal_values(name):
     mdp = get_domain(name).mdp()
-    smdp, _ = options_smdp(mdp, primitive_options(mdp))
+    smdp, _ = options_smdp(mdp, primitive_options(mdp), include_primitives=False)
     flat = solve(mdp, 1e-12)
     over_options = solve(smdp, 1e-12)
     # Independent of the solvers' stopping: evaluate both greedy policies exactly.
@@ -44,7 +44,7 @@ def test_primitive_options_on_random_mdp_with_terminals():
     terminal = np.zeros(30, bool)
     terminal[[3, 17]] = True
     mdp = base.with_rewards(base.R, terminal=terminal)
-    smdp, _ = options_smdp(mdp, primitive_options(mdp))
+    smdp, _ = options_smdp(mdp, primitive_options(mdp), include_primitives=False)
     np.testing.assert_allclose(solve(smdp, 1e-12).V, solve(mdp, 1e-12).V, atol=1e-10)
 
 
@@ -56,7 +56,7 @@ def test_four_rooms_hallway_options_need_at_most_half_the_sweeps():
     options = hallway_options(mdp)
     assert len(options) == 8
     assert sorted(int(o.initiation.sum()) for o in options) == [20, 21, 26, 26, 26, 26, 30, 31]
-    hallway_smdp, models = options_smdp(mdp, options)
+    hallway_smdp, models = options_smdp(mdp, options, include_primitives=False)
     both = stack_models(mdp, models, include_primitives=True)
     V_star = solve(mdp, 1e-13, method="vi").V
     V_star_O = solve(hallway_smdp, 1e-13, method="vi").V
@@ -109,7 +109,8 @@ def test_doorway_options_cover_three_floor_and_solve():
     hubs = (mdp.features["doorway"] == 1) | (mdp.features["stair"] == 1)
     assert [o.subgoal for o in options] == np.flatnonzero(hubs).tolist()
     models = option_models(mdp, options)
-    smdp = stack_models(mdp, models)  # the options cover every state: no error
+    # the options cover every state: no error
+    smdp = stack_models(mdp, models, include_primitives=False)
     with_primitives = stack_models(mdp, models, include_primitives=True)
     V_star = solve(mdp, 1e-8).V
     # Options alone cannot enter the goal's room interior: never better than V*.
@@ -124,7 +125,7 @@ def test_stacking_refuses_uncovered_states():
     mdp = get_domain("four-rooms").mdp("G1")
     only = hallway_options(mdp)[:1]
     with pytest.raises(ModelError, match=r"state \d+ .* is in no option's initiation set"):
-        options_smdp(mdp, only)
+        options_smdp(mdp, only, include_primitives=False)
     smdp, _ = options_smdp(mdp, only, include_primitives=True)
     assert smdp.n_actions == mdp.n_actions + 1
     bad = option_model(get_domain("two-rooms").mdp(), Option(
@@ -132,7 +133,7 @@ def test_stacking_refuses_uncovered_states():
         np.zeros(get_domain("two-rooms").n_states, dtype=np.int64),
         np.ones(get_domain("two-rooms").n_states)))
     with pytest.raises(ModelError, match="model of option 'x' covers"):
-        stack_models(mdp, [bad])
+        stack_models(mdp, [bad], include_primitives=False)
 
 
 def test_models_of_another_task_cannot_make_the_new_goal_pay():

@@ -20,7 +20,7 @@ def test_primitives_are_offered_only_where_no_option_starts():
     mdp = get_domain("two-rooms").mdp("reach-goal")
     models = option_models(mdp, subgoal_options(mdp, np.array([DOORWAY])), duration=False)
     with pytest.raises(ModelError, match="state 23"):
-        stack_models(mdp, models)
+        stack_models(mdp, models, include_primitives=False)
     smdp = stack_models(mdp, models, include_primitives="uncovered")
     A = mdp.n_actions
     prim_states = np.flatnonzero(smdp.admissible[:, :A].any(axis=1) & ~mdp.terminal)

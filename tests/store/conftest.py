@@ -101,9 +101,9 @@ def populated(kb):
                            transitions=sp.csr_array(np.eye(5) * 0.9), gamma=0.9,
                            subgoal=sgs.subgoal_ids[1])
     p1 = kb.put_partition(env, "per-option", [0, 0, 1, 1, 2], options=[option],
-                          block_actions=np.ones((3, 3), bool), delta=0.1)
+                          block_actions=np.ones((3, 3), bool), delta=0.1, epsilon=0.0)
     p2 = kb.put_partition(env, "reward-refined", [0, 1, 2, 2, 3], options=[option],
-                          parents=[p1], task=task, epsilon=0.5)
+                          parents=[p1], task=task, epsilon=0.5, delta=0.0)
     run = kb.put_run(task, "smdp-q", partition=p2, seed=0, metrics={"final_gap": 0.25},
                      curve={"episode": np.arange(4), "gap": np.array([3.0, 1.0, 0.5, 0.25])})
     return kb, {"environment": env, "task": task, "policy": policy, "subgoal-set": sgs,

@@ -60,7 +60,7 @@ def test_queries(populated):
     assert kb.runs_for(rec["task"]) == [rec["run"]]
     assert [p.id for p in kb.lineage(rec["partition"])] == [rec["p1"].id]
     grand = kb.put_partition(rec["environment"], "learned", [0, 1, 2, 3, 4],
-                             parents=[rec["partition"]])
+                             parents=[rec["partition"]], epsilon=0.0, delta=0.0)
     assert [p.id for p in kb.lineage(grand)] == [rec["partition"].id, rec["p1"].id]
     assert kb.partitions_using([]) == [grand]
 
@@ -79,9 +79,9 @@ def test_bad_inputs_are_store_errors(populated):
     with pytest.raises(StoreError, match="shape"):
         kb.put_policy(rec["task"], "x", q=np.zeros((4, 2)))
     with pytest.raises(StoreError, match="every block"):
-        kb.put_partition(rec["environment"], "learned", [0, 2, 2, 2, 2])
+        kb.put_partition(rec["environment"], "learned", [0, 2, 2, 2, 2], epsilon=0.0, delta=0.0)
     with pytest.raises(StoreError, match="unknown partition kind"):
-        kb.put_partition(rec["environment"], "bogus", [0, 0, 0, 0, 0])
+        kb.put_partition(rec["environment"], "bogus", [0, 0, 0, 0, 0], epsilon=0.0, delta=0.0)
     with pytest.raises(StoreError, match="no task"):
         kb.put_run(999, "x")
     with pytest.raises(StoreError, match="dtype"):

@@ -15,17 +15,22 @@ from collections.abc import Callable, Sequence
 from adpart.errors import TaskError
 from adpart.learning.hierarchical_settings import HierarchicalSettings
 from adpart.learning.result import LearnResult
+from adpart.learning.smdp_q import SMDPQSettings
 from adpart.mdp.model import FiniteMDP
 from adpart.options.option import Option
-from adpart.params import Param, build_settings, settings_params
+from adpart.params import build_settings, settings_params
 from adpart.partition.partition import Partition
-from adpart.plugins.builtin.learners import ALPHA, EPSILON, MAX_STEPS, kernel, q_init
+from adpart.plugins.builtin.learners import ALPHA, EPSILON, MAX_STEPS, Q_INIT, kernel, q_init
 from adpart.plugins.hookspecs import hookimpl
 from adpart.plugins.registry import Registrar
 
 
 class SMDPQLearner:
-    """SMDP Q-learning over options, K runs in lock-step, scored exactly."""
+    """SMDP Q-learning over options, K runs in lock-step, scored exactly.
+
+    Its parameters are :class:`~adpart.learning.smdp_q.SMDPQSettings`' fields and the run
+    settings every learner takes.
+    """
 
     name = "smdp-q"
     description = "SMDP Q-learning over options (plus primitive actions), runs in lock-step"
@@ -33,19 +38,17 @@ class SMDPQLearner:
     params = (
         ALPHA,
         EPSILON,
-        Param("primitives", "bool", False, "offer the primitive actions beside the options"),
-        Param("intra-option", "bool", False,
-              "update every option consistent with each step (Sutton, Precup & Singh 1999)"),
+        *settings_params(SMDPQSettings),
         MAX_STEPS,
         q_init("Q(s, o)"),
         kernel("numba", "python"),
     )
 
-    def __init__(self, alpha: str = "1/n^0.8", epsilon: str = "0.1", primitives: bool = False,
-                 intra_option: bool = False, max_steps: int = 1000, q_init: float = 0.0,
-                 kernel: str = "auto") -> None:
-        self.alpha, self.epsilon, self.primitives = alpha, epsilon, bool(primitives)
-        self.intra_option = bool(intra_option)
+    def __init__(self, alpha: str = ALPHA.default, epsilon: str = EPSILON.default,
+                 max_steps: int = MAX_STEPS.default, q_init: float = Q_INIT, kernel: str = "auto",
+                 **values: object) -> None:
+        self.settings = build_settings(SMDPQSettings, values)
+        self.alpha, self.epsilon = alpha, epsilon
         self.max_steps, self.q_init = max_steps, q_init
         self.kernel = None if kernel == "auto" else kernel
 
@@ -53,15 +56,18 @@ class SMDPQLearner:
               progress: Callable[[int, int], object] | None = None,
               options: Sequence[Option] | None = None,
               partition: Partition | None = None) -> LearnResult:
+        from dataclasses import replace
+
+        from adpart.learning.settings import Run
         from adpart.learning.smdp_q import smdp_q_learning
 
         opts = list(options or [])
-        return smdp_q_learning(
-            mdp, opts, include_primitives=self.primitives or not opts, runs=runs,
-            episodes=episodes, seed=seed, alpha=self.alpha, epsilon=self.epsilon,
-            max_steps_per_episode=self.max_steps, eval_every=eval_every, progress=progress,
-            q_init=self.q_init, kernel=self.kernel, intra_option=self.intra_option,
-        )
+        settings = self.settings if opts else replace(self.settings, include_primitives=True)
+        run = Run(runs=runs, episodes=episodes, seed=seed, alpha=self.alpha,
+                  epsilon=self.epsilon, max_steps_per_episode=self.max_steps,
+                  eval_every=eval_every, q_init=self.q_init, kernel=self.kernel,
+                  progress=progress)
+        return smdp_q_learning(mdp, opts, settings, run)
 
 
 class HierarchicalLearner:

@@ -28,8 +28,12 @@ EPSILON = Param("epsilon", "str", "0.1", "exploration schedule, same forms as --
 MAX_STEPS = Param("max-steps", "int", 1000, "primitive-step limit of one episode", min=1)
 
 
+#: The learners' starting value of every Q entry.
+Q_INIT = 0.0
+
+
 def q_init(what: str) -> Param:
-    return Param("q-init", "float", 0.0, f"initial value of every {what}")
+    return Param("q-init", "float", Q_INIT, f"initial value of every {what}")
 
 
 def kernel(*choices: str) -> Param:
