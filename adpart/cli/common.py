@@ -94,21 +94,51 @@ def progress_callback(
     return update, lambda: bar.__exit__(None, None, None)
 
 
-def plugin_options_command(kind: str) -> type[click.Command]:
+def plugin_options_command(kind: str, chooser: str) -> type[click.Command]:
     """A click Command class whose options include every ``kind`` plugin's declared parameters.
 
-    Parameters shared by several plugins appear once, their help naming the plugins that take
-    them; values arrive in the callback as ``plugin_<name>`` keywords (None when not given) and
-    are validated against the chosen plugin by :func:`split_plugin_options`.
+    ``chooser`` is the command's option that names the plugin (``learner`` for ``--learner``).
+    Every plugin's parameters are accepted, so a parameter of another plugin is refused naming
+    the plugin chosen (:func:`split_plugin_options`); ``--help`` shows the chosen plugin's
+    (``--learner NAME --help``; the option's default without it) with that plugin's defaults,
+    and says how to see the others'. Values arrive in the callback as ``plugin_<name>`` keywords
+    (None when not given).
     """
 
     class PluginOptionsCommand(click.Command):
+        def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
+            self._raw_args = list(args)  # read by get_params when --help is formatted
+            return super().parse_args(ctx, args)
+
+        def _chosen(self, params: list[click.Parameter]) -> str:
+            option = next(p for p in params if p.name == chooser)
+            raw = getattr(self, "_raw_args", [])
+            for i, word in enumerate(raw):
+                for flag in option.opts:
+                    if word == flag and i + 1 < len(raw):
+                        return raw[i + 1]
+                    if word.startswith(flag + "="):
+                        return word[len(flag) + 1:]
+            return str(option.default)
+
         def get_params(self, ctx: click.Context) -> list[click.Parameter]:
             params = super().get_params(ctx)
+            chosen = self._chosen(params)
+            return (params[:-1] + _plugin_options(registry(), kind, chosen)
+                    + params[-1:])  # keep --help last
+
+        def format_epilog(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+            chosen = self._chosen(super().get_params(ctx))
             reg = registry()
-            if getattr(self, "_options_for", None) is not reg:  # rebuilt with the registry
-                self._options_for, self._plugin_params = reg, _plugin_options(reg, kind)
-            return params[:-1] + self._plugin_params + params[-1:]  # keep --help last
+            others = [n for n in reg.names(kind) if n != chosen]
+            own = [f"--{p.name}" for p in reg.get(kind, chosen).params] if chosen in (
+                reg.names(kind)) else []
+            super().format_epilog(ctx, formatter)
+            formatter.write_paragraph()
+            formatter.write_text(
+                f"{kind} {chosen!r} takes {', '.join(own) or 'no parameters'}. Another "
+                f"{kind}'s parameters: --{chooser.replace('_', '-')} NAME --help "
+                f"({', '.join(others) or 'none installed'}).")
 
     return PluginOptionsCommand
 
@@ -116,14 +146,11 @@ def plugin_options_command(kind: str) -> type[click.Command]:
 _METAVARS = {"int": "INTEGER", "float": "FLOAT", "bool": "BOOLEAN", "str": "TEXT"}
 
 
-def _plugin_options(reg: Registry, kind: str) -> list[click.Option]:
+def _plugin_options(reg: Registry, kind: str, chosen: str) -> list[click.Option]:
     """One ``--<name>`` per parameter name declared by some ``kind`` plugin.
 
-    The option shows its type when every plugin declaring the name agrees on it (its choices,
-    else INTEGER, FLOAT, BOOLEAN or TEXT), and its help gives each plugin's own default, e.g.
-    ``[q-learning, smdp-q: 1/n^0.8; maxq-q: 0.5]``. The value reaches the chosen plugin as
-    given and is converted by that plugin's declaration, so a bad value is one line naming
-    the plugin and the option.
+    The options of the ``chosen`` plugin are shown with its help, type and default; the others'
+    are hidden but accepted, so that giving one is refused naming the plugin and the option.
     """
     declared: dict[str, list[tuple[str, Any]]] = {}
     for spec in reg.all(kind):
@@ -131,17 +158,12 @@ def _plugin_options(reg: Registry, kind: str) -> list[click.Option]:
             declared.setdefault(p.name, []).append((spec.name, p))
     options = []
     for name, owners in declared.items():
-        metavars = {_setting_metavar(p) for _, p in owners}
-        metavar = metavars.pop() if len(metavars) == 1 else "TEXT"
-        by_default: dict[str, list[str]] = {}
-        for plugin, p in owners:
-            shown = p.none if p.default is None and p.none is not None else p.default
-            by_default.setdefault(str(shown), []).append(plugin)
-        defaults = "; ".join(f"{', '.join(plugins)}: {value}"
-                             for value, plugins in by_default.items())
+        own = [p for plugin, p in owners if plugin == chosen]
+        p = own[0] if own else owners[0][1]
+        shown = p.none if p.default is None and p.none is not None else p.default
         options.append(click.Option(
-            [f"--{name}", f"plugin_{name.replace('-', '_')}"], metavar=metavar, default=None,
-            help=f"{owners[0][1].help} [{defaults}]"))
+            [f"--{name}", f"plugin_{name.replace('-', '_')}"], metavar=_setting_metavar(p),
+            default=None, hidden=not own, help=f"{p.help} [default: {shown}]"))
     return options
 
 

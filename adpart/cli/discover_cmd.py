@@ -21,7 +21,7 @@ from adpart.workflows.refs import get_ref
 from adpart.workflows.resolve import resolve_domain
 
 
-@click.command(name="discover", cls=plugin_options_command("subgoal-detector"))
+@click.command(name="discover", cls=plugin_options_command("subgoal-detector", "detector"))
 @click.argument("env")
 @click.option(
     "--policy",

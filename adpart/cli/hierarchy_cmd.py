@@ -54,7 +54,7 @@ def _plot(env: str, result: Any, path: Path, task_names: list[str]) -> list[str]
     return written
 
 
-@click.command(name="hierarchy", cls=plugin_options_command("hierarchy-estimator"))
+@click.command(name="hierarchy", cls=plugin_options_command("hierarchy-estimator", "estimator"))
 @click.argument("env")
 @click.option(
     "--estimator",

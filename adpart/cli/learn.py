@@ -37,7 +37,7 @@ from adpart.workflows.reports import folder_name
 from adpart.workflows.store import KnowledgeStore
 
 
-@click.command(name="learn", cls=plugin_options_command("learner"))
+@click.command(name="learn", cls=plugin_options_command("learner", "learner"))
 @click.argument("env")
 @click.option("--task", help="Task name (see `adpart envs`) or goal:FEATURE=VALUE,... .")
 @click.option("--learner", default="q-learning", show_default=True, help="Learner plugin.")

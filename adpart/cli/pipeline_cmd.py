@@ -121,9 +121,8 @@ def _say(quiet: bool):  # type: ignore[no-untyped-def]
     default=DEFAULT_CRITERION,
     show_default=True,
     metavar="NAME",
-    help="Partition-criterion plugin that refines every phase of the partition (`adpart plugins "
-    "--kind partition-criterion`); the default is delta-stability with --delta and "
-    "--reward-epsilon.",
+    help="Partition-criterion plugin refining every phase (default: eqs. 4.6-4.7 with --delta "
+    "and --reward-epsilon).",
 )
 @click.option(
     "--criterion-opt",
@@ -131,7 +130,7 @@ def _say(quiet: bool):  # type: ignore[no-untyped-def]
     metavar="KEY=VALUE",
     help="A parameter of the criterion (repeatable).",
 )
-@run_options(runs_help="Runs per learner (20: enough for the summary's confidence intervals).",
+@run_options(runs_help="Runs per learner (20 for the summary's CIs).",
              episodes_help="Episodes per later task.", runs_default=20)
 @click.option(
     "--first-episodes",
@@ -145,7 +144,7 @@ def _say(quiet: bool):  # type: ignore[no-untyped-def]
     default="q-learning",
     show_default=True,
     metavar="NAME",
-    help="Learner plugin of the first task, the flat baseline and the flat fallback.",
+    help="Learner of the first task, the baseline and the fallback.",
 )
 @click.option(
     "--flat-opt",
@@ -156,8 +155,7 @@ def _say(quiet: bool):  # type: ignore[no-untyped-def]
 @click.option(
     "--no-fallback",
     is_flag=True,
-    help="Always learn on the layer, even when the knowledge base predicts that flat "
-    "learning is faster (section 4.4's estimate).",
+    help="Learn on the layer even where section 4.4's estimate predicts flat is faster.",
 )
 @click.option(
     "--hier-opt",
@@ -170,8 +168,7 @@ def _say(quiet: bool):  # type: ignore[no-untyped-def]
 @click.option(
     "--hierarchy",
     metavar="NAME",
-    help="Start each later task from the layer this hierarchy-estimator plugin builds from the "
-    "earlier tasks (expected-learning-time, all-subgoals) instead of the multi-phase partition.",
+    help="Start each later task from this hierarchy estimator's layer of the earlier tasks.",
 )
 @click.option(
     "--hierarchy-opt",
@@ -217,21 +214,13 @@ def pipeline_cmd(
     """Learn the first task, discover subgoals, learn options, partition, transfer to the rest.
 
     \b
-    Later tasks are learned in the hierarchical learner's reward-variation+inconsistency mode:
-    the states where the task pays more than its step reward become subgoals beside the
-    discovered ones (section 4.3.1), and the layer is refined where a primitive action beats
-    every option it offers (4.3.3); --hier-opt mode=inconsistency learns on the stored partition
-    with refinement alone. With --hierarchy NAME each later task starts from the layer that
-    estimator builds from the tasks learned before it in the sequence (section 4.4) instead of
-    the multi-phase partition, its blocks offered the reward-state options. Every step is
-    stored in the knowledge base and reused when the same step is asked again, so a second run
-    (or one resumed after a crash) recomputes nothing it already has. When the detector finds
-    no subgoals, or the knowledge base predicts that abstraction will not pay for a task (its
-    expected learning time on the best layer is not below flat's, or no earlier task was
-    learned to the bound), that task is learned with the flat learner and the stage says why
-    (--no-fallback: always use the layer). Ends with a table (runs within the bound, median
-    episodes to reach it, final value gap), the layer's median episodes over flat's with a 95%
-    bootstrap CI, and one figure per task comparing the decision layer with flat learning.
+    Later tasks are learned on the decision layer (--hier-opt: the hierarchical learner's
+    settings; --hierarchy NAME: start from an estimator's layer, section 4.4) and, with
+    --baseline, flat. Every step is stored in the knowledge base and reused when asked again,
+    so a rerun or a resumed crash recomputes nothing it has. A task the knowledge base predicts
+    abstraction will not pay for is learned flat, saying why (--no-fallback: always the layer).
+    Ends with a table, the layer's median episodes over flat's with a 95% bootstrap CI, and a
+    figure per task (docs/pipeline.md).
     """
     from adpart.store import KnowledgeBase
     from adpart.workflows.pipeline import PipelineConfig, run_pipeline

@@ -199,12 +199,11 @@ class InitiationSettings:
     """Where an option to a subgoal may start (module docstring; docs/options.md)."""
 
     initiation: str = setting("local", choices=INITIATION_CHOICES)
-    """initiation sets of the subgoal options: the states of the subgoal's basin within radius
-    steps of it (local), the basin bounded by the other subgoals (basin), or every state that
-    can reach it (reachable)."""
+    """where an option to a subgoal may start: its basin within --radius steps (local), its
+    basin (basin), or wherever the subgoal is reachable (reachable)."""
 
     radius: float = setting(30.0, min=1.0, finite=False)
-    """steps of a local initiation set (a number >= 1; inf is the basin)."""
+    """steps of a local initiation set (>= 1; inf is the basin)."""
 
 
 def resolve_initiation(initiation: str | None, radius: float | None) -> tuple[str, float]:

@@ -25,12 +25,12 @@ class PartitionSettings:
     """Thresholds of the epsilon,delta-partition (definition 4.4)."""
 
     delta: float = setting(0.3, min=0.0, max=1.0)
-    """delta of eq. 4.6: the largest difference of the mass two states of a block may send to
-    any block under any offered option, in [0, 1] (0: exact lumping)."""
+    """eq. 4.6: the largest spread of a block's discounted mass into another block, in [0, 1]
+    (0: exact lumping)."""
 
     reward_epsilon: float = setting(10.0, min=0.0)
-    """epsilon of eq. 4.7: the largest difference of the rewards (beyond the step reward) two
-    states of a block may have under an offered option (phase 3 only)."""
+    """eq. 4.7: the largest spread of a block's option rewards beyond the step reward (phase
+    3)."""
 
 
 class StabilityCriterion:
