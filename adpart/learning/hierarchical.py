@@ -125,7 +125,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from adpart.errors import TaskError
-from adpart.learning._rmax import counted_smdp
 from adpart.learning.curves import (
     LearningCurve,
     optimal_start_value,
@@ -136,13 +135,13 @@ from adpart.learning.decision_layer import (
     DecisionLayer,
     build_decision_layer,
     decision_layer,
-    offered_values,
     refine_block,
     refinement_model,
     reward_floor,
     reward_options,
     reward_states,
 )
+from adpart.learning.hierarchical_parts import LayerRefiner, ReferenceValues, lifted_values
 from adpart.learning.hierarchical_settings import (
     MODES,
     PRIMITIVE_EXPLORATION,
@@ -160,12 +159,11 @@ from adpart.learning.smdp_q import (
     make_state,
     option_set,
 )
-from adpart.mdp.evaluation import greedy_policy, policy_evaluation
+from adpart.mdp.evaluation import greedy_policy
 from adpart.mdp.model import FiniteMDP, SMDPModel
-from adpart.mdp.solvers import q_from_v, solve
 from adpart.options.models import OptionModel, option_models
 from adpart.options.option import Option
-from adpart.partition.bpsmdp import point_model, point_policy, theorem_4_5_bound
+from adpart.partition.bpsmdp import theorem_4_5_bound
 from adpart.partition.partition import Partition, block_all, row_codes
 
 __all__ = [
@@ -353,6 +351,38 @@ def _pad_partition(partition: Partition, n_prim: int, n_total: int, model: SMDPM
     return partition
 
 
+def starting_layer(mdp: FiniteMDP, options: Sequence[Option], partition: Partition | None,
+                   settings: HierarchicalSettings, models: Sequence[OptionModel] | None
+                   ) -> tuple[Partition, list[Option], SMDPModel, list[Option]]:
+    """The layer learning starts on, its columns (primitives first), their model, and the
+    reward-state options the mode added (module docstring: the four modes of section 4.3)."""
+    A = mdp.n_actions
+    options = list(options)
+    delta, epsilon = settings.refinement.delta, settings.refinement.partition_epsilon
+    extra: list[Option] = []
+    if settings.reward_options:  # 4.3.1: the task's reward states become subgoals
+        extra = reward_options(mdp)
+        if models is not None:
+            models = list(models) + option_models(mdp, extra, duration=False)
+        options = options + extra
+    if partition is None:
+        part0, full, smdp = decision_layer(mdp, options, delta=delta, epsilon=epsilon,
+                                           models=models)
+    else:
+        full, smdp = option_set(mdp, options, include_primitives=True, models=models)
+        part0 = _with_empty_columns(partition, len(extra))
+    part0 = _pad_partition(part0, A, len(full), smdp)
+    if extra and partition is not None:  # the given layer, offered the reward-state options
+        part0 = _offer(part0, np.arange(len(full) - len(extra), len(full)), smdp.admissible)
+    if settings.mode == "action-refinement":  # 4.3.2: reward blocks get every primitive
+        refiner, prims = refinement_model(mdp, smdp), np.arange(A)
+        for s in np.flatnonzero(reward_states(mdp)):  # few reward states, each one block
+            b = int(part0.labels[s])
+            if not part0.admissible[b, :A].all():
+                part0 = refine_block(part0, b, prims, refiner, delta=delta, epsilon=epsilon)
+    return part0, full, smdp, extra
+
+
 # --------------------------------------------------------------------------- the learner
 
 
@@ -390,175 +420,77 @@ def hierarchical_learning(
     run = Run() if run is None else run
     if not isinstance(settings, HierarchicalSettings):
         raise TaskError(f"settings must be a HierarchicalSettings, got {type(settings).__name__}")
-    explore, test, refinement = settings.exploration, settings.test, settings.refinement
-    mode = settings.mode
-    delta, epsilon = refinement.delta, refinement.partition_epsilon
-    threshold, threshold_scale = test.threshold, test.threshold_scale
-    lcb_z, V, split_offered = test.lcb_z, test.min_visits, test.split_offered
-    m_known, primitive_exploration = explore.explore_known, explore.primitive_exploration
-    refine, layer_values = refinement.refine, settings.layer_values
-    reference_values, progress, q_init = run.reference_values, run.progress, run.q_init
+    test, refinement = settings.test, settings.refinement
     cfg = run_settings("hierarchical_learning", mdp, runs=run.runs, episodes=run.episodes,
                        eval_every=run.eval_every,
                        max_steps_per_episode=run.max_steps_per_episode, seed=run.seed,
                        alpha=run.alpha, epsilon=run.epsilon,
-                       q_init=0.0 if q_init is None else q_init)
-    K, N, M, H, root_seed = cfg.runs, cfg.episodes, cfg.eval_every, cfg.horizon, cfg.seed
-    alpha_s, eps_s = cfg.alpha, cfg.epsilon
+                       q_init=0.0 if run.q_init is None else run.q_init)
+    K, N, S = cfg.runs, cfg.episodes, mdp.n_states
     kernel_name, step_kernel = kernel_function(run.kernel)
-    S, A = mdp.n_states, mdp.n_actions
-    options = list(options)
-
-    extra: list[Option] = []
-    if settings.reward_options:
-        extra = reward_options(mdp)
-        if models is not None:
-            models = list(models) + option_models(mdp, extra, duration=False)
-        options = options + extra
-    if partition is None:
-        part0, full, smdp = decision_layer(mdp, options, delta=delta, epsilon=epsilon,
-                                           models=models)
-    else:
-        full, smdp = option_set(mdp, options, include_primitives=True, models=models)
-        part0 = _with_empty_columns(partition, len(extra))
-    part0 = _pad_partition(part0, A, len(full), smdp)
-    refiner = refinement_model(mdp, smdp)
-    prims = np.arange(A)
-    if extra and partition is not None:  # the given layer, offered the reward-state options
-        part0 = _offer(part0, np.arange(len(full) - len(extra), len(full)), smdp.admissible)
-    if mode == "action-refinement":
-        for s in np.flatnonzero(reward_states(mdp)):  # few reward states, each one block
-            b = int(part0.labels[s])
-            if not part0.admissible[b, :A].all():
-                part0 = refine_block(part0, b, prims, refiner, delta=delta, epsilon=epsilon)
-    check = settings.testing
-    reference = settings.test_reference
+    part0, full, smdp, extra = starting_layer(mdp, options, partition, settings, models)
     mu = start_distribution(mdp)
-    v_star = optimal_start_value(mdp, mu, reference_values)
-    L = default_threshold(v_star, scale=threshold_scale) if threshold is None else float(threshold)
-    B0 = part0.n_blocks
-    lower = flat_lower_bound(mdp, H)
-    directed = settings.directed
-    q0 = cfg.q_init if q_init is not None else lower if directed else 0.0
-    capacity = min(S, max(2 * B0, B0 + 64))
-
-    def point_optima(partition: Partition) -> np.ndarray:
-        """``V*_P`` per block: the optimum of the layer's point model (section 4.2.2)."""
-        return solve(point_model(partition, smdp), 1e-8).V
-
-    def state_values(partition: Partition) -> np.ndarray:
-        """Per state, the larger of its block's ``V*_P`` and the best the options offered there
-        achieve from it (:func:`offered_values`); with reference ``"policy"``, the value of the
-        layer's best block policy from it."""
-        if reference == "policy":
-            return policy_evaluation(smdp, point_policy(partition, smdp, 1e-8), never=lower)
-        return np.maximum(offered_values(partition, smdp, mdp.terminal, lower),
-                          point_optima(partition)[partition.labels])
-
-    def split_values(partition: Partition, values: np.ndarray) -> np.ndarray:
-        """The reference for an action the state's block offers: ``values`` where the state
-        shares its block, ``+inf`` (never fires) where it is a block of its own."""
-        shared = np.bincount(partition.labels, minlength=partition.n_blocks) > 1
-        return np.where(shared[partition.labels], values, np.inf)
-
-    vref0 = state_values(part0) if check and reference in ("offered", "policy") else None
-    test_arrays = InconsistencyArrays(
-        threshold=L if check else np.inf, min_visits=V, prim_opt=prims, floor=lower,
-        lcb_z=lcb_z, flat_explore=settings.flat_explore,
-        prim_eps=PRIMITIVE_EXPLORATION[primitive_exploration] if check else 0,
-        r_min=reward_floor(mdp),
-        block_values=point_optima(part0) if check and reference == "model" else None,
-        state_values=vref0,
-        offered_values=split_values(part0, vref0) if check and split_offered else None,
-        explore_known=m_known,
+    v_star = optimal_start_value(mdp, mu, run.reference_values)
+    L = (default_threshold(v_star, scale=test.threshold_scale) if test.threshold is None
+         else float(test.threshold))
+    lower = flat_lower_bound(mdp, cfg.horizon)
+    q0 = cfg.q_init if run.q_init is not None else lower if settings.directed else 0.0
+    check = settings.testing
+    reference = ReferenceValues(settings.test_reference, test.split_offered, mdp, smdp, lower)
+    refine = LayerRefiner(refinement.refine, refinement.delta, refinement.partition_epsilon,
+                          refinement_model(mdp, smdp), lower, child_values)
+    arrays = InconsistencyArrays(
+        threshold=L if check else np.inf, min_visits=test.min_visits,
+        prim_opt=np.arange(mdp.n_actions), floor=lower, lcb_z=test.lcb_z,
+        flat_explore=settings.flat_explore,
+        prim_eps=PRIMITIVE_EXPLORATION[settings.exploration.primitive_exploration] if check
+        else 0, r_min=reward_floor(mdp),
+        **(reference.initial(part0) if check else
+           {"block_values": None, "state_values": None, "offered_values": None}),
+        explore_known=settings.exploration.explore_known,
     )
+    B0 = part0.n_blocks
     st = make_state(
         mdp, full, np.broadcast_to(part0.labels, (K, S)),
-        np.broadcast_to(part0.admissible, (K, B0, len(full))), episodes=N, horizon=H,
-        alpha=alpha_s, epsilon=eps_s, q_init=q0, mu=mu, capacity=capacity,
-        intra=2 if settings.intra_option else 0, test=test_arrays,
+        np.broadcast_to(part0.admissible, (K, B0, len(full))), episodes=N, horizon=cfg.horizon,
+        alpha=cfg.alpha, epsilon=cfg.epsilon, q_init=q0, mu=mu,
+        capacity=min(S, max(2 * B0, B0 + 64)), intra=2 if settings.intra_option else 0,
+        test=arrays,
     )
     parts = [part0] * K
     events: list[dict[str, int]] = []
 
-    def grow(needed: int) -> None:
-        cap = st.Q.shape[1]
-        if needed <= cap:
-            return
-        new_cap = min(S, max(needed, 2 * cap))
-        pad = new_cap - cap
-        st.Q = np.concatenate([st.Q, np.full((K, pad, st.Q.shape[2]), -np.inf)], axis=1)
-        st.adm = np.concatenate([st.adm, np.zeros((K, pad, st.adm.shape[2]), bool)], axis=1)
-        st.n_o = np.concatenate([st.n_o, np.zeros((K, pad, st.n_o.shape[2]), np.int64)], axis=1)
-        st.n_d = np.concatenate([st.n_d, np.zeros((K, pad), np.int64)], axis=1)
-        if reference == "model":  # the other references have no per-block column
-            st.Vref = np.concatenate([st.Vref, np.zeros((K, pad))], axis=1)
-
-    def on_fire(k: int) -> None:
-        s, b, a = (int(x) for x in st.fired[k])
-        old = parts[k]
-        offered = bool(old.admissible[b, prims[a]])  # split_offered: s leaves its block
-        new = refine_block(old, b, [a], refiner, delta=delta, epsilon=epsilon,
-                           at=s if refine == "state" or offered else None)
-        B_old, B_new = old.n_blocks, new.n_blocks
-        grow(B_new)
-        parent = new.parent_map(old)
-        Qn, n_on = child_values(st.Q[k, :B_old], st.n_o[k, :B_old], old, new, b, st.Ql[k],
-                                st.nf[k] > 0, lower, parent)
-        st.Q[k, :B_new], st.Q[k, B_new:] = Qn, -np.inf
-        st.n_o[k, :B_new], st.n_o[k, B_new:] = n_on, 0
-        st.n_d[k, :B_new] = st.n_d[k, :B_old][parent]
-        st.n_d[k, B_new:] = 0
-        st.adm[k, :B_new], st.adm[k, B_new:] = new.admissible, False
-        st.labels[k] = new.labels
-        st.n_blocks[k] = B_new
-        st.vr_on[k] = False  # virtual executions started in the old blocks are dropped
-        if reference == "model":
-            st.Vref[k, :B_new] = point_optima(new)
-        elif reference in ("offered", "policy"):
-            st.Vref[k] = state_values(new)
-            if split_offered:
-                st.Voff[k] = split_values(new, st.Vref[k])
-        parts[k] = new
-        events.append({"run": k, "episode": int(st.episode[k]), "state": s, "block": b,
-                       "action": a, "offered": offered, "blocks_before": B_old,
-                       "blocks_after": B_new})
-
-    def planned(k: int) -> np.ndarray:
-        """``(B_k, C)`` the block values of run k's layer planned on its grounded model."""
-        model = point_model(parts[k], counted_smdp(smdp, mdp, st.xc[k], lower))
-        return q_from_v(model, solve(model, 1e-8).V)
-
-    def lifted() -> np.ndarray:
-        if layer_values == "planned":
-            return np.stack([planned(k)[parts[k].labels] for k in range(K)])
-        return np.take_along_axis(st.Q, st.labels[:, :, None], axis=1)
+    def on_fire(k: int) -> None:  # section 4.3.3: refine run k's layer where the test fired
+        parts[k], event = refine.apply(st, k, parts[k], reference)
+        events.append(event)
 
     def score() -> np.ndarray:
-        Qs = lifted()
+        Qs = lifted_values(settings.layer_values, st, parts, smdp, mdp, lower)
         policies = greedy_policy(Qs.reshape(K * S, -1)).reshape(K, S)
         return start_values(smdp, policies, mu)
 
-    eval_value = drive(st, step_kernel, root_seed, episodes=N, eval_every=M, score=score,
-                       progress=progress, on_fire=on_fire if check else None)
+    eval_value = drive(st, step_kernel, cfg.seed, episodes=N, eval_every=cfg.eval_every,
+                       score=score, progress=run.progress, on_fire=on_fire if check else None)
     names = tuple(o.name for o in full)
+    delta, epsilon = refinement.delta, refinement.partition_epsilon
     parameters: dict[str, object] = {
-        "runs": K, "episodes": N, "seed": root_seed, "mode": mode, "delta": float(delta),
-        "epsilon": None if epsilon is None else float(epsilon), "threshold": L,
-        "threshold_rule": "given" if threshold is not None else
-        f"{threshold_scale} x |V*(start)|",
+        "runs": K, "episodes": N, "seed": cfg.seed, "mode": settings.mode,
+        "delta": float(delta), "epsilon": None if epsilon is None else float(epsilon),
+        "threshold": L, "threshold_rule": "given" if test.threshold is not None else
+        f"{test.threshold_scale} x |V*(start)|",
         "theorem_4_5_bound": theorem_bound(mdp, epsilon=epsilon, delta=delta),
-        "lcb_z": float(lcb_z), "flat_explore": settings.flat_explore,
-        "test_reference": reference, "refine": refine,
-        "primitive_exploration": primitive_exploration if check else "never",
-        "explore_known": m_known if directed else 0, "layer_values": layer_values,
-        "split_offered": bool(split_offered),
-        "flat_lower_bound": lower,
-        "min_visits": V, "alpha": alpha_s.to_dict(), "epsilon_greedy": eps_s.to_dict(),
-        "max_steps_per_episode": H, "eval_every": M, "q_init": float(q0),
+        "lcb_z": float(test.lcb_z), "flat_explore": settings.flat_explore,
+        "test_reference": reference.name, "refine": refinement.refine,
+        "primitive_exploration": settings.exploration.primitive_exploration if check
+        else "never",
+        "explore_known": settings.exploration.explore_known if settings.directed else 0,
+        "layer_values": settings.layer_values, "split_offered": test.split_offered,
+        "flat_lower_bound": lower, "min_visits": test.min_visits,
+        "alpha": cfg.alpha.to_dict(), "epsilon_greedy": cfg.epsilon.to_dict(),
+        "max_steps_per_episode": cfg.horizon, "eval_every": cfg.eval_every, "q_init": float(q0),
         "kernel": kernel_name, "intra_option": settings.intra_option, "options": list(names),
-        "extra_subgoals": [o.subgoal for o in extra],
-        "initial_blocks": B0, "reference": "given" if reference_values is not None else "solved",
+        "extra_subgoals": [o.subgoal for o in extra], "initial_blocks": B0,
+        "reference": "given" if run.reference_values is not None else "solved",
     }
     curve = LearningCurve.from_matrices(
         steps=st.out_steps, decisions=st.out_dec, returns=st.out_ret,
@@ -569,9 +501,10 @@ def hierarchical_learning(
     )
     grounded = st.Ql.copy() if st.Ql.shape[1] == S else None  # a placeholder when not testing
     return HierarchicalResult(
-        Q=lifted(), block_Q=[st.Q[k, :parts[k].n_blocks].copy() for k in range(K)],
+        Q=lifted_values(settings.layer_values, st, parts, smdp, mdp, lower),
+        block_Q=[st.Q[k, :parts[k].n_blocks].copy() for k in range(K)],
         partitions=parts, Q_flat=st.Qf.copy(), Q_grounded=grounded,
         curve=curve, blocks=st.out_blocks.copy(),
-        refinements=events, seed=root_seed, v_star_start=v_star, option_names=names,
+        refinements=events, seed=cfg.seed, v_star_start=v_star, option_names=names,
         parameters=parameters,
     )
