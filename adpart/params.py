@@ -78,24 +78,33 @@ class Param:
             raise PluginError(
                 f"{owner}: --{self.name} expects {self.type}, got {value!r}"
             ) from None
-        if self.type == "float" and not math.isfinite(out):
-            raise PluginError(
-                f"{owner}: --{self.name} must be a finite number; got {value!r}"
-            )
-        if self.choices is not None and out not in self.choices:
-            raise PluginError(
-                f"{owner}: --{self.name} must be one of {', '.join(self.choices)}; got {out!r}"
-            )
-        if self.min is not None and out < self.min:
-            raise PluginError(f"{owner}: --{self.name} must be >= {self.min}; got {out!r}")
-        if self.max is not None and out > self.max:
-            raise PluginError(f"{owner}: --{self.name} must be <= {self.max}; got {out!r}")
+        problem = value_problem(out, kind=self.type, low=self.min, high=self.max,
+                                choices=self.choices)
+        if problem is not None:  # the value as converted, but a non-finite one as given
+            got = value if "finite" in problem else out
+            raise PluginError(f"{owner}: --{self.name} {problem}; got {got!r}")
         if self.check is not None:
             try:
                 self.check(out)
             except AdpartError as exc:
                 raise PluginError(f"{owner}: --{self.name} {value!r}: {exc}") from None
         return out
+
+
+def value_problem(value: Any, *, kind: str, low: float | None = None, high: float | None = None,
+                  choices: Sequence[str] | None = None, finite: bool = True) -> str | None:
+    """What is wrong with a value already of its ``kind`` (``"must be >= 0"``), or None: the one
+    range and choice check of a plugin parameter and of a settings field."""
+    if kind in ("int", "float"):
+        if math.isnan(value) or (finite and math.isinf(value)):
+            return "must be a finite number"
+        if low is not None and value < low:
+            return f"must be >= {low}"
+        if high is not None and value > high:
+            return f"must be <= {high}"
+    if choices is not None and value not in choices:
+        return f"must be one of {', '.join(choices)}"
+    return None
 
 
 # --------------------------------------------------------------------------------------------
@@ -201,27 +210,18 @@ class SettingField:
             if not ok or (b.kind == "int" and int(value) != value):
                 raise fail(f" must be {'an integer' if b.kind == 'int' else 'a number'}")
             value = int(value) if b.kind == "int" else float(value)
-            if math.isnan(value) or (b.finite and math.isinf(value)):
-                raise fail(" must be finite")
-            low = b.min if b.min is not None else -math.inf
-            high = b.max if b.max is not None else math.inf
-            if not low <= value <= high:
-                raise fail(f" is outside [{_fmt(low)}, {_fmt(high)}]: {self.help}")
-            return value
-        if not isinstance(value, str):
+        elif not isinstance(value, str):
             raise fail(" must be a string")
-        if b.choices is not None and value not in b.choices:
-            raise fail(f"; choose one of {', '.join(b.choices)}")
+        problem = value_problem(value, kind=b.kind, low=b.min, high=b.max, choices=b.choices,
+                                finite=b.finite)
+        if problem is not None:
+            raise fail(f" {problem}")
         if b.check is not None:
             try:
                 b.check(value)
             except AdpartError as exc:
                 raise fail(f": {exc}") from None
         return value
-
-
-def _fmt(x: float) -> str:
-    return "inf" if x == math.inf else "-inf" if x == -math.inf else f"{x:g}"
 
 
 def np_bool() -> type:
