@@ -193,8 +193,10 @@ class SettingField:
         from adpart.errors import TaskError
 
         b = self.bounds
+        given = value
+
         def fail(problem: str) -> TaskError:
-            return TaskError(f"{self.owner}: {self.name} = {value!r}{problem} ({self.option})")
+            return TaskError(f"{self.owner}: {self.name} = {given!r}{problem} ({self.option})")
 
         if value is None:
             if self.default is None or b.none is not None:
