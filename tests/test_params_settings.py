@@ -143,6 +143,6 @@ def test_the_command_line_options_are_derived_typed_and_checked():
 
 def test_a_plugin_parameter_refuses_what_the_field_refuses():
     params = {p.name: p for p in settings_params(Outer)}
-    with pytest.raises(PluginError, match="--delta must be <= 1.0; got 1.5"):
+    with pytest.raises(PluginError, match=r"--delta must be <= 1\.0; got 1\.5"):
         params["delta"].convert("1.5", "x")
     assert params["epsilon"].convert("none", "x") is None
