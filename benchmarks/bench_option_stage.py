@@ -38,8 +38,7 @@ def main() -> None:
     for name, first, new in cases:
         domain = get_domain(name)
         src, mdp = domain.mdp(first), domain.mdp(new)
-        found = discover_exhaustive(src, solve(src).policy, np.random.default_rng(0),
-                                    on_loop="truncate")
+        found = discover_exhaustive(src, solve(src).policy, np.random.default_rng(0))
         subgoals = found.subgoals[~mdp.terminal[found.subgoals]]
         _stage(mdp, subgoals[:1], "local")  # warm caches and compiled kernels
         times, sizes = {}, {}

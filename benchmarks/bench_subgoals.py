@@ -24,8 +24,10 @@ from adpart.envs.registry import get_domain
 from adpart.mdp.generate import random_grid_mdp
 from adpart.mdp.model import FiniteMDP
 from adpart.mdp.solvers import solve
+from adpart.params import build_settings
 from adpart.subgoals.discover import discover_exhaustive, discover_monte_carlo
 from adpart.subgoals.result import SubgoalResult
+from adpart.subgoals.settings import CountSettings, MonteCarloSettings
 
 
 def goal_grid(n: int) -> tuple[FiniteMDP, np.ndarray]:
@@ -54,21 +56,23 @@ def best(fn: Callable[[], SubgoalResult], repeats: int) -> tuple[float, SubgoalR
     return min(times), out
 
 
-#: ``name -> (discover_exhaustive keywords, discover_monte_carlo keywords)``: the defaults (ratios
+#: ``name -> (discover_exhaustive settings, discover_monte_carlo settings)``: the defaults (ratios
 #: along sampled paths, the two-passes stop) and the opt-in every-path ratios with the
 #: predicted-agreement stop (docs/subgoals.md).
-CHOICES: dict[str, tuple[dict, dict]] = {
-    "defaults": ({}, {}),
-    "ratios=all, stop=predicted": ({"ratios": "all"}, {"ratios": "all", "stop": "predicted"}),
+CHOICES: dict[str, tuple[CountSettings, MonteCarloSettings]] = {
+    "defaults": (CountSettings(), MonteCarloSettings()),
+    "ratios=all, stop=predicted": (
+        CountSettings(ratios="all"),
+        build_settings(MonteCarloSettings, {"ratios": "all", "stop": "predicted"})),
 }
 
 
 def run(label: str, mdp: FiniteMDP, policy: np.ndarray, repeats: int,
         choice: str = "defaults") -> None:
-    ex_kw, mc_kw = CHOICES[choice]
-    te, ex = best(lambda: discover_exhaustive(mdp, policy, np.random.default_rng(0), **ex_kw),
+    ex_set, mc_set = CHOICES[choice]
+    te, ex = best(lambda: discover_exhaustive(mdp, policy, np.random.default_rng(0), ex_set),
                   repeats)
-    tm, mc = best(lambda: discover_monte_carlo(mdp, policy, np.random.default_rng(0), **mc_kw),
+    tm, mc = best(lambda: discover_monte_carlo(mdp, policy, np.random.default_rng(0), mc_set),
                   repeats)
     both = np.intersect1d(ex.subgoals, mc.subgoals).size
     print(f"{label:<18} {mdp.n_states:>9,} {te:>8.3f} {tm:>8.3f} {te / tm:>7.1f}x "
@@ -89,7 +93,7 @@ def agreement(seeds: tuple[int, ...] = (0, 1, 2, 3, 4), choice: str = "defaults"
     against exhaustive seed ``k+1`` (a different seed per detector), ``exh~0`` exhaustive seed
     ``k`` against exhaustive seed 0 (1.00 when the exhaustive set does not depend on the seed).
     """
-    ex_kw, mc_kw = CHOICES[choice]
+    ex_set, mc_set = CHOICES[choice]
     print(f"agreement with {choice} (Jaccard of the subgoal sets; both empty = 1)")
     print(f"{'domain':<16} {'states':>7} {'seed':>4} {'#exh':>5} {'#MC':>5} {'J':>5} {'J x':>5} "
           f"{'exh~0':>5} {'samples':>8} {'stop':<7} {'exh s':>7} {'MC s':>7}")
@@ -98,11 +102,11 @@ def agreement(seeds: tuple[int, ...] = (0, 1, 2, 3, 4), choice: str = "defaults"
         mdp = get_domain(name).mdp(task)
         policy = solve(mdp).policy
         ex_runs = {k: best(lambda m=mdp, p=policy, k=k: discover_exhaustive(
-            m, p, np.random.default_rng(k), **ex_kw), 3) for k in (*seeds, max(seeds) + 1)}
+            m, p, np.random.default_rng(k), ex_set), 3) for k in (*seeds, max(seeds) + 1)}
         for seed in seeds:
             te, ex = ex_runs[seed]
             tm, mc = best(lambda m=mdp, p=policy, k=seed: discover_monte_carlo(
-                m, p, np.random.default_rng(k), **mc_kw), 3)
+                m, p, np.random.default_rng(k), mc_set), 3)
             jac = _jaccard(ex.subgoals, mc.subgoals)
             jac_x = _jaccard(ex_runs[seed + 1][1].subgoals, mc.subgoals)
             jac_ex = _jaccard(ex.subgoals, ex_runs[seeds[0]][1].subgoals)

@@ -49,8 +49,8 @@ def structure() -> None:
         value_iteration(mdp, 1e-4)
         modified_policy_iteration(mdp, 1e-4, evaluation_sweeps=5)
         policy_evaluation(mdp, policy)
-        discover_exhaustive(mdp, policy, np.random.default_rng(0), on_loop="truncate")
-        discover_monte_carlo(mdp, policy, np.random.default_rng(0), on_loop="truncate")
+        discover_exhaustive(mdp, policy, np.random.default_rng(0))  # truncates a looping policy
+        discover_monte_carlo(mdp, policy, np.random.default_rng(0))
         sample_arrivals(mdp, policy, 100, np.random.default_rng(0))
         smdp = mdp.as_smdp()
         exact_lumping(smdp)

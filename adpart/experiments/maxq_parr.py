@@ -247,7 +247,7 @@ def _parr(config: ExperimentConfig, *, mini: bool) -> ExperimentReport:
     from adpart.options.models import option_models
     from adpart.options.subgoal_options import subgoal_options
     from adpart.params import build_settings
-    from adpart.subgoals import discover_monte_carlo
+    from adpart.subgoals import MonteCarloSettings, discover_monte_carlo
 
     out = Path(config.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -271,8 +271,11 @@ def _parr(config: ExperimentConfig, *, mini: bool) -> ExperimentReport:
                     epsilon=EPSILON, eval_every=max(1, s["first"] // 10),
                     max_steps_per_episode=s["horizon"])
     found = discover_monte_carlo(first, fr.greedy_policies()[0],
-                                 np.random.default_rng(config.seed), on_loop="truncate",
-                                 horizon=s["horizon"], max_samples=s["max_samples"])
+                                 np.random.default_rng(config.seed),
+                                 build_settings(MonteCarloSettings,
+                                                {"on_loop": "truncate",
+                                                 "max_samples": s["max_samples"]}),
+                                 horizon=s["horizon"])
     sub = found.subgoals[~mdp.terminal[found.subgoals]]
     states = np.unique(np.r_[sub, goal_room_cell(mdp)])
     config.progress(f"{sub.size} subgoals; options and models")

@@ -68,7 +68,7 @@ def _two_rooms_settings(config: ExperimentConfig) -> dict[str, Any]:
 def subgoals_two_rooms(config: ExperimentConfig) -> ExperimentReport:
     """Learn two-rooms, discover subgoals on each learned policy, draw the ratios of run 0."""
     from adpart.learning.qlearning import q_learning
-    from adpart.subgoals import discover_exhaustive
+    from adpart.subgoals import CountSettings, discover_exhaustive
     from adpart.workflows.resolve import resolve_domain as get_domain
 
     out = Path(config.out)
@@ -97,7 +97,8 @@ def subgoals_two_rooms(config: ExperimentConfig) -> ExperimentReport:
         for n_traj, rows in per_run.items():
             rng = np.random.default_rng(seeds[k])
             try:
-                res = discover_exhaustive(mdp, policies[k], rng, p=P_LEVEL, trajectories=n_traj)
+                res = discover_exhaustive(mdp, policies[k], rng, CountSettings(
+                    p=P_LEVEL, trajectories=n_traj, on_loop="error"))
             except AdpartError as err:  # a learned policy that loops: recorded, not hidden
                 rows.append({"run": k, "error": str(err)})
                 continue
@@ -235,7 +236,14 @@ def _plot_times(times: dict[str, np.ndarray], path: Path) -> str:
 def subgoals_sampling(config: ExperimentConfig) -> ExperimentReport:
     """Subgoals vs samples, time of each method and agreement of the two sets."""
     from adpart.mdp.solvers import solve
-    from adpart.subgoals import bernstein_samples, discover_exhaustive, discover_monte_carlo
+    from adpart.params import build_settings
+    from adpart.subgoals import (
+        CountSettings,
+        MonteCarloSettings,
+        bernstein_samples,
+        discover_exhaustive,
+        discover_monte_carlo,
+    )
     from adpart.workflows.resolve import resolve_domain as get_domain
 
     out = Path(config.out)
@@ -261,11 +269,13 @@ def subgoals_sampling(config: ExperimentConfig) -> ExperimentReport:
     samples_axis = None
     for k in range(s["runs"]):
         config.progress(f"run {k + 1}/{s['runs']}: exhaustive, Monte Carlo, Monte Carlo curve")
-        ex = discover_exhaustive(mdp, policy, np.random.default_rng(seeds[k]), p=P_LEVEL)
-        mc = discover_monte_carlo(mdp, policy, np.random.default_rng(seeds[k]), p=P_LEVEL)
-        full = discover_monte_carlo(mdp, policy, np.random.default_rng(seeds[k]), p=P_LEVEL,
-                                    stop="max", max_samples=s["curve_samples"],
-                                    batch=s["curve_batch"])
+        ex = discover_exhaustive(mdp, policy, np.random.default_rng(seeds[k]),
+                                 CountSettings(p=P_LEVEL))
+        mc = discover_monte_carlo(mdp, policy, np.random.default_rng(seeds[k]),
+                                  build_settings(MonteCarloSettings, {"p": P_LEVEL}))
+        full = discover_monte_carlo(mdp, policy, np.random.default_rng(seeds[k]), build_settings(
+            MonteCarloSettings, {"p": P_LEVEL, "stop": "max", "max_samples": s["curve_samples"],
+                                 "batch": s["curve_batch"]}))
         hist = full.stats["history"]
         samples_axis = np.array([h["samples"] for h in hist])
         curves.append([h["n_subgoals"] for h in hist])

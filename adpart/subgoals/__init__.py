@@ -7,7 +7,10 @@ Library functions, usable without the plugin layer:
 * :func:`gradient_ratios`, :func:`t_test_threshold` - ratios along paths, eq. 4.2;
 * :func:`discover_exhaustive`, :func:`discover_monte_carlo` - the two pipelines;
 * :func:`reward_variation_states`, :func:`with_reward_variation` - section 4.3.1;
-* :func:`betweenness`, :func:`visit_frequency` - the literature's detectors.
+* :func:`betweenness`, :func:`visit_frequency` - the literature's detectors;
+* :class:`CountSettings`, :class:`MonteCarloSettings`, :class:`RewardVariationSettings`,
+  :class:`BetweennessSettings`, :class:`VisitFrequencySettings` - each detector's settings, the one
+  declaration of their defaults and checks (:mod:`adpart.subgoals.settings`).
 
 See ``docs/subgoals.md`` for the interpretations chosen.
 """
@@ -37,9 +40,18 @@ from adpart.subgoals.ratios import (
 )
 from adpart.subgoals.result import SubgoalResult
 from adpart.subgoals.reward import reward_variation_states, with_reward_variation
+from adpart.subgoals.settings import (
+    BetweennessSettings,
+    CountSettings,
+    MonteCarloSettings,
+    RewardVariationSettings,
+    VisitFrequencySettings,
+)
 
 __all__ = [
-    "CountMetric", "RatioSamples", "SubgoalResult", "Trajectories", "arrival_counts",
+    "BetweennessSettings", "CountMetric", "CountSettings", "MonteCarloSettings", "RatioSamples",
+    "RewardVariationSettings", "SubgoalResult", "Trajectories", "VisitFrequencySettings",
+    "arrival_counts",
     "bernstein_epsilon", "bernstein_samples", "betweenness", "check_policy", "count_metric",
     "discover_exhaustive", "discover_monte_carlo", "gradient_ratios", "local_maxima",
     "policy_matrix", "reward_variation_states", "sample_arrivals", "sample_trajectories",

@@ -24,10 +24,12 @@ from adpart.subgoals.policy import (
     trapped_states,
     walker_matrix,
 )
+from adpart.subgoals.settings import ON_LOOP, CountSettings, given
+
+__all__ = ["COUNT_TOL", "ON_LOOP", "CountMetric", "count_metric"]
 
 #: Default stopping tolerance on the walker mass still alive (a fraction of the one walker).
 COUNT_TOL = 1e-10
-ON_LOOP = ("error", "truncate")
 
 
 @dataclass(frozen=True, eq=False)
@@ -54,38 +56,34 @@ class CountMetric:
         return self.counts * self.counts.shape[0] if self.normalised else self.counts
 
 
-def check_on_loop(on_loop: str) -> str:
-    if on_loop not in ON_LOOP:
-        raise TaskError(f"on_loop = {on_loop!r}; use 'error' or 'truncate'")
-    return on_loop
-
-
 def count_metric(
     mdp: FiniteMDP,
     policy: np.ndarray,
+    settings: CountSettings | None = None,
     *,
     normalised: bool = False,
     tol: float = COUNT_TOL,
     max_iter: int | None = None,
-    on_loop: str = "error",
 ) -> CountMetric:
     """The (normalised) count metric ``C*_pi`` of eq. 4.1 for every state.
 
     Args:
         mdp: the task's MDP (its dynamics, terminal states and admissible actions are used).
         policy: ``(S,)`` action ids or ``(S, A)`` action probabilities.
+        settings: the detector's :class:`~adpart.subgoals.settings.CountSettings` (None: its
+            defaults); only its ``on_loop`` concerns the count: a policy that cycles without
+            terminating (see :func:`trapped_states`) raises :class:`TaskError` with ``"error"``;
+            ``"truncate"`` (default) sums to the cap as eq. 4.1 says.
         normalised: return ``C^*-hat`` (definition 4.3) instead of ``C* = |S| C^*-hat``.
         tol: stop when the mass of walkers still counting falls to ``tol`` or below.
         max_iter: the largest ``n`` of eq. 4.1; default ``|S|``.
-        on_loop: a policy that cycles without terminating (see :func:`trapped_states`) raises
-            :class:`TaskError` with ``"error"``; ``"truncate"`` sums to the cap as eq. 4.1 says.
 
     Returns:
         A :class:`CountMetric`.
     """
+    on_loop = given(CountSettings, settings).on_loop
     mdp = check_mdp(mdp)
     pol = check_policy(mdp, policy)
-    check_on_loop(on_loop)
     if not (np.isfinite(tol) and tol >= 0):
         raise TaskError(f"tol = {tol!r} must be a finite number >= 0")
     S = mdp.n_states

@@ -26,9 +26,9 @@ import time
 
 import numpy as np
 
-from adpart.errors import TaskError
 from adpart.mdp.model import FiniteMDP
-from adpart.subgoals.count import check_on_loop, count_metric
+from adpart.params import settings_dict
+from adpart.subgoals.count import count_metric
 from adpart.subgoals.montecarlo import (
     StartStream,
     bernstein_epsilon,
@@ -48,16 +48,23 @@ from adpart.subgoals.ratios import (
     PathRatios,
     PathStructure,
     RatioSamples,
-    check_level,
     gradient_ratios,
     interior_triples,
     samples_per_state,
     t_test_threshold,
 )
 from adpart.subgoals.result import SubgoalResult
+from adpart.subgoals.settings import (
+    RATIO_MODES,
+    STOP_RULES,
+    CountSettings,
+    MonteCarloSettings,
+    given,
+)
 
-STOP_RULES = ("passes", "predicted", "either", "bernstein", "stable", "max")
-RATIO_MODES = ("paths", "all")
+__all__ = ["BATCH_GROWTH", "MIN_PASSES", "PASS_AGREEMENT", "PREDICTED_AGREEMENT", "RATIO_MODES",
+           "STOP_RULES", "discover_exhaustive", "discover_monte_carlo"]
+
 #: The ``"passes"`` rule (default) stops when the subgoal sets of two consecutive full passes
 #: over the start states agree to at least this Jaccard index.
 PASS_AGREEMENT = 0.9
@@ -75,12 +82,6 @@ MIN_PASSES = 3
 #: judgement is then an ``O(nnz)`` pass over the walker). With ``ratios="paths"`` every batch
 #: has ``batch`` samples.
 BATCH_GROWTH = 0.1
-
-
-def _positive_int(value: object, what: str, low: int = 1) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
-        raise TaskError(f"{what} = {value!r} must be an integer >= {low}")
-    return int(value)
 
 
 def _sample_epsilon(c_t: np.ndarray, next_delta: np.ndarray, n: int, epsilon: float,
@@ -138,24 +139,13 @@ def _threshold(rs: RatioSamples | PathRatios, S: int, p: float,
     return t_test_threshold(nu, sd, n_ps, p), nu, sd, n_ps
 
 
-def _check_ratios(ratios: str) -> str:
-    if ratios not in RATIO_MODES:
-        raise TaskError(f"ratios = {ratios!r}; use 'paths' (sampled, default) or 'all' "
-                        "(every path)")
-    return ratios
-
-
 def discover_exhaustive(
     mdp: FiniteMDP,
     policy: np.ndarray,
     rng: np.random.Generator,
+    settings: CountSettings | None = None,
     *,
-    p: float = 0.025,
-    trajectories: int = 30,
-    n: int = 0,
     horizon: int | None = None,
-    on_loop: str = "error",
-    ratios: str = "paths",
 ) -> SubgoalResult:
     """Subgoals from the exhaustive count metric (eq. 4.1) and the t-test threshold (eq. 4.2).
 
@@ -166,25 +156,19 @@ def discover_exhaustive(
     :data:`~adpart.subgoals.ratios.ALL_PATHS_N`.
 
     Args:
-        p: level of the one-sided t-test, in (0, 1).
-        trajectories: with ``ratios="paths"``, the paths sampled under the policy along which
-            ratios are evaluated (30: with the automatic N this finds exactly the doorway of
-            two-rooms for every seed tried; the seed's example, Fig. 4.2, uses 10).
-        n: the ``N`` of eq. 4.2; 0 = automatic (:data:`~adpart.subgoals.ratios.ALL_PATHS_N`
-            over every path, :func:`samples_per_state` over sampled paths).
+        settings: the level ``p``, the ratio paths ``trajectories``, ``N`` of eq. 4.2 (``n``,
+            0 = automatic: :data:`~adpart.subgoals.ratios.ALL_PATHS_N` over every path,
+            :func:`samples_per_state` over sampled paths), ``ratios`` and ``on_loop``
+            (:class:`~adpart.subgoals.settings.CountSettings`, checked there; None: its
+            defaults).
         horizon: step cap of the sampled paths (default ``|S|``; ``ratios="paths"`` only).
-        on_loop: ``"error"`` or ``"truncate"`` for a policy that never terminates.
-        ratios: ``"paths"`` (default: ``trajectories`` sampled paths) or ``"all"`` (every
-            path of the walker).
     """
     t0 = time.perf_counter()
+    s = given(CountSettings, settings)
+    p, n, trajectories, ratios = s.p, s.n, s.trajectories, s.ratios
     mdp = check_mdp(mdp)
     pol = check_policy(mdp, policy)
-    p = check_level(p)
-    trajectories = _positive_int(trajectories, "trajectories")
-    n = _positive_int(n, "n", 0)
-    ratios = _check_ratios(ratios)
-    cm = count_metric(mdp, pol, on_loop=check_on_loop(on_loop))
+    cm = count_metric(mdp, pol, s)
     t_count = time.perf_counter() - t0
     S = mdp.n_states
     if ratios == "all":
@@ -211,8 +195,7 @@ def discover_exhaustive(
         "count_time_s": t_count,
         "time_s": time.perf_counter() - t0,
     }
-    params = {"p": p, "trajectories": trajectories, "n": n, "horizon": horizon, "on_loop": on_loop,
-              "ratios": ratios}
+    params = {**settings_dict(s), "horizon": horizon}
     return SubgoalResult(subgoals, scores, mu, stats, params, "count-exhaustive")
 
 
@@ -220,19 +203,9 @@ def discover_monte_carlo(
     mdp: FiniteMDP,
     policy: np.ndarray,
     rng: np.random.Generator,
+    settings: MonteCarloSettings | None = None,
     *,
-    p: float = 0.025,
-    trajectories: int = 30,
-    n: int = 0,
-    batch: int = 50,
-    epsilon: float = 2.0,
-    confidence: float = 0.9,
-    stable_batches: int = 3,
-    stop: str = "passes",
-    max_samples: int = 50_000,
     horizon: int | None = None,
-    on_loop: str = "error",
-    ratios: str = "paths",
 ) -> SubgoalResult:
     """Subgoals from the sampled count metric (definition 4.4), batch by batch.
 
@@ -255,23 +228,26 @@ def discover_monte_carlo(
     on deterministic dynamics. When the passes a pass rule needs do not fit under
     ``max_samples`` (a large model, where the exhaustive count is what Monte Carlo is meant to
     avoid) the rule is ``"either"``; ``"bernstein"`` when the sample count meets eq. 4.3 with
-    the current ``max C_H`` and ``epsilon`` (the seed's rule; it stops after a few hundred
-    samples, far too early for the counts to be accurate to ``epsilon``, because eq. 4.3 bounds
-    each trajectory's count by ``max C_H`` rather than by ``|S|``); ``"stable"`` when the
-    subgoal set has not changed over ``stable_batches`` batches; ``"either"`` whichever of those
-    two comes first; ``"max"`` only at ``max_samples``. Batches other than passes have
+    the current ``max C_H`` and ``count_epsilon`` (the seed's rule; it stops after a few
+    hundred samples, far too early for the counts to be accurate to ``count_epsilon``, because
+    eq. 4.3 bounds each trajectory's count by ``max C_H`` rather than by ``|S|``); ``"stable"``
+    when the subgoal set has not changed over ``stable_batches`` batches; ``"either"`` whichever
+    of those two comes first; ``"max"`` only at ``max_samples``. Batches other than passes have
     ``batch`` samples; with ``ratios="all"`` and ``"either"``, ``"stable"`` or ``"bernstein"``
     at least ``batch`` and :data:`BATCH_GROWTH` of the samples so far (not past eq. 4.3's
     count), so the set is judged ``O(log N)`` times. A state is a subgoal when some path reaches
     ``mu + 2 eps_N / max(1, Delta_H(s_{t+1}))`` (theorem 4.3), with ``eps_N`` the accuracy the
     samples drawn so far guarantee by eq. 4.3 for the ratio's two states
-    (:func:`_sample_epsilon`; at most ``epsilon``).
+    (:func:`_sample_epsilon`; at most ``count_epsilon``).
 
     Args:
-        epsilon: the count accuracy ``eps_N`` of theorems 4.2-4.3 the ``"bernstein"`` rule aims
-            at, in standard count units (section 5.1.4 uses 5 for the a-priori bound and 2 for
-            the raised threshold).
-        confidence: the probability ``p`` of eq. 4.3 (section 5.1.4 uses 0.9).
+        settings: :class:`~adpart.subgoals.settings.MonteCarloSettings` (None: its defaults):
+            its ``count`` group as in :func:`discover_exhaustive`; ``batch``, ``stop``,
+            ``stable_batches``, ``max_samples``; ``count_epsilon``, the count accuracy
+            ``eps_N`` of theorems 4.2-4.3 the ``"bernstein"`` rule aims at, in standard count
+            units (section 5.1.4 uses 5 for the a-priori bound and 2 for the raised threshold);
+            ``confidence``, the probability ``p`` of eq. 4.3 (section 5.1.4 uses 0.9).
+        horizon: step cap of every sampled trajectory (default ``|S|``).
 
     With ``ratios="paths"`` (default) the ``trajectories`` ratio paths are sampled first, as the
     exhaustive detector samples them. With ``ratios="all"`` the ratios are those of every path of
@@ -279,26 +255,20 @@ def discover_monte_carlo(
     only, ``O(nnz)`` per batch, no exhaustive count), so ``C_H -> C*`` makes the result the
     exhaustive one; the first batch has ``trajectories`` samples.
 
-    The other arguments are as in :func:`discover_exhaustive`.
+    The stored ``params`` are the settings; ``stats["stop"]`` is the rule applied (``"either"``
+    when the passes the requested rule needs do not fit under ``max_samples``).
     """
     t0 = time.perf_counter()
+    s = given(MonteCarloSettings, settings)
+    p, n, trajectories, ratios = s.count.p, s.count.n, s.count.trajectories, s.count.ratios
+    batch, stable_batches, max_samples, stop = s.batch, s.stable_batches, s.max_samples, s.stop
+    epsilon, confidence = s.count_epsilon, s.confidence
     mdp = check_mdp(mdp)
     pol = check_policy(mdp, policy)
-    p = check_level(p)
-    trajectories = _positive_int(trajectories, "trajectories")
-    n = _positive_int(n, "n", 0)
-    batch = _positive_int(batch, "batch")
-    stable_batches = _positive_int(stable_batches, "stable_batches")
-    max_samples = _positive_int(max_samples, "max_samples")
-    bernstein_samples(1.0, epsilon, confidence)  # validates epsilon and confidence
-    if stop not in STOP_RULES:
-        raise TaskError(f"stop = {stop!r}; use one of {', '.join(STOP_RULES)}")
-    check_on_loop(on_loop)
-    ratios = _check_ratios(ratios)
     S = mdp.n_states
     walker = walker_matrix(mdp, pol)
     trapped = trapped_states(walker)
-    if trapped.size and on_loop == "error":
+    if trapped.size and s.count.on_loop == "error":
         raise loop_error(trapped, "the sampled count metric")
 
     if ratios == "all":
@@ -419,6 +389,7 @@ def discover_monte_carlo(
         "ratio_samples": rs.n_triples if ratios == "all" else rs.n,
         "ratios": ratios,
         "trajectories": trajectories,
+        "stop": stop,
         "samples": n_samples,
         "batches": len(history),
         "stop_reason": reason,
@@ -434,8 +405,5 @@ def discover_monte_carlo(
         "history": history,
         "time_s": time.perf_counter() - t0,
     }
-    params = {"p": p, "trajectories": trajectories, "n": n, "batch": batch, "epsilon": epsilon,
-              "confidence": confidence, "stable_batches": stable_batches, "stop": stop,
-              "max_samples": max_samples, "horizon": horizon, "on_loop": on_loop,
-              "ratios": ratios}
+    params = {**settings_dict(s), "horizon": horizon}
     return SubgoalResult(subgoals, scores, mu, stats, params, "count-mc")

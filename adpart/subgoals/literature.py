@@ -11,6 +11,9 @@
   uniformly random admissible actions from uniform non-terminal starts; a walk is successful when
   it arrives at a terminal state within the horizon; a state's score is the fraction of successful
   walks that arrive at it at least once (terminal states excluded).
+
+The detectors' settings are :class:`~adpart.subgoals.settings.BetweennessSettings` and
+:class:`~adpart.subgoals.settings.VisitFrequencySettings`.
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ from adpart.errors import TaskError
 from adpart.mdp.model import FiniteMDP
 from adpart.subgoals.montecarlo import sample_trajectories
 from adpart.subgoals.policy import check_mdp
+from adpart.subgoals.settings import VisitFrequencySettings, given
 
 
 def transition_graph(mdp: FiniteMDP) -> sp.csr_array:
@@ -74,9 +78,14 @@ def betweenness(graph: sp.csr_array, *, sources: np.ndarray | None = None,
     return bc
 
 
-def visit_frequency(mdp: FiniteMDP, rng: np.random.Generator, *, walks: int = 500,
-                    horizon: int | None = None) -> tuple[np.ndarray, int]:
-    """Fraction of successful random walks arriving at each state, and the number of successes."""
+def visit_frequency(mdp: FiniteMDP, rng: np.random.Generator,
+                    settings: VisitFrequencySettings | None = None) -> tuple[np.ndarray, int]:
+    """Fraction of successful random walks arriving at each state, and the number of successes.
+
+    ``settings.walks`` walks of at most ``settings.horizon`` steps (0: ``10 |S|``) each
+    (:class:`~adpart.subgoals.settings.VisitFrequencySettings`; None: its defaults).
+    """
+    s = given(VisitFrequencySettings, settings)
     mdp = check_mdp(mdp)
     S = mdp.n_states
     if not mdp.terminal.any():
@@ -85,8 +94,8 @@ def visit_frequency(mdp: FiniteMDP, rng: np.random.Generator, *, walks: int = 50
             "when it arrives at one"
         )
     uniform = mdp.admissible / mdp.admissible.sum(axis=1, keepdims=True)
-    H = 10 * S if horizon is None else int(horizon)
-    traj = sample_trajectories(mdp, uniform, walks, rng, H)
+    H = s.horizon or 10 * S
+    traj = sample_trajectories(mdp, uniform, s.walks, rng, H)
     last = traj.paths[np.arange(traj.n), traj.lengths - 1]
     ok = ~traj.truncated & mdp.terminal[last] & (traj.lengths > 1)
     good = traj.paths[ok, 1:]

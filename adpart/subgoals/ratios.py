@@ -110,10 +110,11 @@ def _t_quantile(q: float, dof: int) -> float:
     return float(stats.t.ppf(q, dof))
 
 
-def t_test_threshold(mean: float, sd: float, n: int, p: float = 0.025) -> float:
+def t_test_threshold(mean: float, sd: float, n: int, p: float) -> float:
     """The sample mean ``rho`` a state needs to pass the one-sided t-test of eq. 4.2 at level p.
 
-    ``mu = nu + t_{1-p, N-1} * sigma / sqrt(N)`` with ``N`` the ratio samples per state.
+    ``mu = nu + t_{1-p, N-1} * sigma / sqrt(N)`` with ``N`` the ratio samples per state. The
+    detectors' level is :class:`~adpart.subgoals.settings.CountSettings`' ``p``.
     """
     p = check_level(p)
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 2:

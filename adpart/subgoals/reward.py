@@ -2,39 +2,41 @@
 
 With ``r_min = min {R(s, a)}`` over admissible pairs of non-terminal states, a state ``s`` is a
 subgoal when ``R(s, a) > r_min`` for some admissible ``a`` (4.3.1; section 5.1.3 uses the level
-``r_min = 0`` instead, which ``level`` reproduces). adpart pays a goal's reward on the *arrival*
-transition, i.e. in ``R(s, a)`` of the goal's predecessors, so with ``terminal_targets`` (default)
-the terminal states such a rewarded pair can reach are added too: they are the goal states 4.3.1
-wants among the subgoals. The result is added to a detected set with :func:`with_reward_variation`.
+``r_min = 0`` instead, which ``reward_level`` reproduces). adpart pays a goal's reward on the
+*arrival* transition, i.e. in ``R(s, a)`` of the goal's predecessors, so with ``terminal_targets``
+(default) the terminal states such a rewarded pair can reach are added too: they are the goal
+states 4.3.1 wants among the subgoals. The result is added to a detected set with
+:func:`with_reward_variation`. Both settings are
+:class:`~adpart.subgoals.settings.RewardVariationSettings`'.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from adpart.errors import TaskError
 from adpart.mdp.model import FiniteMDP
 from adpart.subgoals.policy import check_mdp
 from adpart.subgoals.result import SubgoalResult
+from adpart.subgoals.settings import RewardVariationSettings, given
 
 #: Rewards within this distance of the level count as equal to it.
 REWARD_ATOL = 1e-9
 
 
 def reward_variation_states(
-    mdp: FiniteMDP, *, level: float | None = None, terminal_targets: bool = True
+    mdp: FiniteMDP, settings: RewardVariationSettings | None = None
 ) -> np.ndarray:
-    """Sorted int64 states whose reward exceeds ``level`` (default: the minimum reward)."""
+    """Sorted int64 states whose reward exceeds ``settings.reward_level`` (None, the default:
+    the minimum reward), with the terminal states they reach when ``terminal_targets``."""
+    s = given(RewardVariationSettings, settings)
     mdp = check_mdp(mdp)
     live = mdp.admissible & ~mdp.terminal[:, None]
     if not live.any():
         return np.zeros(0, dtype=np.int64)
-    floor = float(mdp.R[live].min()) if level is None else float(level)
-    if not np.isfinite(floor):
-        raise TaskError(f"reward level {level!r} must be a finite number")
+    floor = float(mdp.R[live].min()) if s.reward_level is None else s.reward_level
     high = live & (mdp.R > floor + REWARD_ATOL)
     states = np.flatnonzero(high.any(axis=1))
-    if terminal_targets and high.any():
+    if s.terminal_targets and high.any():
         S = mdp.n_states
         s_idx, a_idx = np.nonzero(high)
         reached = mdp.P[a_idx * S + s_idx]
@@ -44,11 +46,10 @@ def reward_variation_states(
 
 
 def with_reward_variation(
-    result: SubgoalResult, mdp: FiniteMDP, *, level: float | None = None,
-    terminal_targets: bool = True,
+    result: SubgoalResult, mdp: FiniteMDP, settings: RewardVariationSettings | None = None
 ) -> SubgoalResult:
     """``result`` with the reward-variation states added (scores and threshold unchanged)."""
-    added = reward_variation_states(mdp, level=level, terminal_targets=terminal_targets)
+    added = reward_variation_states(mdp, settings)
     stats = dict(result.stats)
     stats["reward_variation_states"] = added.tolist()
     stats["base_subgoals"] = result.subgoals.tolist()

@@ -140,13 +140,16 @@ def _parr_goal_states(maze, mdp):
     """The experiment's first task, its Monte Carlo subgoals and the goal room's cell."""
     from adpart.experiments.maxq_parr import ALPHA, EPSILON, _first_task, goal_room_cell
     from adpart.learning.qlearning import q_learning
-    from adpart.subgoals import discover_monte_carlo
+    from adpart.params import build_settings
+    from adpart.subgoals import MonteCarloSettings, discover_monte_carlo
 
     first, _goal = _first_task(maze)
     fr = q_learning(first, runs=1, episodes=3000, seed=0, alpha=ALPHA, epsilon=EPSILON,
                     eval_every=300, max_steps_per_episode=5000)
     found = discover_monte_carlo(first, fr.greedy_policies()[0], np.random.default_rng(0),
-                                 on_loop="truncate", horizon=5000, max_samples=5000)
+                                 build_settings(MonteCarloSettings,
+                                                {"on_loop": "truncate", "max_samples": 5000}),
+                                 horizon=5000)
     return np.unique(np.r_[found.subgoals[~mdp.terminal[found.subgoals]], goal_room_cell(mdp)])
 
 

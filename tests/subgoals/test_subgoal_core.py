@@ -13,8 +13,11 @@ from adpart.envs.registry import get_domain
 from adpart.errors import TaskError
 from adpart.mdp.model import FiniteMDP
 from adpart.mdp.solvers import solve
+from adpart.params import build_settings
 from adpart.plugins.builtin.detectors import Betweenness, CountExhaustive, CountMonteCarlo
 from adpart.subgoals import (
+    CountSettings,
+    MonteCarloSettings,
     arrival_counts,
     bernstein_samples,
     betweenness,
@@ -64,9 +67,10 @@ def _brute_force(mdp: FiniteMDP, policy: np.ndarray) -> np.ndarray:
 def test_subgoal_count_equals_path_enumeration(seed, S, pol_seed):
     mdp = _tiny_mdp(seed, S)
     policy = np.random.default_rng(pol_seed).integers(0, 2, S)
-    cm = count_metric(mdp, policy, tol=0.0, on_loop="truncate")
+    truncate = CountSettings(on_loop="truncate")
+    cm = count_metric(mdp, policy, truncate, tol=0.0)
     np.testing.assert_allclose(cm.counts, _brute_force(mdp, policy), rtol=1e-10, atol=1e-12)
-    norm = count_metric(mdp, policy, tol=0.0, normalised=True, on_loop="truncate")
+    norm = count_metric(mdp, policy, truncate, tol=0.0, normalised=True)
     np.testing.assert_allclose(norm.counts * S, cm.counts, rtol=1e-12)
 
 
@@ -201,8 +205,12 @@ def test_subgoal_bad_inputs():
         count_metric(mdp, good[:-1])
     with pytest.raises(TaskError, match="not an action id"):
         count_metric(mdp, np.full(mdp.n_states, 99))
+    with pytest.raises(TaskError, match=r"p = 1\.5"):
+        discover_exhaustive(mdp, good, rng, CountSettings(p=1.5))
     with pytest.raises(TaskError, match="level p"):
-        discover_exhaustive(mdp, good, rng, p=1.5)
+        discover_exhaustive(mdp, good, rng, CountSettings(p=0.0))
+    with pytest.raises(TaskError, match="must be a CountSettings"):
+        discover_exhaustive(mdp, good, rng, MonteCarloSettings())
     with pytest.raises(TaskError, match="level p"):
         t_test_threshold(0.0, 1.0, 5, 0.0)
     with pytest.raises(TaskError, match="integer action"):
@@ -221,18 +229,23 @@ def test_subgoal_inadmissible_action():
 
 
 def test_subgoal_looping_policy():
-    """A deterministic 2-cycle never terminates: the core errors by default, the detector plugins
-    truncate by default (the pipeline must work on any policy) and error on request."""
+    """A deterministic 2-cycle never terminates: the core and the detector plugins truncate by
+    default (the pipeline must work on any policy; one default, CountSettings') and error on
+    request."""
     P = np.zeros((3, 1, 3))
     P[0, 0, 1] = P[1, 0, 0] = P[2, 0, 2] = 1.0
     mdp = FiniteMDP.from_dense(P, np.zeros((3, 1)), 0.9, terminal=np.array([False, False, True]))
     pol = np.zeros(3, dtype=np.int64)
     with pytest.raises(TaskError, match="never terminates"):
-        count_metric(mdp, pol)
+        count_metric(mdp, pol, CountSettings(on_loop="error"))
     with pytest.raises(TaskError, match="never terminates"):
         CountMonteCarlo(on_loop="error").detect(mdp, pol, np.random.default_rng(0))
-    assert CountMonteCarlo().kw["on_loop"] == "truncate"
-    cm = count_metric(mdp, pol, on_loop="truncate")
+    with pytest.raises(TaskError, match="never terminates"):
+        discover_monte_carlo(mdp, pol, np.random.default_rng(0),
+                             build_settings(MonteCarloSettings, {"on_loop": "error"}))
+    assert CountMonteCarlo().settings.count.on_loop == "truncate"
+    assert CountExhaustive().settings.on_loop == "truncate"
+    cm = count_metric(mdp, pol)
     assert cm.iterations == 3 and cm.trapped.tolist() == [0, 1]
 
 
@@ -302,7 +315,8 @@ def test_monte_carlo_agrees_with_exhaustive_over_seeds_on_slippery_four_rooms():
     """
     mdp = get_domain("four-rooms").mdp("G1")
     policy = solve(mdp).policy
-    exhaustive = [discover_exhaustive(mdp, policy, np.random.default_rng(k), ratios="all")
+    every_path = CountSettings(ratios="all")
+    exhaustive = [discover_exhaustive(mdp, policy, np.random.default_rng(k), every_path)
                   for k in range(5)]
     for res in exhaustive[1:]:
         assert res.subgoals.tolist() == exhaustive[0].subgoals.tolist()
@@ -310,8 +324,8 @@ def test_monte_carlo_agrees_with_exhaustive_over_seeds_on_slippery_four_rooms():
     assert exhaustive[0].subgoals.size > 0
     assert exhaustive[0].stats["samples_per_state"] == 4  # ALL_PATHS_N
     for k in range(5):
-        mc = discover_monte_carlo(mdp, policy, np.random.default_rng(k), ratios="all",
-                                  stop="predicted")
+        mc = discover_monte_carlo(mdp, policy, np.random.default_rng(k), build_settings(
+            MonteCarloSettings, {"ratios": "all", "stop": "predicted"}))
         assert mc.stats["stop_reason"] == "predicted"
         assert mc.stats["history"][-1]["predicted_jaccard"] >= 0.95
         assert mc.stats["samples"] % mdp.n_states == 0
@@ -395,8 +409,8 @@ def test_exhaustive_with_sampled_paths_is_the_seed_procedure():
     seed, the statistics are those of the sampled ratios, and N is chosen from them."""
     mdp = get_domain("two-rooms").mdp()
     policy = solve(mdp).policy
-    res = discover_exhaustive(mdp, policy, np.random.default_rng(0), ratios="paths",
-                              trajectories=10)
+    res = discover_exhaustive(mdp, policy, np.random.default_rng(0),
+                              CountSettings(ratios="paths", trajectories=10))
     assert res.stats["ratios"] == "paths" and res.stats["trajectories"] == 10
     counts = count_metric(mdp, policy).counts
     traj = sample_trajectories(mdp, policy, 10, np.random.default_rng(0))
@@ -405,12 +419,13 @@ def test_exhaustive_with_sampled_paths_is_the_seed_procedure():
     rs = gradient_ratios(counts, traj)
     assert res.stats["ratio_mean"] == pytest.approx(rs.ratios.mean())
     # the sampled paths are the default
-    default = discover_exhaustive(mdp, policy, np.random.default_rng(0), trajectories=10)
+    default = discover_exhaustive(mdp, policy, np.random.default_rng(0),
+                                  CountSettings(trajectories=10))
     assert default.params["ratios"] == "paths"
     assert default.subgoals.tolist() == res.subgoals.tolist()
     assert default.threshold == res.threshold
     with pytest.raises(TaskError, match="ratios"):
-        discover_exhaustive(mdp, policy, np.random.default_rng(0), ratios="some")
+        discover_exhaustive(mdp, policy, np.random.default_rng(0), CountSettings(ratios="some"))
 
 
 def test_predicted_jaccard_oracle():
@@ -436,7 +451,9 @@ def test_defaults_are_sampled_paths_and_the_two_passes_rule():
 
     for name in ("count-exhaustive", "count-mc"):
         det = get_registry().get("subgoal-detector", name).create({})
-        assert det.kw["ratios"] == "paths"
+        assert det.settings == (CountSettings() if name == "count-exhaustive"
+                                else MonteCarloSettings())
+    assert CountSettings().ratios == "paths" and MonteCarloSettings().stop == "passes"
     mdp = get_domain("four-rooms").mdp("G1")
     policy = solve(mdp).policy
     mc = discover_monte_carlo(mdp, policy, np.random.default_rng(0))
@@ -445,8 +462,8 @@ def test_defaults_are_sampled_paths_and_the_two_passes_rule():
     assert "predicted_jaccard" not in mc.stats["history"][-1]
     steps = {}
     for ratios in ("paths", "all"):
-        res = discover_monte_carlo(mdp, policy, np.random.default_rng(0), stop="stable",
-                                   max_samples=2_000, ratios=ratios)
+        res = discover_monte_carlo(mdp, policy, np.random.default_rng(0), build_settings(
+            MonteCarloSettings, {"stop": "stable", "max_samples": 2_000, "ratios": ratios}))
         samples = [h["samples"] for h in res.stats["history"]]
         steps[ratios] = np.diff(samples)
     assert np.all(steps["paths"] == 50)

@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 from adpart.envs.registry import get_domain
 from adpart.mdp.generate import random_mdp
 from adpart.mdp.solvers import solve
-from adpart.subgoals import arrival_counts, count_metric, sample_trajectories
+from adpart.subgoals import CountSettings, arrival_counts, count_metric, sample_trajectories
 from adpart.subgoals.montecarlo import sample_arrivals
 
 
@@ -71,7 +71,7 @@ def test_sample_arrivals_matches_path_counts_in_distribution():
     """Fixed seed 11, 40,000 trajectories: the two estimators of C_H agree with eq. 4.1."""
     mdp = _mdp(3, 6, 2)
     policy = np.array([0, 1, 0, 1, 0, 1])
-    exact = count_metric(mdp, policy, on_loop="truncate").counts
+    exact = count_metric(mdp, policy, CountSettings(on_loop="truncate")).counts
     rng = np.random.default_rng(11)
     arrivals, _ = sample_arrivals(mdp, policy, 40_000, rng)
     traj = sample_trajectories(mdp, policy, 40_000, rng)

@@ -3,6 +3,9 @@ library functions of :mod:`adpart.subgoals`, registered like any third-party plu
 
 Call signature (hookspec ``register_subgoal_detectors``): ``cls(**params).detect(mdp, policy,
 rng) -> SubgoalResult`` where ``policy`` is ``(S,)`` action ids or ``(S, A)`` probabilities.
+Each detector's parameters (their defaults, ranges and help) are derived from its settings
+dataclass in :mod:`adpart.subgoals.settings`, and the parameters a result stores are those
+settings (:func:`~adpart.params.settings_dict`).
 """
 
 from __future__ import annotations
@@ -11,9 +14,8 @@ import time
 
 import numpy as np
 
-from adpart.errors import TaskError
 from adpart.mdp.model import FiniteMDP
-from adpart.params import Param
+from adpart.params import build_settings, settings_dict, settings_params
 from adpart.plugins.hookspecs import hookimpl
 from adpart.plugins.registry import Registrar
 from adpart.subgoals.discover import discover_exhaustive, discover_monte_carlo
@@ -27,115 +29,81 @@ from adpart.subgoals.literature import (
 from adpart.subgoals.policy import check_mdp, check_policy
 from adpart.subgoals.result import SubgoalResult
 from adpart.subgoals.reward import with_reward_variation
-
-_P = Param("p", "float", 0.025, "level of the one-sided t-test (eq. 4.2), in (0, 1)", min=0.0)
-_TRAJ = Param("trajectories", "int", 30, "sampled paths along which ratios are taken (--ratios "
-              "paths); count-mc: also its first batch", min=1)
-_N = Param("n", "int", 0, "N of eq. 4.2 (ratio samples per state); 0 = automatic (4 with "
-           "--ratios all)", min=0)
-_RATIOS = Param("ratios", "str", "paths", "gradient ratios along sampled paths (paths, the "
-                "seed's Fig. 4.2) or over every path of the count's walker (all)",
-                choices=("paths", "all"))
-_LOOP = Param("on-loop", "str", "truncate", "a policy that never terminates: error or truncate",
-              choices=("error", "truncate"))
+from adpart.subgoals.settings import (
+    BetweennessSettings,
+    CountSettings,
+    MonteCarloSettings,
+    RewardVariationSettings,
+    VisitFrequencySettings,
+)
 
 
 class CountExhaustive:
-    """Count metric by sparse mat-vecs (eq. 4.1), gradient ratios, t-test threshold."""
+    """Count metric by sparse mat-vecs (eq. 4.1), gradient ratios, t-test threshold.
+
+    Its parameters are :class:`~adpart.subgoals.settings.CountSettings`' fields.
+    """
 
     name = "count-exhaustive"
     description = "count metric by sparse mat-vecs (eq. 4.1), gradient ratios, t-test threshold"
-    params = (_P, _TRAJ, _N, _LOOP, _RATIOS)
+    params = settings_params(CountSettings)
 
-    def __init__(self, p: float = 0.025, trajectories: int = 30, n: int = 0,
-                 on_loop: str = "truncate", ratios: str = "paths") -> None:
-        self.kw = {"p": p, "trajectories": trajectories, "n": n, "on_loop": on_loop,
-                   "ratios": ratios}
+    def __init__(self, **values: object) -> None:
+        self.settings = build_settings(CountSettings, values)
 
     def detect(self, mdp: FiniteMDP, policy: np.ndarray, rng: np.random.Generator) -> SubgoalResult:
-        return discover_exhaustive(mdp, policy, rng, **self.kw)
+        return discover_exhaustive(mdp, policy, rng, self.settings)
 
 
 class CountMonteCarlo:
-    """Sampled count metric in batches (def. 4.4), Bernstein/stability stops, raised threshold."""
+    """Sampled count metric in batches (def. 4.4), Bernstein/stability stops, raised threshold.
+
+    Its parameters are :class:`~adpart.subgoals.settings.MonteCarloSettings`' fields (its
+    ``count`` group's, the exhaustive detector's, included).
+    """
 
     name = "count-mc"
     description = "Monte Carlo count metric in batches (def. 4.4, eq. 4.3, theorem 4.3)"
-    params = (
-        _P, _TRAJ, _N,
-        Param("batch", "int", 50, "trajectories per batch", min=1),
-        Param("count-epsilon", "float", 2.0, "count accuracy eps_N of eq. 4.3 / theorem 4.3",
-              min=0.0),
-        Param("confidence", "float", 0.9, "probability p of eq. 4.3, in (0, 1)", min=0.0),
-        Param("stable-batches", "int", 3, "stop when the subgoals are unchanged this many batches",
-              min=1),
-        Param("stop", "str", "passes", "stopping rule (passes: two passes over the start "
-              "states agree; predicted: passes until the predicted Jaccard index with the exact "
-              "set is 0.95)", choices=("passes", "predicted", "either", "bernstein", "stable",
-                                       "max")),
-        Param("max-samples", "int", 50_000, "most trajectories sampled", min=1),
-        _LOOP,
-        _RATIOS,
-    )
+    params = settings_params(MonteCarloSettings)
 
-    def __init__(self, p: float = 0.025, trajectories: int = 30, n: int = 0, batch: int = 50,
-                 count_epsilon: float = 2.0, confidence: float = 0.9, stable_batches: int = 3,
-                 stop: str = "passes", max_samples: int = 50_000,
-                 on_loop: str = "truncate", ratios: str = "paths") -> None:
-        self.kw = {"p": p, "trajectories": trajectories, "n": n, "batch": batch,
-                   "epsilon": count_epsilon, "confidence": confidence,
-                   "stable_batches": stable_batches,
-                   "stop": stop, "max_samples": max_samples, "on_loop": on_loop,
-                   "ratios": ratios}
+    def __init__(self, **values: object) -> None:
+        self.settings = build_settings(MonteCarloSettings, values)
 
     def detect(self, mdp: FiniteMDP, policy: np.ndarray, rng: np.random.Generator) -> SubgoalResult:
-        return discover_monte_carlo(mdp, policy, rng, **self.kw)
+        return discover_monte_carlo(mdp, policy, rng, self.settings)
 
 
+#: The detector of each of :data:`~adpart.subgoals.settings.REWARD_BASES` (none: no detector).
 _BASES = {"count-exhaustive": CountExhaustive, "count-mc": CountMonteCarlo, "none": None}
 
 
 class RewardVariation:
-    """A base detector's subgoals plus the states with above-minimum reward (4.3.1)."""
+    """A base detector's subgoals plus the states with above-minimum reward (4.3.1).
+
+    Its parameters are :class:`~adpart.subgoals.settings.RewardVariationSettings`' fields; the
+    base detector runs with its defaults.
+    """
 
     name = "reward-variation"
     description = "base detector's subgoals plus states with reward above the minimum (4.3.1)"
-    params = (
-        Param("base", "str", "count-exhaustive", "detector whose subgoals are extended",
-              choices=tuple(_BASES)),
-        Param("level", "str", "min", "reward level to exceed: min (4.3.1) or a number (5.1.3: 0)"),
-        Param("terminal-targets", "bool", True, "also add terminal states a rewarded pair reaches"),
-    )
+    params = settings_params(RewardVariationSettings)
 
-    def __init__(self, base: str = "count-exhaustive", level: str = "min",
-                 terminal_targets: bool = True) -> None:
-        if base not in _BASES:
-            raise TaskError(f"base = {base!r}; use one of {', '.join(_BASES)}")
-        try:
-            self.level = None if str(level) == "min" else float(level)
-        except ValueError:
-            raise TaskError(f"level = {level!r}; use 'min' or a number such as 0") from None
-        self.base, self.terminal_targets = base, bool(terminal_targets)
+    def __init__(self, **values: object) -> None:
+        self.settings = build_settings(RewardVariationSettings, values)
 
     def detect(self, mdp: FiniteMDP, policy: np.ndarray, rng: np.random.Generator) -> SubgoalResult:
         t0 = time.perf_counter()
-        factory = _BASES[self.base]
+        factory = _BASES[self.settings.base]
         if factory is None:
             mdp = check_mdp(mdp)
             check_policy(mdp, policy)
             base = SubgoalResult(np.zeros(0, np.int64), np.zeros(mdp.n_states), None)
         else:
             base = factory().detect(mdp, policy, rng)
-        out = with_reward_variation(base, mdp, level=self.level,
-                                    terminal_targets=self.terminal_targets)
-        stats = dict(out.stats, time_s=time.perf_counter() - t0, base_detector=self.base)
-        params = {"base": self.base, "level": "min" if self.level is None else self.level,
-                  "terminal_targets": self.terminal_targets, "base_params": dict(base.params)}
+        out = with_reward_variation(base, mdp, self.settings)
+        stats = dict(out.stats, time_s=time.perf_counter() - t0, base_detector=self.settings.base)
+        params = {**settings_dict(self.settings), "base_params": dict(base.params)}
         return SubgoalResult(out.subgoals, out.scores, out.threshold, stats, params, self.name)
-
-
-#: How the betweenness detector turns scores into subgoals.
-SELECT_RULES = ("local-maxima", "top")
 
 
 class Betweenness:
@@ -143,60 +111,55 @@ class Betweenness:
 
     Subgoals are the local maxima of betweenness (``select="local-maxima"``, the paper's rule:
     more central than every neighbour) or the ``top`` most central states (``select="top"``).
+    Its parameters are :class:`~adpart.subgoals.settings.BetweennessSettings`' fields.
     """
 
     name = "betweenness"
     description = "local maxima (or top-k) of transition-graph betweenness (Simsek & Barto 2008)"
-    params = (Param("select", "str", "local-maxima",
-                    "local-maxima (higher than every neighbour, the paper's rule) or top",
-                    choices=SELECT_RULES),
-              Param("top", "int", 4, "number of subgoals with --select top", min=1),
-              Param("sources", "int", 0, "sampled BFS sources; 0 = all (exact)", min=0))
+    params = settings_params(BetweennessSettings)
 
-    def __init__(self, select: str = "local-maxima", top: int = 4, sources: int = 0) -> None:
-        if select not in SELECT_RULES:
-            raise TaskError(f"select = {select!r}; use one of {', '.join(SELECT_RULES)}")
-        self.select, self.top, self.sources = select, int(top), int(sources)
+    def __init__(self, **values: object) -> None:
+        self.settings = build_settings(BetweennessSettings, values)
 
     def detect(self, mdp: FiniteMDP, policy: np.ndarray | None, rng: np.random.Generator) -> (
         SubgoalResult
     ):
         t0 = time.perf_counter()
+        s = self.settings
         mdp = check_mdp(mdp)
         S = mdp.n_states
         src = None
-        if 0 < self.sources < S:
-            src = np.sort(rng.choice(S, size=self.sources, replace=False))
+        if 0 < s.sources < S:
+            src = np.sort(rng.choice(S, size=s.sources, replace=False))
         graph = transition_graph(mdp)
         scores = betweenness(graph, sources=src)
-        subgoals = (local_maxima(graph, scores) if self.select == "local-maxima"
-                    else top_states(scores, self.top))
+        subgoals = (local_maxima(graph, scores) if s.select == "local-maxima"
+                    else top_states(scores, s.top))
         stats = {"time_s": time.perf_counter() - t0, "sources": S if src is None else src.size}
-        return SubgoalResult(subgoals, scores, None, stats,
-                             {"select": self.select, "top": self.top, "sources": self.sources},
-                             self.name)
+        return SubgoalResult(subgoals, scores, None, stats, settings_dict(s), self.name)
 
 
 class VisitFrequency:
-    """States visited by many successful random walks (Digney 1996, McGovern & Barto 2001)."""
+    """States visited by many successful random walks (Digney 1996, McGovern & Barto 2001).
+
+    Its parameters are :class:`~adpart.subgoals.settings.VisitFrequencySettings`' fields.
+    """
 
     name = "visit-frequency"
     description = "top-k states on successful random walks (Digney 1996; McGovern & Barto 2001)"
-    params = (Param("top", "int", 4, "number of subgoals (most visited)", min=1),
-              Param("walks", "int", 500, "random walks sampled", min=1),
-              Param("horizon", "int", 0, "step limit of a walk; 0 = 10 |S|", min=0))
+    params = settings_params(VisitFrequencySettings)
 
-    def __init__(self, top: int = 4, walks: int = 500, horizon: int = 0) -> None:
-        self.top, self.walks, self.horizon = int(top), int(walks), int(horizon)
+    def __init__(self, **values: object) -> None:
+        self.settings = build_settings(VisitFrequencySettings, values)
 
     def detect(self, mdp: FiniteMDP, policy: np.ndarray | None, rng: np.random.Generator) -> (
         SubgoalResult
     ):
         t0 = time.perf_counter()
-        scores, ok = visit_frequency(mdp, rng, walks=self.walks, horizon=self.horizon or None)
-        stats = {"time_s": time.perf_counter() - t0, "successful_walks": ok, "walks": self.walks}
-        return SubgoalResult(top_states(scores, self.top), scores, None, stats,
-                             {"top": self.top, "walks": self.walks, "horizon": self.horizon},
+        s = self.settings
+        scores, ok = visit_frequency(mdp, rng, s)
+        stats = {"time_s": time.perf_counter() - t0, "successful_walks": ok, "walks": s.walks}
+        return SubgoalResult(top_states(scores, s.top), scores, None, stats, settings_dict(s),
                              self.name)
 
 
