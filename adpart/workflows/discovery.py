@@ -36,7 +36,10 @@ def discover_subgoals(
     """Run ``detector`` on ``policy``'s greedy actions in its task's MDP; store the subgoal set.
 
     A subgoal set already stored for the same policy, detector, parameters and seed is returned
-    instead of being recomputed (``reused=True``).
+    instead of being recomputed (``reused=True``). The record keeps the parameters the detector
+    ran with (``detector_params``, with the seed) and the ones its result states (``params``:
+    the built-in detectors' settings, :func:`adpart.params.settings_dict`), which a reused
+    result states again.
     """
     spec = get_registry().get("subgoal-detector", detector)
     resolved = spec.resolve_params(params or {})
@@ -60,7 +63,7 @@ def discover_subgoals(
                 scores=kb.load(existing, "scores"),
                 threshold=prov.get("threshold"),
                 stats=prov.get("stats", {}),
-                params=resolved,
+                params=prov.get("params", resolved),
                 detector=detector,
             )
             return Discovery(stored, existing, float(prov.get("seconds", 0.0)), reused=True)
@@ -78,6 +81,7 @@ def discover_subgoals(
         plugin_version=spec.version,
         parameters={
             "detector_params": wanted,
+            "params": dict(result.params),
             "threshold": result.threshold,
             "stats": dict(result.stats),
             "seconds": round(seconds, 4),
