@@ -64,9 +64,9 @@ class Param:
             raise PluginError(f"{owner}: parameter {self.name!r} has unknown type {self.type!r}")
         target = PARAM_TYPES[self.type]
         if value is None or (self.none is not None and value == self.none):
-            if self.none is None:
+            if self.none is None and self.default is not None:
                 raise PluginError(f"{owner}: --{self.name} expects {self.type}, got None")
-            return None
+            return None  # a declared word for None, or a parameter whose default is None
         if self.type == "bool" and isinstance(value, str):
             lowered = value.lower()
             if lowered not in {"true", "false", "1", "0", "yes", "no"}:
