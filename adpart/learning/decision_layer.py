@@ -74,7 +74,8 @@ def reward_level(mdp: FiniteMDP) -> float:
     where the two agree. Where some actions pay a little less (two-rooms' diagonal moves at -1.2
     beside -1) or a penalty (Taxi's -10 for an illegal pick-up), every state has a pair above
     ``r_min``, and the rule would make every state a subgoal; the rewards only a few states pay
-    (a goal) stay above this level.
+    (a goal) stay above this level. Where no reward is paid by half of the live states (every
+    state pays its own), the level is section 4.3.1's ``r_min``, the smallest reward.
     """
     live = mdp.admissible & ~mdp.terminal[:, None]
     s, _ = np.nonzero(live)
@@ -82,7 +83,8 @@ def reward_level(mdp: FiniteMDP) -> float:
     pairs = np.unique(inverse * mdp.n_states + s)  # each (value, state) once
     states_paying = np.bincount(pairs // mdp.n_states, minlength=values.size)
     n_live = np.count_nonzero(live.any(axis=1))
-    return float(values[np.flatnonzero(2 * states_paying >= n_live)[-1]])
+    common = np.flatnonzero(2 * states_paying >= n_live)
+    return float(values[common[-1]] if common.size else values[0])
 
 
 def reward_states(mdp: FiniteMDP, *, arrivals: bool = False) -> np.ndarray:

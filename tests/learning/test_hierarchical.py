@@ -441,3 +441,10 @@ def test_reward_level_is_the_step_reward_most_states_pay():
     assert reward_level(taxi) == -1.0
     assert (taxi.R[reward_states(taxi)] == 20.0).any(axis=1).all()
     assert reward_level(goal_grid()) == 0.0  # every step pays 0: r_min of section 4.3.1
+    # no reward shared by half the live states (a chain paying -1, -2, -3): r_min, no crash
+    P = np.zeros((4, 1, 4))
+    P[[0, 1, 2, 3], 0, [1, 2, 3, 3]] = 1.0
+    chain = FiniteMDP.from_dense(P, np.array([[-1.0], [-2.0], [-3.0], [0.0]]), 0.9,
+                                 terminal=np.array([False, False, False, True]))
+    assert reward_level(chain) == -3.0
+    assert np.flatnonzero(reward_states(chain)).tolist() == [0, 1]
