@@ -117,8 +117,10 @@ from adpart.learning.decision_layer import (
     reward_floor,
     reward_options,
 )
-from adpart.learning.hierarchical import LCB_Z, MIN_VISITS, THRESHOLD_SCALE, child_values
-from adpart.learning.schedules import Schedule, constant, parse_schedule, visit_count
+from adpart.learning.hierarchical import child_values
+from adpart.learning.hierarchical_settings import HierarchicalSettings
+from adpart.learning.schedules import Schedule, parse_schedule
+from adpart.learning.settings import Run
 from adpart.learning.smdp_q import option_set
 from adpart.mdp.evaluation import policy_evaluation
 from adpart.mdp.model import FiniteMDP, SMDPModel
@@ -132,10 +134,6 @@ __all__ = ["Firing", "ReferenceAgent", "ReferenceResult", "hierarchical_referenc
 
 #: The modes this reference covers (the learner's testing modes).
 MODES = ("inconsistency", "reward-variation+inconsistency")
-#: What the grounded flat value is compared with (module docstring, step 1).
-REFERENCES = ("learned", "model", "offered", "policy")
-REFINE_RULES = ("state", "block")
-PRIMITIVE_EXPLORATION = ("never", "always", "until-reward")
 #: Solver tolerance of the point model's optimum, as the learner solves it.
 POINT_TOL = 1e-8
 
@@ -546,66 +544,44 @@ def hierarchical_reference(
     mdp: FiniteMDP,
     options: Sequence[Option],
     partition: Partition | None = None,
-    *,
-    mode: str = "inconsistency",
-    delta: float = 0.0,
-    epsilon: float | None = 0.0,
-    threshold: float | None = None,
-    threshold_scale: float = THRESHOLD_SCALE,
-    min_visits: int = MIN_VISITS,
-    lcb_z: float = LCB_Z,
-    flat_explore: bool = True,
-    reference: str | None = None,
+    settings: HierarchicalSettings | None = None,
+    run: Run | None = None,
     models: Sequence[OptionModel] | None = None,
-    runs: int = 10,
-    episodes: int = 500,
-    seed: int = 0,
-    alpha: Schedule | str | float = visit_count(0.8),  # noqa: B008 (immutable)
-    epsilon_greedy: Schedule | str | float = constant(0.1),  # noqa: B008 (immutable)
-    max_steps_per_episode: int = 1000,
-    reference_values: np.ndarray | None = None,
-    q_init: float | None = None,
-    refine: str = "state",
-    primitive_exploration: str = "until-reward",
-    split_offered: bool = False,
-    intra_option: bool = False,
-    explore_known: int = 0,
-    layer_values: str = "learned",
 ) -> ReferenceResult:
-    """Run the rule of the module docstring for ``runs`` runs, one after the other.
+    """Run the rule of the module docstring for ``run.runs`` runs, one after the other.
 
-    The settings mean what they mean for
-    :func:`~adpart.learning.hierarchical.hierarchical_learning` (same names and defaults); the
-    learner's output-only settings (``eval_every``, ``progress``, ``kernel``) have no place here.
+    It takes what :func:`~adpart.learning.hierarchical.hierarchical_learning` takes, the same
+    settings objects (already checked when they were built); the learner's output-only settings
+    (``eval_every``, ``progress``, ``kernel``) have no place here.
 
     Raises:
         TaskError: a setting outside this reference's scope (``intra_option``,
-            ``explore_known``, ``layer_values="planned"``, a mode that does not test) or out of
-            range.
+            ``explore_known``, ``layer_values="planned"``, a mode that does not test).
     """
-    if intra_option:
+    settings = HierarchicalSettings() if settings is None else settings
+    run = Run() if run is None else run
+    if settings.intra_option:
         raise TaskError("the plain reference leaves out intra-option learning "
                         "(intra_option=True); compare with intra_option=False")
-    if explore_known:
+    if settings.exploration.explore_known:
         raise TaskError("the plain reference leaves out R-max exploration (explore_known); "
                         "compare with explore_known=0")
-    if layer_values != "learned":
+    if settings.layer_values != "learned":
         raise TaskError("the plain reference leaves out planned layer values "
-                        f"(layer_values={layer_values!r}); compare with 'learned'")
-    if mode not in MODES:
-        raise TaskError(f"mode = {mode!r}: the plain reference covers the testing modes "
+                        f"(layer_values={settings.layer_values!r}); compare with 'learned'")
+    if settings.mode not in MODES:
+        raise TaskError(f"mode = {settings.mode!r}: the plain reference covers the testing modes "
                         f"{list(MODES)}")
-    if reference is None:
-        reference = "offered" if mode == "reward-variation+inconsistency" else "learned"
-    for name, value, allowed in (("reference", reference, REFERENCES),
-                                 ("refine", refine, REFINE_RULES),
-                                 ("primitive_exploration", primitive_exploration,
-                                  PRIMITIVE_EXPLORATION)):
-        if value not in allowed:
-            raise TaskError(f"{name} = {value!r}; choose one of {list(allowed)}")
-    if split_offered and reference != "policy":
-        raise TaskError("split_offered compares with the layer's policy: give "
-                        "reference = 'policy'")
+    test, refinement = settings.test, settings.refinement
+    mode, reference = settings.mode, settings.test_reference
+    delta, epsilon, refine = refinement.delta, refinement.partition_epsilon, refinement.refine
+    threshold, threshold_scale = test.threshold, test.threshold_scale
+    min_visits, lcb_z, split_offered = test.min_visits, test.lcb_z, test.split_offered
+    flat_explore = settings.exploration.flat_explore
+    primitive_exploration = settings.exploration.primitive_exploration
+    runs, episodes, seed = run.runs, run.episodes, 0 if run.seed is None else run.seed
+    alpha, epsilon_greedy, q_init = run.alpha, run.epsilon, run.q_init
+    max_steps_per_episode, reference_values = run.max_steps_per_episode, run.reference_values
     horizon = int(max_steps_per_episode)
     mu = start_distribution(mdp)
     if threshold is None:
