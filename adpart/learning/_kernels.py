@@ -170,18 +170,20 @@ class ScheduledAgents:
 class LockStepState(ScheduledAgents):
     """All arrays the kernel reads and writes (the driver owns them; the kernel mutates in place).
 
+    :meth:`args` passes them grouped as the paragraphs below, each tuple in the order named.
+
     Model (read-only): ``keys`` (nnz,) row-offset cumulative probabilities; ``indptr``
     (A*S+1,) and ``indices`` (nnz,) of the transition CSR; ``R`` (S, A); ``terminal`` (S,) bool;
     ``adm_ptr`` (S+1,) / ``adm_idx`` admissible actions of each state in CSR form;
     ``start_cdf`` (S,) cumulative start distribution; ``last_start`` the last state with
     positive start probability; ``gamma``; ``horizon`` (steps per episode).
 
-    Per agent (K leading axis): ``Q`` (K, S, A) with ``-inf`` on inadmissible pairs; ``n_sa``
-    (K, S, A) and ``n_s`` (K, S) visit counts; ``state``; ``episode`` (completed episodes);
-    ``target`` (episodes to complete before returning); ``t_ep``, ``ret``, ``dret``, ``gpow``
-    (steps, undiscounted and discounted return, ``gamma**t`` of the current episode);
-    ``alpha_ep`` / ``eps_ep`` (``scale * rate**episode`` of each schedule); ``U`` (K, B, 4)
-    uniforms and ``cursor`` (K,) the next unused row.
+    Per agent (K leading axis), the table: ``Q`` (K, S, A) with ``-inf`` on inadmissible pairs;
+    ``n_sa`` (K, S, A) and ``n_s`` (K, S) visit counts; the agents: ``state``; ``episode``
+    (completed episodes); ``target`` (episodes to complete before returning); ``t_ep``, ``ret``,
+    ``dret``, ``gpow`` (steps, undiscounted and discounted return, ``gamma**t`` of the current
+    episode); ``alpha_ep`` / ``eps_ep`` (``scale * rate**episode`` of each schedule); ``U``
+    (K, B, 4) uniforms and ``cursor`` (K,) the next unused row.
 
     Outputs (K, N): ``out_steps``, ``out_ret``, ``out_dret`` per completed episode. Evaluated
     greedy policies: ``policy`` (K, S), any signed integer dtype, lowest-index argmax of each row
@@ -223,24 +225,34 @@ class LockStepState(ScheduledAgents):
     changed: np.ndarray
 
     def args(self, stride: int) -> tuple:
-        """:func:`lockstep`'s positional arguments, in order."""
+        """:func:`lockstep`'s arguments, grouped as the class docstring's paragraphs: the model;
+        the schedules ``(*alpha, *eps, a_pow, e_pow)`` with their visit-power tables; ``stride``;
+        the table ``(Q, n_sa, n_s)``; the agents; the outputs. The tuples hold the state's arrays
+        themselves, so what the kernel writes lands in the state."""
         return (
-            self.keys, self.indptr, self.indices, self.R, self.terminal, self.adm_ptr,
-            self.adm_idx, self.start_cdf, self.last_start, self.gamma, self.horizon, *self.alpha,
-            *self.eps, stride, visit_power_table(self.alpha[2], POW_TABLE),
-            visit_power_table(self.eps[2], POW_TABLE), self.Q, self.n_sa, self.n_s, self.state,
-            self.episode, self.target, self.t_ep, self.ret, self.dret, self.gpow, self.alpha_ep,
-            self.eps_ep, self.U, self.cursor, self.out_steps, self.out_ret, self.out_dret,
-            self.policy, self.changed,
+            (self.keys, self.indptr, self.indices, self.R, self.terminal, self.adm_ptr,
+             self.adm_idx, self.start_cdf, self.last_start, self.gamma, self.horizon),
+            (*self.alpha, *self.eps, visit_power_table(self.alpha[2], POW_TABLE),
+             visit_power_table(self.eps[2], POW_TABLE)),
+            stride,
+            (self.Q, self.n_sa, self.n_s),
+            (self.state, self.episode, self.target, self.t_ep, self.ret, self.dret, self.gpow,
+             self.alpha_ep, self.eps_ep, self.U, self.cursor),
+            (self.out_steps, self.out_ret, self.out_dret, self.policy, self.changed),
         )
 
 
-def lockstep(keys, indptr, indices, R, terminal, adm_ptr, adm_idx, start_cdf, last_start,
-             gamma, horizon, a_scale, a_rate, a_omega, a_floor, e_scale, e_rate, e_omega,
-             e_floor, stride, a_pow, e_pow, Q, n_sa, n_s, state, episode, target, t_ep, ret,
-             dret, gpow, alpha_ep, eps_ep, U, cursor, out_steps, out_ret, out_dret, policy,
-             changed):
-    """The rule of the module docstring; returns 0 (all done) or 1 (some agent needs uniforms)."""
+def lockstep(model, schedules, stride, table, agents, outputs):
+    """The rule of the module docstring; returns 0 (all done) or 1 (some agent needs uniforms).
+
+    The arguments are the groups of :meth:`LockStepState.args`, unpacked here into the names the
+    rule is written with."""
+    (keys, indptr, indices, R, terminal, adm_ptr, adm_idx, start_cdf, last_start, gamma,
+     horizon) = model
+    a_scale, a_rate, a_omega, a_floor, e_scale, e_rate, e_omega, e_floor, a_pow, e_pow = schedules
+    Q, n_sa, n_s = table
+    (state, episode, target, t_ep, ret, dret, gpow, alpha_ep, eps_ep, U, cursor) = agents
+    out_steps, out_ret, out_dret, policy, changed = outputs
     K = Q.shape[0]
     S = R.shape[0]
     A = R.shape[1]
