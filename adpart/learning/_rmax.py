@@ -152,11 +152,16 @@ def sweep(k, x0, m, unknown, frozen, tol, gamma, R, terminal, indptr, indices, p
 
 
 @compiled
-def rmax_observe(k, s, a, s2, m, v_max, tol, gamma, R, terminal, indptr, indices, prim_adm, nf,
-                 xc, xm, Qx, Vx, pred_ptr, pred_idx, queue, inq):  # pragma: no cover - compiled
+def observe(k, s, a, s2, m, v_max, tol, gamma, task, counts, plan, fifo):  # pragma: no cover
     """Record the step ``(s, a) -> s2`` of run ``k`` (``nf`` already counts it): count the
     successor in ``xc``, and in ``xm`` while the pair is unknown; re-plan when this try makes
-    it known."""
+    it known. The arrays come grouped by role: ``task = (R, terminal, indptr, indices,
+    prim_adm)``, ``counts = (nf, xc, xm)``, ``plan = (Qx, Vx)`` (R-max's values) and
+    ``fifo = (pred_ptr, pred_idx, queue, inq)`` (the sweep's predecessors and queue)."""
+    R, terminal, indptr, indices, prim_adm = task
+    nf, xc, xm = counts
+    Qx, Vx = plan
+    pred_ptr, pred_idx, queue, inq = fifo
     S = R.shape[0]
     row = a * S + s
     n = nf[k, s, a]
@@ -169,3 +174,10 @@ def rmax_observe(k, s, a, s2, m, v_max, tol, gamma, R, terminal, indptr, indices
     if n == m:
         sweep(k, s, m, v_max, True, tol, gamma, R, terminal, indptr, indices, prim_adm, nf, xm,
               Qx, Vx, pred_ptr, pred_idx, queue, inq)
+
+
+def rmax_observe(k, s, a, s2, m, v_max, tol, gamma, R, terminal, indptr, indices, prim_adm, nf,
+                 xc, xm, Qx, Vx, pred_ptr, pred_idx, queue, inq):
+    """:func:`observe` with its arrays one by one, for callers outside compiled code."""
+    observe(k, s, a, s2, m, v_max, tol, gamma, (R, terminal, indptr, indices, prim_adm),
+            (nf, xc, xm), (Qx, Vx), (pred_ptr, pred_idx, queue, inq))

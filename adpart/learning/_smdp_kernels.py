@@ -98,7 +98,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from adpart.learning._kernels import ScheduledAgents, njit_lazily
-from adpart.learning._rmax import model_spread, rmax_observe, sweep
+from adpart.learning._rmax import model_spread, observe, sweep
 from adpart.mdp._sampling import compiled, first_above, successor
 
 #: Uniforms per agent-step in the main stream (explore?, which option, successor, next start).
@@ -111,44 +111,50 @@ AUX_PER_STEP = 2
 class SMDPLockStepState(ScheduledAgents):
     """All arrays the kernel reads and writes (the driver owns them; the kernel mutates in place).
 
-    Model: ``keys``/``indptr``/``indices`` (the transition CSR and its sampler keys), ``R`` (S, A),
-    ``terminal`` (S,), ``start_cdf`` (S,), ``last_start``, ``gamma``, ``horizon``, the schedules
-    ``alpha``/``eps`` as ``(scale, rate, omega, floor)``.
+    :meth:`args` hands them to the kernel in ten tuples, one per role below, in this order and
+    each in the order its paragraph names its fields. Everything the kernel writes is an array:
+    a tuple holds the state's arrays themselves, so the writes land here; the scalars
+    (``gamma``, ``check_on``, ``explore_m``, ...) are read only, and a new value set on the state
+    reaches the next call, whose tuples are built afresh.
 
-    Options: ``pol_act`` (O, S) int64: the action, ``-1`` undefined, ``-2 - m`` = stochastic row
-    ``m`` of ``pol_cdf`` (M, A) (cumulative, 2.0 from the last positive entry on); ``beta`` (O, S).
-
-    Decision layer per run: ``labels`` (K, S), ``adm`` (K, Bcap, O) bool, ``Q`` (K, Bcap, O),
-    ``n_o`` (K, Bcap, O) and ``n_d`` (K, Bcap) counts, ``n_blocks`` (K,).
-
-    Flat layer (hierarchical): ``track_flat``, ``Qf``/``nf`` (K, S, A); inconsistency test
-    ``check_on``, ``threshold``, ``min_visits``, ``prim_opt`` (A,) option index of each primitive
-    action (-1: none); ``prim_adm`` (S, A) where each action may be taken; ``fired`` (K, 3).
-
-    Intra-option learning: ``intra`` (0, 1 or 2); ``chained`` (K,) whether every step of the
-    running option so far got its one-step update; ``vr_on``/``vr_b0``/``vr_G``/``vr_g`` (K, O)
-    the virtual executions of mode 2 (running?, start block, return, discount).
-
-    Primitive exploration (hierarchical): ``prim_eps`` (0 never, 1 always, 2 until the run's
-    first reward), ``rewarded`` (K,) whether run ``k`` has arrived in a terminal state by a step
-    paying more than ``r_min``.
-
-    Sound inconsistency test (hierarchical): ``Ql`` (K, S, A) the grounded lower bound of the flat
-    values, ``tsum``/``tsq`` (K, S, A) sums of its targets and their squares, ``succ0`` (K, S, A)
-    the first successor seen (-1 none yet, -2 more than one), ``lcb_z`` the z of its lower
-    confidence bound; ``flat_explore``: take the optimistic flat action where it beats the block;
-    ``ref_model``: what the grounded flat value is compared with - 0 the block's learned
-    ``max_o Q``, 1 ``Vref[k, block]`` (K, Bcap) the block's point-model value, 2 ``Vref[k, state]``
-    (K, S) the optimum of the options offered in the state's block, from the state itself;
-    ``split_offered``: the test also reads an action the block already offers, against
-    ``Voff[k, state]`` (K, S) (+inf where the state's block cannot be split), and a firing then
-    splits the state from its block.
-
-    Agents: ``state``, ``episode``, ``target``, ``t_ep``, ``d_ep``, ``ret``, ``dret``, ``gpow``,
-    ``cur`` (running option or -1), ``s0``, ``b0``, ``G``, ``g``, ``alpha_ep``, ``eps_ep``;
-    uniforms ``U`` (K, B, 4), ``W`` (K, B, 2), ``cursor`` (K,).
-
-    Outputs (K, N): ``out_steps``, ``out_dec``, ``out_ret``, ``out_dret``, ``out_blocks``.
+    1. Model: ``keys``/``indptr``/``indices`` (the transition CSR and its sampler keys), ``R``
+       (S, A), ``terminal`` (S,), ``start_cdf`` (S,), ``last_start``, ``gamma``, ``horizon``.
+    2. Schedules: ``alpha`` then ``eps``, each ``(scale, rate, omega, floor)``, as one flat
+       8-tuple.
+    3. Options: ``pol_act`` (O, S) int64: the action, ``-1`` undefined, ``-2 - m`` = stochastic
+       row ``m`` of ``pol_cdf`` (M, A) (cumulative, 2.0 from the last positive entry on);
+       ``beta`` (O, S).
+    4. Decision layer per run: ``labels`` (K, S), ``adm`` (K, Bcap, O) bool, ``Q`` (K, Bcap, O),
+       ``n_o`` (K, Bcap, O) and ``n_d`` (K, Bcap) counts, ``n_blocks`` (K,).
+    5. Flat layer (hierarchical): ``track_flat``, ``Qf``/``nf`` (K, S, A); ``prim_adm`` (S, A)
+       where each action may be taken; primitive exploration ``prim_eps`` (0 never, 1 always, 2
+       until the run's first reward), ``rewarded`` (K,) whether run ``k`` has arrived in a
+       terminal state by a step paying more than ``r_min``, then ``r_min``; ``flat_explore``:
+       take the optimistic flat action where it beats the block.
+    6. Sound inconsistency test (hierarchical): ``check_on``, ``threshold``, ``min_visits``,
+       ``prim_opt`` (A,) option index of each primitive action (-1: none), ``fired`` (K, 3);
+       ``Ql`` (K, S, A) the grounded lower bound of the flat values, ``tsum``/``tsq`` (K, S, A)
+       sums of its targets and their squares, ``succ0`` (K, S, A) the first successor seen (-1
+       none yet, -2 more than one), ``lcb_z`` the z of its lower confidence bound;
+       ``ref_model``: what the grounded flat value is compared with - 0 the block's learned
+       ``max_o Q``, 1 ``Vref[k, block]`` (K, Bcap) the block's point-model value, 2
+       ``Vref[k, state]`` (K, S) the optimum of the options offered in the state's block, from
+       the state itself; then ``Vref``; ``split_offered``: the test also reads an action the
+       block already offers, against ``Voff[k, state]`` (K, S) (+inf where the state's block
+       cannot be split), and a firing then splits the state from its block; then ``Voff``;
+       ``Vl`` (K, S) the grounded values and ``floor`` their untried pairs' value, re-planned on
+       the count model when ``explore_m > 0``.
+    7. Intra-option learning: ``intra`` (0, 1 or 2); ``chained`` (K,) whether every step of the
+       running option so far got its one-step update; ``vr_on``/``vr_b0``/``vr_G``/``vr_g``
+       (K, O) the virtual executions of mode 2 (running?, start block, return, discount).
+    8. R-max count model (:mod:`adpart.learning._rmax`): ``explore_m``, ``xc``/``xm`` (K, nnz)
+       successor counts, ``Qx`` (K, S, A)/``Vx`` (K, S) the optimistic plan, ``pred_ptr``/
+       ``pred_idx`` the predecessor CSR, ``xqueue``/``xinq`` (K, S) the sweeps' FIFO,
+       ``v_max``, ``sweep_tol``.
+    9. Agents: ``state``, ``episode``, ``target``, ``t_ep``, ``d_ep``, ``ret``, ``dret``,
+       ``gpow``, ``cur`` (running option or -1), ``s0``, ``b0``, ``G``, ``g``, ``alpha_ep``,
+       ``eps_ep``; uniforms ``U`` (K, B, 4), ``W`` (K, B, 2), ``cursor`` (K,).
+    10. Outputs (K, N): ``out_steps``, ``out_dec``, ``out_ret``, ``out_dret``, ``out_blocks``.
     """
 
     keys: np.ndarray
@@ -237,22 +243,26 @@ class SMDPLockStepState(ScheduledAgents):
     out_blocks: np.ndarray
 
     def args(self) -> tuple:
-        """The kernel's positional arguments, in order."""
+        """The kernel's arguments: the groups of the class docstring, in its order. The tuples
+        hold the state's arrays themselves, so what the kernel writes lands in the state."""
         return (
-            self.keys, self.indptr, self.indices, self.R, self.terminal, self.start_cdf,
-            self.last_start, self.gamma, self.horizon, *self.alpha, *self.eps,
-            self.pol_act, self.pol_cdf, self.beta, self.labels, self.adm, self.Q, self.n_o,
-            self.n_d, self.n_blocks, self.track_flat, self.Qf, self.nf, self.check_on,
-            self.threshold, self.min_visits, self.prim_opt, self.prim_adm, self.fired,
-            self.intra, self.chained, self.Ql, self.tsum, self.tsq, self.succ0, self.lcb_z,
-            self.flat_explore, self.prim_eps, self.rewarded, self.r_min,
-            self.vr_on, self.vr_b0, self.vr_G, self.vr_g, self.ref_model,
-            self.Vref, self.split_offered, self.Voff, self.explore_m, self.xc, self.xm, self.Qx,
-            self.Vx, self.pred_ptr, self.pred_idx, self.xqueue, self.xinq, self.v_max,
-            self.sweep_tol, self.Vl, self.floor, self.state, self.episode, self.target,
-            self.t_ep, self.d_ep, self.ret, self.dret, self.gpow, self.cur, self.s0,
-            self.b0, self.G, self.g, self.alpha_ep, self.eps_ep, self.U, self.W, self.cursor,
-            self.out_steps, self.out_dec, self.out_ret, self.out_dret, self.out_blocks,
+            (self.keys, self.indptr, self.indices, self.R, self.terminal, self.start_cdf,
+             self.last_start, self.gamma, self.horizon),
+            (*self.alpha, *self.eps),
+            (self.pol_act, self.pol_cdf, self.beta),
+            (self.labels, self.adm, self.Q, self.n_o, self.n_d, self.n_blocks),
+            (self.track_flat, self.Qf, self.nf, self.prim_adm, self.prim_eps, self.rewarded,
+             self.r_min, self.flat_explore),
+            (self.check_on, self.threshold, self.min_visits, self.prim_opt, self.fired, self.Ql,
+             self.tsum, self.tsq, self.succ0, self.lcb_z, self.ref_model, self.Vref,
+             self.split_offered, self.Voff, self.Vl, self.floor),
+            (self.intra, self.chained, self.vr_on, self.vr_b0, self.vr_G, self.vr_g),
+            (self.explore_m, self.xc, self.xm, self.Qx, self.Vx, self.pred_ptr, self.pred_idx,
+             self.xqueue, self.xinq, self.v_max, self.sweep_tol),
+            (self.state, self.episode, self.target, self.t_ep, self.d_ep, self.ret, self.dret,
+             self.gpow, self.cur, self.s0, self.b0, self.G, self.g, self.alpha_ep, self.eps_ep,
+             self.U, self.W, self.cursor),
+            (self.out_steps, self.out_dec, self.out_ret, self.out_dret, self.out_blocks),
         )
 
 
@@ -267,20 +277,29 @@ def watkins_target(table, k, s2, r, gamma, done):  # pragma: no cover - compiled
     return r + gamma * best
 
 
-def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, horizon,
-             a_scale, a_rate, a_omega, a_floor, e_scale, e_rate, e_omega, e_floor,
-             pol_act, pol_cdf, beta, labels, adm, Q, n_o, n_d, n_blocks, track_flat, Qf, nf,
-             check_on, threshold, min_visits, prim_opt, prim_adm, fired, intra, chained,
-             Ql, tsum, tsq, succ0, lcb_z, flat_explore, prim_eps, rewarded, r_min,
-             vr_on, vr_b0, vr_G, vr_g, ref_model,
-             Vref, split_offered, Voff, explore_m, xc, xm, Qx, Vx, pred_ptr, pred_idx, xqueue,
-             xinq, v_max, sweep_tol,
-             Vl, floor, state,
-             episode, target,
-             t_ep,
-             d_ep, ret, dret, gpow, cur, s0, b0, G, g, alpha_ep, eps_ep, U, W, cursor,
-             out_steps, out_dec, out_ret, out_dret, out_blocks):
-    """The rule of the module docstring; returns 0 (all done), 1 (refill) or 2 (inconsistency)."""
+def lockstep(model, schedules, options, layer, flat, check, intra_opt, rmax, agents, outputs):
+    """The rule of the module docstring; returns 0 (all done), 1 (refill) or 2 (inconsistency).
+
+    The arguments are the groups of :meth:`SMDPLockStepState.args`, unpacked here into the names
+    the rule is written with."""
+    keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, horizon = model
+    a_scale, a_rate, a_omega, a_floor, e_scale, e_rate, e_omega, e_floor = schedules
+    pol_act, pol_cdf, beta = options
+    labels, adm, Q, n_o, n_d, n_blocks = layer
+    track_flat, Qf, nf, prim_adm, prim_eps, rewarded, r_min, flat_explore = flat
+    (check_on, threshold, min_visits, prim_opt, fired, Ql, tsum, tsq, succ0, lcb_z, ref_model,
+     Vref, split_offered, Voff, Vl, floor) = check
+    intra, chained, vr_on, vr_b0, vr_G, vr_g = intra_opt
+    explore_m, xc, xm, Qx, Vx, pred_ptr, pred_idx, xqueue, xinq, v_max, sweep_tol = rmax
+    (state, episode, target, t_ep, d_ep, ret, dret, gpow, cur, s0, b0, G, g, alpha_ep, eps_ep,
+     U, W, cursor) = agents
+    out_steps, out_dec, out_ret, out_dret, out_blocks = outputs
+    # the count model's groups for :func:`observe`, built once: a tuple built in the loop would
+    # take and drop a reference to each of its arrays on every step
+    x_task = (R, terminal, indptr, indices, prim_adm)
+    x_counts = (nf, xc, xm)
+    x_plan = (Qx, Vx)
+    x_fifo = (pred_ptr, pred_idx, xqueue, xinq)
     K = Q.shape[0]
     O = Q.shape[2]  # noqa: E741 (the thesis' symbol)
     S = R.shape[0]
@@ -426,9 +445,8 @@ def lockstep(keys, indptr, indices, R, terminal, start_cdf, last_start, gamma, h
                 old = Qf[k, s, a]
                 Qf[k, s, a] = old + alpha * (tdf - old)
                 if explore_m > 0:
-                    rmax_observe(k, s, a, s2, explore_m, v_max, sweep_tol, gamma, R, terminal,
-                                 indptr, indices, prim_adm, nf, xc, xm, Qx, Vx, pred_ptr,
-                                 pred_idx, xqueue, xinq)
+                    observe(k, s, a, s2, explore_m, v_max, sweep_tol, gamma, x_task, x_counts,
+                            x_plan, x_fifo)
                 if check_on and explore_m > 0:
                     sweep(k, s, 1, floor, False, sweep_tol, gamma, R, terminal, indptr, indices,
                           prim_adm, nf, xc, Ql, Vl, pred_ptr, pred_idx, xqueue, xinq)
