@@ -133,9 +133,11 @@ class SMDPLockStepState(ScheduledAgents):
        take the optimistic flat action where it beats the block.
     6. Sound inconsistency test (hierarchical): ``check_on``, ``threshold``, ``min_visits``,
        ``prim_opt`` (A,) option index of each primitive action (-1: none), ``fired`` (K, 3);
-       ``Ql`` (K, S, A) the grounded lower bound of the flat values, ``tsum``/``tsq`` (K, S, A)
-       sums of its targets and their squares, ``succ0`` (K, S, A) the first successor seen (-1
-       none yet, -2 more than one), ``lcb_z`` the z of its lower confidence bound;
+       ``Ql`` (K, S, A) the grounded lower bound of the flat values, ``tmean``/``tm2``
+       (K, S, A) the running mean of its targets and their summed squared deviations (Welford's
+       update, so that equal targets have a standard error of exactly 0), ``succ0`` (K, S, A)
+       the first successor seen (-1 none yet, -2 more than one), ``lcb_z`` the z of its lower
+       confidence bound;
        ``ref_model``: what the grounded flat value is compared with - 0 the block's learned
        ``max_o Q``, 1 ``Vref[k, block]`` (K, Bcap) the block's point-model value, 2
        ``Vref[k, state]`` (K, S) the optimum of the options offered in the state's block, from
@@ -189,8 +191,8 @@ class SMDPLockStepState(ScheduledAgents):
     intra: int
     chained: np.ndarray
     Ql: np.ndarray
-    tsum: np.ndarray
-    tsq: np.ndarray
+    tmean: np.ndarray
+    tm2: np.ndarray
     succ0: np.ndarray
     lcb_z: float
     flat_explore: bool
@@ -254,7 +256,7 @@ class SMDPLockStepState(ScheduledAgents):
             (self.track_flat, self.Qf, self.nf, self.prim_adm, self.prim_eps, self.rewarded,
              self.r_min, self.flat_explore),
             (self.check_on, self.threshold, self.min_visits, self.prim_opt, self.fired, self.Ql,
-             self.tsum, self.tsq, self.succ0, self.lcb_z, self.ref_model, self.Vref,
+             self.tmean, self.tm2, self.succ0, self.lcb_z, self.ref_model, self.Vref,
              self.split_offered, self.Voff, self.Vl, self.floor),
             (self.intra, self.chained, self.vr_on, self.vr_b0, self.vr_G, self.vr_g),
             (self.explore_m, self.xc, self.xm, self.Qx, self.Vx, self.pred_ptr, self.pred_idx,
@@ -287,7 +289,7 @@ def lockstep(model, schedules, options, layer, flat, check, intra_opt, rmax, age
     pol_act, pol_cdf, beta = options
     labels, adm, Q, n_o, n_d, n_blocks = layer
     track_flat, Qf, nf, prim_adm, prim_eps, rewarded, r_min, flat_explore = flat
-    (check_on, threshold, min_visits, prim_opt, fired, Ql, tsum, tsq, succ0, lcb_z, ref_model,
+    (check_on, threshold, min_visits, prim_opt, fired, Ql, tmean, tm2, succ0, lcb_z, ref_model,
      Vref, split_offered, Voff, Vl, floor) = check
     intra, chained, vr_on, vr_b0, vr_G, vr_g = intra_opt
     explore_m, xc, xm, Qx, Vx, pred_ptr, pred_idx, xqueue, xinq, v_max, sweep_tol = rmax
@@ -335,8 +337,7 @@ def lockstep(model, schedules, options, layer, flat, check, intra_opt, rmax, age
                             lb -= lcb_z * model_spread(k, s, a, terminal, indptr, indices, nf,
                                                        xc, Vl)
                         elif succ0[k, s, a] == -2 and n > 1:  # more than one successor seen
-                            mean = tsum[k, s, a] / n
-                            var = max(0.0, (tsq[k, s, a] - n * mean * mean) / (n - 1))
+                            var = tm2[k, s, a] / (n - 1)  # Welford: 0 for equal targets
                             lb -= lcb_z * math.sqrt(var / n)
                         if lb > vl:
                             vl = lb
@@ -454,8 +455,9 @@ def lockstep(model, schedules, options, layer, flat, check, intra_opt, rmax, age
                     tdl = watkins_target(Ql, k, s2, r, gamma, done)
                     old = Ql[k, s, a]
                     Ql[k, s, a] = old + alpha * (tdl - old)
-                    tsum[k, s, a] += tdl
-                    tsq[k, s, a] += tdl * tdl
+                    dev = tdl - tmean[k, s, a]  # Welford's running mean and squared deviations
+                    tmean[k, s, a] += dev / nf[k, s, a]
+                    tm2[k, s, a] += dev * (tdl - tmean[k, s, a])
                     if succ0[k, s, a] == -1:
                         succ0[k, s, a] = s2
                     elif succ0[k, s, a] != s2:

@@ -313,8 +313,8 @@ def make_state(
         Ql=np.broadcast_to(np.where(mdp.admissible, float(lower_bound), -np.inf)
                            if check else np.zeros((1, A)), flat_shape if check else (1, 1, A)
                            ).copy(),
-        tsum=np.zeros(flat_shape if check else (1, 1, A)),
-        tsq=np.zeros(flat_shape if check else (1, 1, A)),
+        tmean=np.zeros(flat_shape if check else (1, 1, A)),
+        tm2=np.zeros(flat_shape if check else (1, 1, A)),
         succ0=np.full(flat_shape if check else (1, 1, A), -1, dtype=np.int64),
         lcb_z=float(lcb_z),
         flat_explore=bool(flat_explore and track_flat),

@@ -340,12 +340,11 @@ def test_the_standard_error_of_equal_targets_is_zero():
                                                (0, 1, 3, 3, 0), (0, 2, 0, 0, 0)]
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "the kernel's standard error of the targets, from their running sums "
-    "sqrt((tsq - n mean^2) / (n - 1) / n), is 2.7e-8 for five equal targets, not 0 (cancellation); "
-    "at episode 2 in state 2 it breaks the tie of LCB(2, a0) = LCB(2, a1) towards a1, which "
-    "block 2 does not offer, and fires (0, 2, 2, 2, 1) where the documented rule does not"))
 def test_the_kernel_agrees_where_a_pairs_targets_are_all_equal():
+    """The kernel took the targets' standard error from running sums, sqrt((tsq - n mean^2) /
+    (n - 1) / n): 2.7e-8 for five equal targets, not 0 (cancellation), which broke the tie
+    LCB(2, a0) = LCB(2, a1) towards a1 and fired where the documented rule does not. It keeps
+    Welford's running mean and squared deviations now, as the reference does."""
     mdp, options, layer, run = equal_targets_case()
     models = option_models(mdp, options, duration=False)
     compare(mdp, options, models, layer, run)
@@ -356,5 +355,5 @@ def test_the_kernel_agrees_where_a_pairs_targets_are_all_equal():
 def test_settings_outside_the_scope_are_refused(setting):
     mdp, options, layer = corridor_case()
     # planned values are refused by the settings already (they need R-max, which is out too)
-    with pytest.raises(TaskError, match="reference|planned"):
+    with pytest.raises(TaskError, match=r"reference|planned"):
         reference_run(mdp, options, layer, runs=1, episodes=1, **setting)
