@@ -238,16 +238,17 @@ def _is_numpy_number(value: Any) -> bool:
     return isinstance(value, (np.integer, np.floating))
 
 
-def _attribute_docstrings(cls: type) -> dict[str, str]:
-    """``{field: the string literal right below it}`` read from ``cls``'s source."""
+def _attribute_docstrings(cls: type) -> dict[str, str] | None:
+    """``{field: the string literal right below it}`` read from ``cls``'s source (None where
+    Python kept no source)."""
     import ast
     import inspect
     import textwrap
 
     try:
         source = textwrap.dedent(inspect.getsource(cls))
-    except (OSError, TypeError):
-        return {}
+    except (OSError, TypeError):  # defined where no source is kept (exec, a bare REPL)
+        return None
     body = ast.parse(source).body[0].body  # type: ignore[attr-defined]
     docs: dict[str, str] = {}
     for node, nxt in itertools.pairwise(body):
@@ -286,10 +287,11 @@ def settings(cls: type) -> type:
                 raise TypeError(f"{cls.__name__}.{f.name}: declare it with setting(...) or as a "
                                 "group (field(default_factory=SomeSettings))")
             continue
-        if f.name not in docs:
+        if docs is not None and f.name not in docs:
             raise TypeError(f"{cls.__name__}.{f.name} has no docstring (a string literal right "
                             "below the field): it is the option's help")
-        own.append(SettingField(f.name, f.default, docs[f.name], bounds, cls.__name__))
+        help_text = docs[f.name] if docs is not None else f.name.replace("_", " ")
+        own.append(SettingField(f.name, f.default, help_text, bounds, cls.__name__))
     cls.__settings_fields__ = tuple(own)  # type: ignore[attr-defined]
     return cls
 

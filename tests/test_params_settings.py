@@ -146,3 +146,15 @@ def test_a_plugin_parameter_refuses_what_the_field_refuses():
     with pytest.raises(PluginError, match=r"--delta must be <= 1\.0; got 1\.5"):
         params["delta"].convert("1.5", "x")
     assert params["epsilon"].convert("none", "x") is None
+
+
+def test_a_class_defined_where_python_keeps_no_source_still_works():
+    """``exec`` (or a bare REPL) keeps no source to read docstrings from: the field's name is
+    its help, and everything else works."""
+    namespace: dict = {}
+    exec(compile("from adpart.params import setting, settings\n\n@settings\nclass S:\n"
+                 "    max_size: int = setting(16, min=1)\n", "<no source>", "exec"), namespace)
+    (param,) = settings_params(namespace["S"])
+    assert param.help == "max size" and param.default == 16
+    with pytest.raises(TaskError, match="must be >= 1"):
+        build_settings(namespace["S"], {"max_size": 0})
