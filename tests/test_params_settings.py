@@ -152,7 +152,7 @@ def test_a_class_defined_where_python_keeps_no_source_still_works():
     """``exec`` (or a bare REPL) keeps no source to read docstrings from: the field's name is
     its help, and everything else works."""
     namespace: dict = {}
-    exec(compile("from adpart.params import setting, settings\n\n@settings\nclass S:\n"
+    exec(compile("from adpart.params import setting, settings\n\n@settings\nclass S:\n"  # noqa: S102
                  "    max_size: int = setting(16, min=1)\n", "<no source>", "exec"), namespace)
     (param,) = settings_params(namespace["S"])
     assert param.help == "max size" and param.default == 16
