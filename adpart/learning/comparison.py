@@ -13,9 +13,10 @@ from typing import Any
 import numpy as np
 
 from adpart.learning.curves import LearningCurve, episodes_within
+from adpart.learning.transfer_metrics import km_median, metrics_from_curve
 
-__all__ = ["TIE_TOLERANCE", "best_final_run", "episodes_to_bound", "ratio_of_medians_ci",
-           "ratio_to_flat", "success_bound", "task_row"]
+__all__ = ["TIE_TOLERANCE", "best_final_run", "episodes_to_bound", "measured",
+           "ratio_of_medians_ci", "ratio_to_flat", "success_bound", "task_row"]
 
 #: Final gaps closer than this fraction of the value scale (``max(1, |V*(start)|)``) are a tie:
 #: exact evaluations of equally good policies differ by rounding (1.8e-15 on three-floor), and
@@ -48,7 +49,8 @@ def task_row(
     task: str, label: str, curve: LearningCurve, fraction: float, extra: dict[str, Any]
 ) -> dict[str, Any]:
     """One learner's summary row for a task: runs within the bound, median episodes to it
-    (``inf`` when never within), final gaps, mean steps and decisions, then ``extra``."""
+    (``inf`` when never within), final gaps, mean steps and decisions, the measured transfer
+    metrics (:func:`measured`), then ``extra``."""
     v_star = float(curve.metadata.get("v_star_start", np.nan))
     bound = success_bound(curve, fraction)
     within = episodes_within(curve.matrix("value_gap"), curve.evaluated_episodes(), bound)
@@ -66,7 +68,29 @@ def task_row(
         "episodes_to_bound_median": float(np.median(to_bound)),
         "steps_total_mean": float(curve.matrix("steps").sum(axis=1).mean()),
         "decisions_total_mean": float(curve.matrix("decisions").sum(axis=1).mean()),
+        **measured(curve, bound),
         **extra,
+    }
+
+
+def measured(curve: LearningCurve, bound: float) -> dict[str, Any]:
+    """Taylor & Stone's metrics of the runs (:mod:`adpart.learning.transfer_metrics`): runs that
+    never stay within ``bound`` are censored, not counted as the budget plus one; the time to
+    the bound is the Kaplan-Meier median with its 95% CI, in episodes and in primitive steps;
+    jumpstart, area under the gap curve and asymptotic gap are run means. Empty without a
+    finite bound (a curve with no ``V*``)."""
+    if not np.isfinite(bound):
+        return {}
+    m = metrics_from_curve(curve, bound)
+    km = {unit: [float(x) for x in km_median(*m.event_times(unit))]
+          for unit in ("episodes", "steps")}
+    return {
+        "censored_runs": int(m.censored.sum()),
+        "time_to_bound_km": km,  # [median, low, high] per unit; inf: fewer than half get there
+        "jumpstart_gap_mean": float(np.mean(m.jumpstart)),
+        "gap_auc_episodes_mean": float(np.mean(m.auc_episodes)),
+        "gap_auc_steps_mean": float(np.mean(m.auc_steps)),
+        "asymptotic_gap_mean": float(np.mean(m.asymptotic_gap)),
     }
 
 

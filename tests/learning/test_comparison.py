@@ -6,7 +6,7 @@ import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
-from adpart.learning.comparison import TIE_TOLERANCE, best_final_run
+from adpart.learning.comparison import TIE_TOLERANCE, best_final_run, task_row
 from adpart.learning.curves import LearningCurve
 
 
@@ -39,3 +39,29 @@ def test_the_choice_is_within_the_tolerance_of_the_best_and_the_first_such(gaps,
     tol = TIE_TOLERANCE * max(1.0, abs(v_star))
     first = next(k for k, g in enumerate(gaps) if g <= min(gaps) + tol)
     assert chosen == first
+
+
+def test_a_row_reports_censored_runs_and_the_kaplan_meier_time_to_the_bound() -> None:
+    """Four runs evaluated at episodes 1..4 (every episode 10 steps), bound 0.05 |V*| = 1: runs
+    0 and 1 get within at episodes 2 and 3 and stay; runs 2 and 3 never do (censored at 4).
+    Oracle by hand: S(t) drops to 3/4 at 2 and to 1/2 at 3, so the KM median is episode 3
+    (step 30); the old figure counted the censored runs as 5 episodes."""
+    gaps = np.array([[5.0, 0.5, 0.0, 0.0],
+                     [5.0, 3.0, 0.2, 0.1],
+                     [5.0, 4.0, 3.0, 2.0],
+                     [9.0, 9.0, 9.0, 9.0]])
+    ones = np.ones_like(gaps)
+    curve = LearningCurve.from_matrices(steps=10 * ones, decisions=ones, returns=0 * ones,
+                                        discounted_returns=0 * ones, eval_value=-20.0 - gaps,
+                                        value_gap=gaps, metadata={"v_star_start": -20.0})
+    row = task_row("t", "x", curve, 0.05, {})
+    assert row["bound"] == 1.0 and row["runs_within_bound"] == 2 and row["censored_runs"] == 2
+    assert row["time_to_bound_km"]["episodes"][0] == 3.0
+    assert row["time_to_bound_km"]["steps"][0] == 30.0
+    assert row["jumpstart_gap_mean"] == 6.0  # (5 + 5 + 5 + 9) / 4
+    assert row["asymptotic_gap_mean"] == np.mean(gaps[:, 1:])  # the last three evaluations
+    never = task_row("t", "x", LearningCurve.from_matrices(
+        steps=10 * ones, decisions=ones, returns=0 * ones, discounted_returns=0 * ones,
+        eval_value=-20.0 - 9 * ones, value_gap=9 * ones, metadata={"v_star_start": -20.0}),
+        0.05, {})
+    assert never["censored_runs"] == 4 and never["time_to_bound_km"]["episodes"][0] == np.inf
