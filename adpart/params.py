@@ -203,12 +203,12 @@ class SettingField:
                 return None
             raise fail(f"; give a {b.kind}")
         if b.kind == "bool":
-            if not isinstance(value, (bool, np_bool())):
+            if not isinstance(value, bool) and not _numpy_scalar(value, 'bool_'):
                 raise fail(" must be true or false")
             return bool(value)
         if b.kind in ("int", "float"):
             ok = isinstance(value, (int, float)) and not isinstance(value, bool)
-            ok = ok or _is_numpy_number(value)
+            ok = ok or _numpy_scalar(value, 'integer', 'floating')
             if not ok or (b.kind == "int" and int(value) != value):
                 raise fail(f" must be {'an integer' if b.kind == 'int' else 'a number'}")
             value = int(value) if b.kind == "int" else float(value)
@@ -226,16 +226,11 @@ class SettingField:
         return value
 
 
-def np_bool() -> type:
+def _numpy_scalar(value: Any, *kinds: str) -> bool:
+    """Whether ``value`` is a numpy scalar of one of ``kinds`` (numpy imported only when asked)."""
     import numpy as np
 
-    return np.bool_
-
-
-def _is_numpy_number(value: Any) -> bool:
-    import numpy as np
-
-    return isinstance(value, (np.integer, np.floating))
+    return isinstance(value, tuple(getattr(np, k) for k in kinds))
 
 
 def _attribute_docstrings(cls: type) -> dict[str, str] | None:

@@ -148,7 +148,6 @@ from adpart.learning.hierarchical_settings import (
     REWARD_OPTION_MODES,
     TESTING_MODES,
     HierarchicalSettings,
-    InconsistencyTest,
 )
 from adpart.learning.result import LearnResult
 from adpart.learning.settings import Run, run_settings
@@ -183,10 +182,6 @@ __all__ = [
     "reward_states",
 ]
 
-#: The test's defaults, read from the one declaration (:class:`InconsistencyTest`).
-THRESHOLD_SCALE = InconsistencyTest().threshold_scale
-LCB_Z = InconsistencyTest().lcb_z
-MIN_VISITS = InconsistencyTest().min_visits
 
 
 @dataclass(frozen=True, eq=False)
