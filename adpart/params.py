@@ -16,8 +16,8 @@ from typing import Any
 
 from adpart.errors import AdpartError, PluginError
 
-__all__ = ["PARAM_TYPES", "Param", "SettingField", "build_settings", "setting", "setting_fields",
-           "settings", "settings_dict", "settings_params"]
+__all__ = ["PARAM_TYPES", "Param", "SettingField", "build_settings", "hook", "setting",
+           "setting_fields", "settings", "settings_dict", "settings_params"]
 
 #: The spelling of a parameter's type -> the Python type a value is converted to.
 PARAM_TYPES: dict[str, type] = {"int": int, "float": float, "str": str, "bool": bool}
@@ -128,12 +128,15 @@ class _Bounds:
     check: Callable[[Any], Any] | None = None
     cli: bool = True
     finite: bool = True
+    parse: Callable[[Any], Any] | None = None
+    option: str | None = None
 
 
 def setting(default: Any, *, kind: str | None = None, min: float | None = None,
             max: float | None = None, choices: Sequence[str] | None = None,
             none: str | None = None, check: Callable[[Any], Any] | None = None,
-            cli: bool = True, finite: bool = True) -> Any:
+            cli: bool = True, finite: bool = True, parse: Callable[[Any], Any] | None = None,
+            option: str | None = None) -> Any:
     """A field of a :func:`settings` class: its default and how a value is checked.
 
     The field's help is the string literal written right below it in the class body (its
@@ -153,6 +156,12 @@ def setting(default: Any, *, kind: str | None = None, min: float | None = None,
             setting only Python callers give, such as an array).
         finite: False lets Python callers give ``inf`` (e.g. a threshold that never fires);
             the command line still takes finite numbers only.
+        parse: turns a value into the object the algorithm reads (a schedule's spelling, a
+            number or a schedule into a :class:`~adpart.learning.schedules.Schedule`); it
+            raises :class:`AdpartError` on a bad value. The default and the command line keep
+            the spelling (kind ``"str"``); Python callers may also give the object itself.
+        option: the command-line spelling when it is not the field's name (``max-steps`` for
+            ``max_steps_per_episode``).
     """
     if kind is None:
         if default is None:
@@ -162,8 +171,19 @@ def setting(default: Any, *, kind: str | None = None, min: float | None = None,
     if default is None and none is None and cli:
         raise TypeError("a setting whose default is None needs none= (its command-line word)")
     bounds = _Bounds(kind, min, max, tuple(choices) if choices is not None else None, none,
-                     check, cli, finite)
+                     check if parse is None else parse, cli, finite, parse, option)
     return field(default=default, metadata={_SETTING: bounds})
+
+
+#: Metadata key of a hook field (see :func:`hook`).
+_HOOK = "adpart.hook"
+
+
+def hook() -> Any:
+    """A field of a :func:`settings` class that is no setting: a callback or an array only Python
+    callers pass (a progress callback, reference values). It defaults to None, is not checked,
+    not on the command line, not compared and not in the provenance record."""
+    return field(default=None, compare=False, repr=False, metadata={_HOOK: True})
 
 
 @dataclass(frozen=True)
@@ -179,12 +199,12 @@ class SettingField:
     @property
     def option(self) -> str:
         """Its command-line spelling, ``--threshold-scale`` for ``threshold_scale``."""
-        return "--" + self.name.replace("_", "-")
+        return "--" + (self.bounds.option or self.name.replace("_", "-"))
 
     def param(self) -> Param:
         """The plugin parameter of this field (its CLI option and conversion)."""
         b = self.bounds
-        return Param(self.name.replace("_", "-"), b.kind, self.default, self.help,
+        return Param(self.option[2:], b.kind, self.default, self.help,
                      choices=b.choices, min=b.min, max=b.max, none=b.none, check=b.check)
 
     def validate(self, value: Any) -> Any:
@@ -202,6 +222,11 @@ class SettingField:
             if self.default is None or b.none is not None:
                 return None
             raise fail(f"; give a {b.kind}")
+        if b.parse is not None:  # the spelling or the object itself, into the object
+            try:
+                return b.parse(value)
+            except AdpartError as exc:
+                raise fail(f": {exc}") from None
         if b.kind == "bool":
             if not isinstance(value, bool) and not _numpy_scalar(value, 'bool_'):
                 raise fail(" must be true or false")
@@ -275,12 +300,14 @@ def settings(cls: type) -> type:
     docs = _attribute_docstrings(cls)
     own: list[SettingField] = []
     for f in fields(cls):
+        if f.metadata.get(_HOOK):
+            continue
         bounds = f.metadata.get(_SETTING)
         if bounds is None:
             if not (isinstance(f.default_factory, type)  # type: ignore[misc]
                     and hasattr(f.default_factory, "__settings_fields__")):
-                raise TypeError(f"{cls.__name__}.{f.name}: declare it with setting(...) or as a "
-                                "group (field(default_factory=SomeSettings))")
+                raise TypeError(f"{cls.__name__}.{f.name}: declare it with setting(...), hook() "
+                                "or as a group (field(default_factory=SomeSettings))")
             continue
         if docs is not None and f.name not in docs:
             raise TypeError(f"{cls.__name__}.{f.name} has no docstring (a string literal right "
@@ -297,6 +324,8 @@ def setting_fields(cls_or_obj: Any) -> tuple[SettingField, ...]:
     out: list[SettingField] = []
     own = {sf.name: sf for sf in cls.__settings_fields__}
     for f in fields(cls):
+        if f.metadata.get(_HOOK):
+            continue
         if f.name in own:
             out.append(own[f.name])
         else:
@@ -307,12 +336,16 @@ def setting_fields(cls_or_obj: Any) -> tuple[SettingField, ...]:
 def _groups(cls: type) -> dict[str, type]:
     own = {sf.name for sf in cls.__settings_fields__}  # type: ignore[attr-defined]
     return {f.name: f.default_factory for f in fields(cls)  # type: ignore[misc]
-            if f.name not in own}
+            if f.name not in own and not f.metadata.get(_HOOK)}
 
 
-def settings_params(cls: type) -> tuple[Param, ...]:
-    """The plugin parameters (and so the CLI options) of a settings class, one per leaf field."""
+def settings_params(cls: type, only: Sequence[str] | None = None) -> tuple[Param, ...]:
+    """The plugin parameters (and so the CLI options) of a settings class, one per leaf field
+    (those named in ``only``, in that order, when given)."""
     found = [sf for sf in setting_fields(cls) if sf.bounds.cli]
+    if only is not None:
+        by_name = {sf.name: sf for sf in found}
+        found = [by_name[name] for name in only]
     names = [sf.name for sf in found]
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
@@ -321,12 +354,16 @@ def settings_params(cls: type) -> tuple[Param, ...]:
 
 
 def build_settings(cls: type, values: dict[str, Any] | None = None) -> Any:
-    """An instance of settings class ``cls`` from flat leaf values (``name`` or ``name-x``);
-    groups get the values of their own fields. Unknown names raise TaskError."""
+    """An instance of settings class ``cls`` from flat leaf values (``name``, ``name-x`` or the
+    field's option spelling); groups get the values of their own fields. Unknown names raise
+    TaskError."""
     from adpart.errors import TaskError
 
-    given = {k.replace("-", "_"): v for k, v in (values or {}).items()}
-    known = {sf.name for sf in setting_fields(cls)}
+    leaves = setting_fields(cls)
+    spelled = {sf.option[2:].replace("-", "_"): sf.name for sf in leaves}  # max_steps -> field
+    given = {spelled.get(k.replace("-", "_"), k.replace("-", "_")): v
+             for k, v in (values or {}).items()}
+    known = {sf.name for sf in leaves}
     unknown = sorted(set(given) - known)
     if unknown:
         raise TaskError(f"{cls.__name__} has no setting {unknown[0]!r}; its settings: "
@@ -348,9 +385,11 @@ def settings_dict(obj: Any) -> dict[str, Any]:
     cls = type(obj)
     own = {sf.name for sf in cls.__settings_fields__}
     for f in fields(cls):
+        if f.metadata.get(_HOOK):
+            continue
         value = getattr(obj, f.name)
         if f.name in own:
-            out[f.name] = value
+            out[f.name] = value.to_dict() if hasattr(value, "to_dict") else value
         else:
             out.update(settings_dict(value))
     return out

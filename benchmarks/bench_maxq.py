@@ -41,6 +41,7 @@ from adpart.learning.maxq import get_graph, hierarchical_rollouts, maxq_q, taxi_
 from adpart.learning.maxq.maxq_q import _Run
 from adpart.learning.qlearning import q_learning
 from adpart.learning.schedules import parse_schedule
+from adpart.learning.settings import Run
 from adpart.mdp.evaluation import policy_evaluation
 from adpart.mdp.solvers import solve
 
@@ -101,15 +102,15 @@ def taxi(runs: int = RUNS, seed: int = 2000) -> dict[str, float]:
     for label, (abstraction, episodes) in settings.items():
         g = taxi_graph().compile(mdp, abstraction=abstraction)
         t0 = time.process_time()
-        res = maxq_q(mdp, g, runs=runs, episodes=episodes, seed=seed, alpha=ALPHA,
-                     epsilon=EPSILON, eval_every=EVAL, max_steps_per_episode=1000)
+        res = maxq_q(mdp, g, Run(runs=runs, episodes=episodes, seed=seed, alpha=ALPHA,
+                                 epsilon=EPSILON, eval_every=EVAL, max_steps_per_episode=1000))
         timings[label] = time.process_time() - t0
         rows[label] = _curve_steps(res.curve, EVAL, GAP)
         finals[label] = _final(res.curve.matrix("value_gap")[:, -1])
         budgets[label] = float(res.curve.matrix("steps").sum(axis=1).mean())
     t0 = time.process_time()
-    res = q_learning(mdp, runs=runs, episodes=30000, seed=seed, alpha=ALPHA, epsilon=EPSILON,
-                     eval_every=EVAL, max_steps_per_episode=1000)
+    res = q_learning(mdp, Run(runs=runs, episodes=30000, seed=seed, alpha=ALPHA, epsilon=EPSILON,
+                              eval_every=EVAL, max_steps_per_episode=1000))
     timings["flat Q"] = time.process_time() - t0
     rows["flat Q"] = _curve_steps(res.curve, EVAL, GAP)
     finals["flat Q"] = _final(res.curve.matrix("value_gap")[:, -1])
@@ -162,8 +163,8 @@ def parr(runs: int = RUNS, seed: int = 3000, episodes: int = 300,
     budget = float(steps.sum(axis=1).mean())
     t0 = time.process_time()
     flat_eps = episodes * 4
-    res = q_learning(mdp, runs=runs, episodes=flat_eps, seed=seed, alpha=ALPHA,
-                     epsilon=EPSILON, eval_every=eval_every, max_steps_per_episode=5000)
+    res = q_learning(mdp, Run(runs=runs, episodes=flat_eps, seed=seed, alpha=ALPHA,
+                              epsilon=EPSILON, eval_every=eval_every, max_steps_per_episode=5000))
     timings["flat Q"] = time.process_time() - t0
     rows["flat Q"] = _curve_steps(res.curve, eval_every, PARR_GAP)
     finals["flat Q"] = _final(res.curve.matrix("value_gap")[:, -1])

@@ -37,6 +37,7 @@ from adpart.learning import _kernels
 from adpart.learning.curves import start_distribution
 from adpart.learning.qlearning import BLOCK_ROWS, _initial_state
 from adpart.learning.schedules import constant, visit_count
+from adpart.learning.settings import Run
 from adpart.mdp.generate import random_grid_mdp
 
 
@@ -164,9 +165,9 @@ def end_to_end(n_states: int = 100_000, runs: int = 50, agent_steps: int = 1_000
     def call():
         timers.update(kernel=0.0, scoring=0.0)
         t0 = time.perf_counter()
-        result = qlearning.q_learning(mdp, runs=runs, episodes=episodes,
-                                      max_steps_per_episode=horizon, eval_every=eval_every,
-                                      reference_values=V, seed=0)
+        result = qlearning.q_learning(mdp, Run(runs=runs, episodes=episodes,
+                                               max_steps_per_episode=horizon,
+                                               eval_every=eval_every, reference_values=V, seed=0))
         total = time.perf_counter() - t0
         row = {"total_s": total, **{f"{k}_s": v for k, v in timers.items()}}
         row["overhead_s"] = total - timers["kernel"] - timers["scoring"]
@@ -180,8 +181,8 @@ def end_to_end(n_states: int = 100_000, runs: int = 50, agent_steps: int = 1_000
     rows: dict[str, list[dict]] = {"today": [], "before": []}
     curves_seen: dict[str, np.ndarray] = {}
     try:
-        qlearning.q_learning(mdp, runs=2, episodes=1, max_steps_per_episode=5,
-                             reference_values=V, seed=0)  # warm-up (compiled code, caches)
+        qlearning.q_learning(mdp, Run(runs=2, episodes=1, max_steps_per_episode=5,
+                                      reference_values=V, seed=0))  # warm-up (compiled code)
         for _ in range(repeats):  # alternate, so both see the same machine load
             for style in ("today", "before"):
                 if style == "before":
@@ -242,20 +243,20 @@ def repeated_evaluations(runs: int = 10, episodes: int = 300, eval_every: int = 
             super().__init__(*args, **kwargs)
             made.append(self)
 
-    qlearning.q_learning(mdp, **kw)  # warm-up
+    qlearning.q_learning(mdp, Run(**kw))  # warm-up
     times: dict[str, float] = {"today": np.inf, "before": np.inf}
     out = {}
     for _ in range(3):
         qlearning.StartValues = Counting
         try:
             t0 = time.perf_counter()
-            out["today"] = qlearning.q_learning(mdp, **kw).curve["eval_value"]
+            out["today"] = qlearning.q_learning(mdp, Run(**kw)).curve["eval_value"]
             times["today"] = min(times["today"], time.perf_counter() - t0)
         finally:
             qlearning.StartValues = curves.StartValues
         with _BeforeStyle(qlearning):
             t0 = time.perf_counter()
-            out["before"] = qlearning.q_learning(mdp, **kw).curve["eval_value"]
+            out["before"] = qlearning.q_learning(mdp, Run(**kw)).curve["eval_value"]
             times["before"] = min(times["before"], time.perf_counter() - t0)
     scored = runs * len(range(eval_every, episodes + 1, eval_every))
     same = np.array_equal(out["today"], out["before"], equal_nan=True)

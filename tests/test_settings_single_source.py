@@ -20,6 +20,28 @@ from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "adpart"
 
+#: Parameters that share a settings field's name but are another setting, with what they are.
+#: Each entry must still match a declaration (a stale one fails the test).
+OTHER_MEANINGS: dict[tuple[str, str], str] = {
+    ("adpart/mdp/solvers.py", "epsilon"): "the solvers' stopping tolerance on ||V - V*||",
+    ("adpart/options/subgoal_options.py", "epsilon"): "the pseudo-reward's small epsilon",
+    ("adpart/experiments/sequential.py", "alpha"): "the sequential test's significance level",
+    ("adpart/experiments/sequential.py", "seed"): "the permutation test's seed",
+    ("adpart/experiments/stats.py", "seed"): "the bootstrap's seed",
+    ("adpart/experiments/protocol.py", "seed"): "the bootstrap's seed",
+    ("adpart/experiments/maxq.py", "seed"): "the bootstrap's seed",
+    ("adpart/learning/comparison.py", "seed"): "the bootstrap's seed",
+    ("adpart/learning/transfer_metrics.py", "seed"): "the stratified bootstrap's seed",
+    ("adpart/learning/maxq/maxq_q.py", "seed"): "the Monte Carlo rollouts' seed",
+    ("adpart/mdp/generate.py", "seed"): "the random MDP generator's seed",
+    ("adpart/envs/gym_adapter.py", "seed"): "the Gymnasium environment's reset seed",
+    ("adpart/cli/discover_cmd.py", "seed"): "the subgoal detector's sampling seed",
+    ("adpart/workflows/discovery.py", "seed"): "the subgoal detector's sampling seed",
+    ("adpart/testing.py", "seed"): "the conformance checks' fixed seed",
+    ("adpart/testing.py", "runs"): "the conformance check's own two-run size",
+    ("adpart/testing.py", "episodes"): "the conformance check's own three-episode size",
+}
+
 
 def _is_settings_class(node: ast.ClassDef) -> bool:
     return any(isinstance(d, ast.Name) and d.id == "settings" for d in node.decorator_list)
@@ -62,8 +84,13 @@ def _literal(node: ast.expr | None, allowed: set[str]) -> bool:
     return isinstance(node, ast.Name) and node.id.isupper() and node.id not in allowed
 
 
-def second_declarations(root: Path = PACKAGE) -> list[str]:
-    """Every default of an owned name declared outside its settings dataclass, one line each."""
+def second_declarations(root: Path = PACKAGE,
+                        other: dict[tuple[str, str], str] | None = None) -> list[str]:
+    """Every default of an owned name declared outside its settings dataclass, one line each
+    (but those ``other`` names as another setting), and every entry of ``other`` that matched
+    nothing."""
+    other = {} if other is None else other
+    used: set[tuple[str, str]] = set()
     owned = settings_fields(root)
     classes = {owner.split(" ")[0] for owner in owned.values()}
     found = []
@@ -71,6 +98,14 @@ def second_declarations(root: Path = PACKAGE) -> list[str]:
         where = path.relative_to(root.parent)
         tree = ast.parse(path.read_text(), str(path))
         allowed = _instances(tree, classes)
+
+        def elsewhere(name: str, where: Path = where) -> bool:
+            key = (where.as_posix(), name)
+            if key in other:
+                used.add(key)
+                return True
+            return False
+
         for node in ast.walk(tree):
             if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
                 args = node.args
@@ -79,7 +114,8 @@ def second_declarations(root: Path = PACKAGE) -> list[str]:
                                  args.defaults, strict=True))
                 pairs += [(a, d) for a, d in zip(args.kwonlyargs, args.kw_defaults, strict=True)]
                 for arg, default in pairs:
-                    if arg.arg in owned and _literal(default, allowed):
+                    if (arg.arg in owned and _literal(default, allowed)
+                            and not elsewhere(arg.arg)):
                         found.append(f"{where}:{node.lineno}: parameter {arg.arg} = "
                                      f"{ast.unparse(default)} (owned by {owned[arg.arg]})")
             elif isinstance(node, ast.Call):
@@ -93,14 +129,17 @@ def second_declarations(root: Path = PACKAGE) -> list[str]:
                     found.append(f"{where}:{node.lineno}: Param({text!r}, ..., "
                                  f"{ast.unparse(node.args[2])}) (owned by {owned[key]})")
                 elif (name == "option" and text.startswith("--") and key in owned
-                      and any(k.arg == "default" for k in node.keywords)):
+                      and any(k.arg == "default" for k in node.keywords)
+                      and not elsewhere(key)):
                     found.append(f"{where}:{node.lineno}: option {text} with a default "
                                  f"(owned by {owned[key]})")
+    found += [f"{path}: no parameter {name} any more; drop it from OTHER_MEANINGS"
+              for path, name in sorted(set(other) - used)]
     return found
 
 
 def test_every_setting_has_one_default():
-    found = second_declarations()
+    found = second_declarations(other=OTHER_MEANINGS)
     assert not found, "\n".join(found)
 
 
@@ -109,13 +148,16 @@ def test_the_test_finds_a_second_default(tmp_path):
     root.mkdir()
     (root / "core.py").write_text(
         "from adpart.params import setting, settings\n\n@settings\nclass S:\n"
-        "    delta: float = setting(0.3, min=0.0)\n    '''delta of eq. 4.6.'''\n")
+        "    delta: float = setting(0.3, min=0.0)\n    '''delta of eq. 4.6.'''\n"
+        "    epsilon: float = setting(0.1, min=0.0)\n    '''exploration.'''\n")
     (root / "use.py").write_text(
         "import click\nfrom adpart.params import Param\n\n"
-        "def refine(p, *, delta=0.0, other=1, epsilon=None):\n    pass\n\n"
+        "def refine(p, *, delta=0.0, other=1, epsilon=1e-6):\n    pass\n\n"
         "P = Param('delta', 'float', 0.3, 'help')\n"
         "opt = click.option('--delta', default=0.3)\n")
-    found = second_declarations(root)
-    assert len(found) == 3, found
+    found = second_declarations(root, {("adpart/use.py", "other"): "unused",
+                                       ("adpart/use.py", "epsilon"): "another epsilon"})
+    assert len(found) == 4, found
     assert "use.py:4: parameter delta = 0.0" in found[0]
     assert "Param('delta'" in found[1] and "option --delta" in found[2]
+    assert "no parameter other any more" in found[3]

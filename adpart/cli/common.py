@@ -226,29 +226,47 @@ def executor_options(default: str = "local"):  # type: ignore[no-untyped-def]
     return decorate
 
 
-def run_options(  # type: ignore[no-untyped-def]
-    *, runs_help: str = "Independent runs.", episodes_help: str = "Episodes per run.",
-    runs_default: int = 10,
-):
-    """Decorator adding ``--episodes``, ``--runs``, ``--seed`` and ``--eval-every``."""
+def run_options():  # type: ignore[no-untyped-def]
+    """Decorator adding ``--episodes``, ``--runs``, ``--seed`` and ``--eval-every``: the
+    experiment's fields of :class:`adpart.learning.settings.Run` (their defaults, ranges and
+    help declared there), each handed to the command as its own keyword."""
+    from adpart.learning.settings import EXPERIMENT_FIELDS, Run, fresh_seed
+
+    options = field_options(Run, EXPERIMENT_FIELDS)
 
     def decorate(func):  # type: ignore[no-untyped-def]
-        func = click.option(
-            "--eval-every",
-            type=click.IntRange(min=1),
-            default=10,
-            show_default=True,
-            help="Score the greedy policies exactly every N episodes.",
-        )(func)
-        func = click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True,
-                            help="Root seed.")(func)
-        func = click.option("--runs", type=click.IntRange(min=1), default=runs_default,
-                            show_default=True,
-                            help=runs_help)(func)
-        return click.option("--episodes", type=click.IntRange(min=1), default=300,
-                            show_default=True, help=episodes_help)(func)
+        @functools.wraps(func)
+        def command(*args: Any, **kwargs: Any) -> Any:
+            kwargs["seed"] = fresh_seed(kwargs["seed"])  # --seed fresh: drawn once, here
+            return func(*args, **kwargs)
+
+        return options(command)
 
     return decorate
+
+
+def field_options(cls: type, names: tuple[str, ...]):  # type: ignore[no-untyped-def]
+    """Decorator: an option per named field of the settings class ``cls`` (default, range,
+    help from its declaration), each converted and checked and passed as the field's keyword."""
+    params = settings_params(cls, only=names)
+
+    def decorate(func):  # type: ignore[no-untyped-def]
+        for p in reversed(params):
+            func = _setting_option(p, p.keyword)(func)
+        return func
+
+    return decorate
+
+
+def _setting_option(p: Param, dest: str):  # type: ignore[no-untyped-def]
+    """The click option of one settings field's parameter, stored under ``dest``."""
+    name = f"--{p.name}"
+    if p.type == "bool":
+        return click.option(f"{name}/--no-{p.name}", dest, default=p.default,
+                            show_default=True, help=p.help)
+    return click.option(name, dest, type=_SettingType(p, _setting_metavar(p)),
+                        default=p.default,
+                        show_default=True if p.default is not None else p.none, help=p.help)
 
 
 def make_executor(
@@ -319,17 +337,7 @@ def settings_options(cls: type, keyword: str):  # type: ignore[no-untyped-def]
             return func(*args, **kwargs)
 
         for p in reversed(params):
-            name = f"--{p.name}"
-            if p.type == "bool":
-                option = click.option(f"{name}/--no-{p.name}", f"{keyword}__{p.keyword}",
-                                      default=p.default, show_default=True, help=p.help)
-            else:
-                option = click.option(name, f"{keyword}__{p.keyword}",
-                                      type=_SettingType(p, _setting_metavar(p)),
-                                      default=p.default,
-                                      show_default=True if p.default is not None else p.none,
-                                      help=p.help)
-            command = option(command)
+            command = _setting_option(p, f"{keyword}__{p.keyword}")(command)
         return command
 
     return decorate

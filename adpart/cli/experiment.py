@@ -7,8 +7,9 @@ from pathlib import Path
 
 import click
 
-from adpart.cli.common import echo_json
+from adpart.cli.common import echo_json, field_options
 from adpart.experiments import EXPERIMENTS, ExperimentConfig, load_all, run_experiment
+from adpart.learning.settings import Run, fresh_seed
 from adpart.workflows.reports import folder_name
 
 
@@ -19,14 +20,7 @@ from adpart.workflows.reports import folder_name
     type=click.Path(file_okay=False, path_type=Path),
     help="Output folder [default: adpart-experiments/NAME].",
 )
-@click.option(
-    "--runs",
-    type=click.IntRange(min=1),
-    default=20,
-    show_default=True,
-    help="Independent runs per learner.",
-)
-@click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True, help="Root seed.")
+@field_options(Run, ("runs", "seed"))
 @click.option("--quick", is_flag=True, help="A small, fast version (few runs and episodes).")
 @click.option(
     "--kb",
@@ -65,7 +59,7 @@ def experiment_cmd(
     config = ExperimentConfig(
         out=out,
         runs=runs,
-        seed=seed,
+        seed=fresh_seed(seed),
         quick=quick,
         kb=kb_path,
         progress=(lambda message: click.echo(f"[{name}] {message}", err=True))

@@ -41,7 +41,7 @@ from adpart.workflows.store import KnowledgeStore
 @click.argument("env")
 @click.option("--task", help="Task name (see `adpart envs`) or goal:FEATURE=VALUE,... .")
 @click.option("--learner", default="q-learning", show_default=True, help="Learner plugin.")
-@run_options(episodes_help="Episodes per run (sweeps for value-iteration).")
+@run_options()
 @executor_options()
 @click.option(
     "--runs-per-batch",

@@ -130,8 +130,7 @@ def _say(quiet: bool):  # type: ignore[no-untyped-def]
     metavar="KEY=VALUE",
     help="A parameter of the criterion (repeatable).",
 )
-@run_options(runs_help="Runs per learner (20 for the summary's CIs).",
-             episodes_help="Episodes per later task.", runs_default=20)
+@run_options()
 @click.option(
     "--first-episodes",
     type=click.IntRange(min=1),
@@ -283,7 +282,7 @@ def pipeline_cmd(
     metavar="ID",
     help="The decision layer (partition:N), e.g. from `adpart partition` or a pipeline.",
 )
-@run_options(runs_help="Runs per learner.", episodes_help="Episodes per run.")
+@run_options()
 @click.option(
     "--hier-opt",
     multiple=True,

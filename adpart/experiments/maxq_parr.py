@@ -267,9 +267,9 @@ def _parr(config: ExperimentConfig, *, mini: bool) -> ExperimentReport:
     mdp = maze.mdp()
     first, goal = _first_task(maze)
     config.progress(f"parr {which} maze: first task flat ({s['first']} episodes)")
-    fr = q_learning(first, runs=1, episodes=s["first"], seed=config.seed, alpha=ALPHA,
-                    epsilon=EPSILON, eval_every=max(1, s["first"] // 10),
-                    max_steps_per_episode=s["horizon"])
+    fr = q_learning(first, Run(runs=1, episodes=s["first"], seed=config.seed, alpha=ALPHA,
+                               epsilon=EPSILON, eval_every=max(1, s["first"] // 10),
+                               max_steps_per_episode=s["horizon"]))
     found = discover_monte_carlo(first, fr.greedy_policies()[0],
                                  np.random.default_rng(config.seed),
                                  build_settings(MonteCarloSettings,

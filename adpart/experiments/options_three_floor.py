@@ -160,7 +160,7 @@ def options_three_floor(config: ExperimentConfig) -> ExperimentReport:
               "eval_every": s["eval_every"], "max_steps_per_episode": s["horizon"],
               "alpha": ALPHA, "epsilon": EPSILON, "reference_values": v_star}
     config.progress(f"learning {NEW_TASK}: flat ({s['runs']} runs x {s['episodes']} episodes)")
-    results: dict[str, Any] = {FLAT: q_learning(mdp, **common)}
+    results: dict[str, Any] = {FLAT: q_learning(mdp, Run(**common))}
     for name, (options, models, prims) in built.items():
         config.progress(f"learning {NEW_TASK}: SMDP Q over {name}")
         results[f"SMDP Q, {name}"] = smdp_q_learning(

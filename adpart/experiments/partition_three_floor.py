@@ -120,7 +120,7 @@ def _learn(mdp: Any, options: list[Any], models: list[Any], partition: Any, s: d
               "eval_every": s["eval_every"], "max_steps_per_episode": s["horizon"]}
     out: dict[str, Any] = {}
     if "flat" in which:
-        out["flat Q-learning"] = q_learning(mdp, **common)
+        out["flat Q-learning"] = q_learning(mdp, Run(**common))
     if "smdp" in which:
         out["SMDP Q (options)"] = smdp_q_learning(mdp, options, None, Run(**common), models)
     if "hier" in which:

@@ -150,7 +150,7 @@ from adpart.learning.hierarchical_settings import (
     HierarchicalSettings,
 )
 from adpart.learning.result import LearnResult
-from adpart.learning.settings import Run, run_settings
+from adpart.learning.settings import Run, fresh_seed, require_mdp
 from adpart.learning.smdp_q import (
     InconsistencyArrays,
     drive,
@@ -416,20 +416,17 @@ def hierarchical_learning(
     if not isinstance(settings, HierarchicalSettings):
         raise TaskError(f"settings must be a HierarchicalSettings, got {type(settings).__name__}")
     test, refinement = settings.test, settings.refinement
-    cfg = run_settings("hierarchical_learning", mdp, runs=run.runs, episodes=run.episodes,
-                       eval_every=run.eval_every,
-                       max_steps_per_episode=run.max_steps_per_episode, seed=run.seed,
-                       alpha=run.alpha, epsilon=run.epsilon,
-                       q_init=0.0 if run.q_init is None else run.q_init)
-    K, N, S = cfg.runs, cfg.episodes, mdp.n_states
+    require_mdp("hierarchical_learning", mdp)
+    K, N, S, H = run.runs, run.episodes, mdp.n_states, run.max_steps_per_episode
+    seed = fresh_seed(run.seed)
     kernel_name, step_kernel = kernel_function(run.kernel)
     part0, full, smdp, extra = starting_layer(mdp, options, partition, settings, models)
     mu = start_distribution(mdp)
     v_star = optimal_start_value(mdp, mu, run.reference_values)
     L = (default_threshold(v_star, scale=test.threshold_scale) if test.threshold is None
          else float(test.threshold))
-    lower = flat_lower_bound(mdp, cfg.horizon)
-    q0 = cfg.q_init if run.q_init is not None else lower if settings.directed else 0.0
+    lower = flat_lower_bound(mdp, H)
+    q0 = run.q_init if run.q_init is not None else lower if settings.directed else 0.0
     check = settings.testing
     reference = ReferenceValues(settings.test_reference, test.split_offered, mdp, smdp, lower)
     refine = LayerRefiner(refinement.refine, refinement.delta, refinement.partition_epsilon,
@@ -447,8 +444,8 @@ def hierarchical_learning(
     B0 = part0.n_blocks
     st = make_state(
         mdp, full, np.broadcast_to(part0.labels, (K, S)),
-        np.broadcast_to(part0.admissible, (K, B0, len(full))), episodes=N, horizon=cfg.horizon,
-        alpha=cfg.alpha, epsilon=cfg.epsilon, q_init=q0, mu=mu,
+        np.broadcast_to(part0.admissible, (K, B0, len(full))), episodes=N, horizon=H,
+        alpha=run.alpha, epsilon=run.epsilon, q_init=q0, mu=mu,
         capacity=min(S, max(2 * B0, B0 + 64)), intra=2 if settings.intra_option else 0,
         test=arrays,
     )
@@ -464,12 +461,12 @@ def hierarchical_learning(
         policies = greedy_policy(Qs.reshape(K * S, -1)).reshape(K, S)
         return start_values(smdp, policies, mu)
 
-    eval_value = drive(st, step_kernel, cfg.seed, episodes=N, eval_every=cfg.eval_every,
+    eval_value = drive(st, step_kernel, seed, episodes=N, eval_every=run.eval_every,
                        score=score, progress=run.progress, on_fire=on_fire if check else None)
     names = tuple(o.name for o in full)
     delta, epsilon = refinement.delta, refinement.partition_epsilon
     parameters: dict[str, object] = {
-        "runs": K, "episodes": N, "seed": cfg.seed, "mode": settings.mode,
+        "runs": K, "episodes": N, "seed": seed, "mode": settings.mode,
         "delta": float(delta), "epsilon": None if epsilon is None else float(epsilon),
         "threshold": L, "threshold_rule": "given" if test.threshold is not None else
         f"{test.threshold_scale} x |V*(start)|",
@@ -481,8 +478,8 @@ def hierarchical_learning(
         "explore_known": settings.exploration.explore_known if settings.directed else 0,
         "layer_values": settings.layer_values, "split_offered": test.split_offered,
         "flat_lower_bound": lower, "min_visits": test.min_visits,
-        "alpha": cfg.alpha.to_dict(), "epsilon_greedy": cfg.epsilon.to_dict(),
-        "max_steps_per_episode": cfg.horizon, "eval_every": cfg.eval_every, "q_init": float(q0),
+        "alpha": run.alpha.to_dict(), "epsilon_greedy": run.epsilon.to_dict(),
+        "max_steps_per_episode": H, "eval_every": run.eval_every, "q_init": float(q0),
         "kernel": kernel_name, "intra_option": settings.intra_option, "options": list(names),
         "extra_subgoals": [o.subgoal for o in extra], "initial_blocks": B0,
         "reference": "given" if run.reference_values is not None else "solved",
@@ -500,6 +497,6 @@ def hierarchical_learning(
         block_Q=[st.Q[k, :parts[k].n_blocks].copy() for k in range(K)],
         partitions=parts, Q_flat=st.Qf.copy(), Q_grounded=grounded,
         curve=curve, blocks=st.out_blocks.copy(),
-        refinements=events, seed=cfg.seed, v_star_start=v_star, option_names=names,
+        refinements=events, seed=seed, v_star_start=v_star, option_names=names,
         parameters=parameters,
     )

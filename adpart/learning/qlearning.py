@@ -32,7 +32,6 @@ Design choices (documented in ``docs/learning.md``):
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -45,8 +44,8 @@ from adpart.learning.curves import (
     start_distribution,
 )
 from adpart.learning.result import LearnResult
-from adpart.learning.schedules import Schedule, constant, visit_count
-from adpart.learning.settings import run_settings
+from adpart.learning.schedules import Schedule
+from adpart.learning.settings import Run, fresh_seed, require_mdp
 from adpart.mdp.evaluation import greedy_policy
 from adpart.mdp.model import FiniteMDP
 
@@ -146,55 +145,39 @@ def _initial_state(
     return st
 
 
-def q_learning(
-    mdp: FiniteMDP,
-    *,
-    runs: int = 10,
-    episodes: int = 500,
-    seed: int | None = None,
-    alpha: Schedule | str | float = visit_count(0.8),  # noqa: B008 (immutable)
-    epsilon: Schedule | str | float = constant(0.1),  # noqa: B008 (immutable)
-    max_steps_per_episode: int = 1000,
-    eval_every: int = 10,
-    reference_values: np.ndarray | None = None,
-    progress: Callable[[int, int], object] | None = None,
-    q_init: float = 0.0,
-    kernel: str | None = None,
-) -> QLearningResult:
-    """Learn ``mdp`` with ``runs`` independent epsilon-greedy Q-learners in lock-step.
+def q_learning(mdp: FiniteMDP, run: Run | None = None) -> QLearningResult:
+    """Learn ``mdp`` with ``run.runs`` independent epsilon-greedy Q-learners in lock-step.
 
     Args:
         mdp: the task, a validated :class:`~adpart.mdp.model.FiniteMDP`.
-        runs: number K of independent runs (agents).
-        episodes: episodes N per run.
-        seed: root seed; run k uses ``np.random.default_rng(seed).spawn(runs)[k]``.
-        alpha: step-size schedule (a :class:`Schedule` or its spelling, e.g. ``"1/n^0.8"``);
-            its visit count is ``n(s, a)``. Default ``1/n(s,a)^0.8`` (meets the
-            stochastic-approximation conditions).
-        epsilon: exploration schedule; its visit count is ``n(s)``. Default 0.1.
-        max_steps_per_episode: step limit H; a cut episode bootstraps through the cut.
-        eval_every: score the greedy policies every this many episodes (and after the last).
-        reference_values: ``V*`` (S,) for the value gap; solved exactly when omitted.
-        progress: called as ``progress(episodes_done_by_every_run, episodes)`` after each block.
-        q_init: initial value of every admissible ``Q(s, a)``.
-        kernel: ``"numba"`` (the default, :func:`default_kernel`) or ``"python"`` (the same
-            rule interpreted: the reference); identical results. ``"numpy"``, an earlier third
-            copy of the rule, runs ``"numba"`` with a ``FutureWarning``.
+        run: the run settings (:class:`~adpart.learning.settings.Run`; default ``Run()``):
+            runs K and episodes N; the root seed (run k uses
+            ``np.random.default_rng(seed).spawn(runs)[k]``); the step-size schedule ``alpha``
+            (visit count ``n(s, a)``; default ``1/n(s,a)^0.8``, which meets the
+            stochastic-approximation conditions) and the exploration schedule ``epsilon``
+            (visit count ``n(s)``); the step limit H (a cut episode bootstraps through the
+            cut); exact scoring every ``eval_every`` episodes (and after the last) against
+            ``reference_values`` (``V*``, solved when omitted); ``q_init`` (auto: 0); the
+            kernel, ``"numba"`` (:func:`default_kernel`) or ``"python"`` (the same rule
+            interpreted: the reference), identical results (``"numpy"``, an earlier third copy
+            of the rule, runs ``"numba"`` with a ``FutureWarning``); and ``progress``, called as
+            ``progress(episodes_done_by_every_run, episodes)`` after each block.
 
     Returns:
         A :class:`QLearningResult`.
 
     Raises:
-        TaskError: a setting is out of range.
+        TaskError: a setting is out of range (raised where the ``Run`` is built).
         UnknownNameError: ``kernel`` is not a kernel's name (the message lists them).
         ModelError: ``mdp`` is not a FiniteMDP, or no episode can start, or bad reference values.
     """
-    cfg = run_settings("q_learning", mdp, runs=runs, episodes=episodes, eval_every=eval_every,
-                       max_steps_per_episode=max_steps_per_episode, seed=seed, alpha=alpha,
-                       epsilon=epsilon, q_init=q_init)
-    K, N, M, H, root_seed = cfg.runs, cfg.episodes, cfg.eval_every, cfg.horizon, cfg.seed
-    alpha_s, eps_s = cfg.alpha, cfg.epsilon
-    name = _kernels.resolve_kernel(kernel, "Q-learning", KERNEL_ALIASES)
+    run = Run() if run is None else run
+    require_mdp("q_learning", mdp)
+    K, N, M, H = run.runs, run.episodes, run.eval_every, run.max_steps_per_episode
+    root_seed, q_init = fresh_seed(run.seed), run.start_q
+    alpha_s, eps_s = run.alpha, run.epsilon
+    reference_values, progress = run.reference_values, run.progress
+    name = _kernels.resolve_kernel(run.kernel, "Q-learning", KERNEL_ALIASES)
     step_kernel = _kernels.KERNELS[name]
 
     mu = start_distribution(mdp)

@@ -29,7 +29,7 @@ class ReferenceResult(LearnResult):
     """The result of :func:`value_iteration_curve`: a learner's result with one run."""
 
 
-def value_iteration_curve(mdp: FiniteMDP, *, sweeps: int, seed: int = 0) -> ReferenceResult:
+def value_iteration_curve(mdp: FiniteMDP, *, sweeps: int, seed: int) -> ReferenceResult:
     """Run ``sweeps`` Jacobi value-iteration sweeps from V = 0, scoring each greedy policy.
 
     Args:

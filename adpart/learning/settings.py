@@ -1,105 +1,99 @@
-"""The settings every tabular learner validates the same way (runs, episodes, seed, schedules).
+"""The run settings every tabular learner takes: one :class:`Run`, checked once when built.
 
-Flat Q-learning, SMDP Q-learning and the hierarchical learner take the same experiment settings;
-:func:`run_settings` checks them once, with errors that name the setting and the fix.
+Flat Q-learning, SMDP Q-learning, the hierarchical learner and MAXQ-Q all take a ``Run``: how many
+independent runs, how long, how they are seeded and scored, and the sample-based update's
+step-size and exploration schedules. Its fields are the single declaration of each default,
+range and help text: the learner plugins' parameters, ``adpart learn``'s run options and the
+stored provenance are derived from it (:mod:`adpart.params`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
-from adpart.errors import ModelError, TaskError
-from adpart.learning.schedules import Schedule, constant, parse_schedule, visit_count
-from adpart.mdp.model import FiniteMDP
+from adpart.errors import ModelError
+from adpart.learning.schedules import Schedule, parse_schedule
+from adpart.params import hook, setting, settings
+
+__all__ = ["LEARNER_FIELDS", "MAX_SEED", "Run", "fresh_seed", "require_mdp"]
+
+#: The largest seed: the knowledge base stores seeds as signed 64-bit integers.
+MAX_SEED = 2**63 - 1
+
+#: The fields of :class:`Run` that describe the learner's update rather than the experiment:
+#: they are the learner plugins' parameters (``--learner-opt alpha=1``); the rest are the
+#: ``--runs/--episodes/--seed/--eval-every`` options of the commands that learn.
+LEARNER_FIELDS = ("alpha", "epsilon", "max_steps_per_episode", "q_init", "kernel")
+
+#: The experiment's fields, in the order the commands list them.
+EXPERIMENT_FIELDS = ("episodes", "runs", "seed", "eval_every")
 
 
-@dataclass(frozen=True)
-class RunSettings:
-    """Validated settings: K runs of N episodes, evaluated every M, at most H steps each."""
+def _probability_schedule(what: str) -> Callable[[Any], Schedule]:
+    """A parser: a schedule (or its spelling, or a number) that stays within [0, 1]."""
 
-    runs: int
-    episodes: int
-    eval_every: int
-    horizon: int
-    seed: int
-    alpha: Schedule
-    epsilon: Schedule
-    q_init: float
+    def parse(value: Any) -> Schedule:
+        return parse_schedule(value).check_probability(what)
+
+    return parse
 
 
-def count(value: object, what: str) -> int:
-    """``value`` as an int >= 1, else TaskError naming ``what``."""
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-        raise TaskError(f"{what} = {value!r} must be an integer >= 1")
-    return int(value)
+@settings
+class Run:
+    """How a learner's K runs go (dissertation section 2.x: epsilon-greedy Q-learning, eq. 2.4).
+
+    Building one checks every field; a learner below this boundary trusts it.
+    """
+
+    runs: int = setting(20, min=1, max=100_000)
+    """Independent runs K, advanced together (20 give the summaries' confidence intervals)."""
+    episodes: int = setting(300, min=1, max=10_000_000)
+    """Episodes per run."""
+    seed: int | None = setting(0, kind="int", min=0, max=MAX_SEED, none="fresh")
+    """Root seed: run k uses numpy's default_rng(seed).spawn(runs)[k] (fresh: one drawn from
+    OS entropy, recorded with the result)."""
+    eval_every: int = setting(10, min=1)
+    """Score the greedy policies exactly every N episodes (and after the last)."""
+    max_steps_per_episode: int = setting(1000, min=1, option="max-steps")
+    """Primitive-step limit of one episode; a cut episode bootstraps through the cut."""
+    alpha: Schedule = setting("1/n^0.8", kind="str", parse=_probability_schedule("alpha"))
+    """Step-size schedule: 0.1 | 1/n^0.8 | exp:0.5,0.99 (its visit count is n(s, a))."""
+    epsilon: Schedule = setting("0.1", kind="str", parse=_probability_schedule("epsilon"))
+    """Exploration schedule, same forms as --alpha (its visit count is n(s))."""
+    q_init: float | None = setting(None, kind="float", none="auto")
+    """Starting value of every admissible Q entry (auto: 0, or the lower bound r_min/(1-gamma)
+    under R-max exploration)."""
+    kernel: str | None = setting(None, kind="str", none="auto")
+    """Step kernel: numba (compiled) or python (the same rule interpreted, the reference);
+    identical results."""
+    reference_values: np.ndarray | None = hook()
+    """V* (S,) to score against; solved exactly when omitted."""
+    progress: Callable[[int, int], object] | None = hook()
+    """Called as progress(episodes done by every run, episodes) after every evaluation."""
+
+    @property
+    def start_q(self) -> float:
+        """The starting Q-value when no learner rule overrides None: 0."""
+        return 0.0 if self.q_init is None else float(self.q_init)
 
 
-def root_seed(seed: object) -> int:
-    """``seed`` as a non-negative int; None draws one from OS entropy (recorded by callers)."""
+def fresh_seed(seed: int | None) -> int:
+    """``seed``, or for a ``fresh`` seed (None) one drawn from OS entropy here, once."""
     if seed is None:
-        return int(np.random.SeedSequence().entropy)  # type: ignore[arg-type]
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise TaskError(f"seed = {seed!r} must be a non-negative integer (or None for a fresh one)")
+        return int(np.random.SeedSequence().entropy) % (MAX_SEED + 1)  # type: ignore[operator]
     return int(seed)
 
 
-def schedule(value: object, what: str) -> Schedule:
-    """A schedule from its spelling, checked to stay within [0, 1]."""
-    return parse_schedule(value).check_probability(what)  # type: ignore[arg-type]
+def require_mdp(learner: str, mdp: object) -> object:
+    """``mdp`` if it is a FiniteMDP, else ModelError naming ``learner`` and the fix."""
+    from adpart.mdp.model import FiniteMDP
 
-
-def run_settings(
-    learner: str, mdp: object, *, runs: object, episodes: object, eval_every: object,
-    max_steps_per_episode: object, seed: object, alpha: object, epsilon: object,
-    q_init: object = 0.0, epsilon_name: str = "epsilon",
-) -> RunSettings:
-    """Check ``mdp`` is a FiniteMDP and the settings are in range; ``learner`` names the caller."""
     if not isinstance(mdp, FiniteMDP):
         raise ModelError(
             f"{learner} needs a FiniteMDP, got {type(mdp).__name__}; build one with "
             "adpart.envs.registry.get_domain(name).mdp()"
         )
-    K = count(runs, "runs")
-    N = count(episodes, "episodes")
-    M = count(eval_every, "eval_every")
-    H = count(max_steps_per_episode, "max_steps_per_episode")
-    seed_value = root_seed(seed)
-    alpha_s = schedule(alpha, "alpha")
-    eps_s = schedule(epsilon, epsilon_name)
-    if not isinstance(q_init, (int, float, np.number)) or not np.isfinite(q_init):
-        raise TaskError(f"q_init = {q_init!r} must be a finite number")
-    return RunSettings(K, N, M, H, seed_value, alpha_s, eps_s, float(q_init))
-
-
-@dataclass(frozen=True)
-class Run:
-    """How a learner's K runs go: what :func:`run_settings` checks, and the scoring hooks.
-
-    Attributes:
-        runs, episodes: K independent runs of N episodes each.
-        seed: the root seed (None: a fresh one from OS entropy, recorded in the result).
-        alpha, epsilon: the step-size and exploration schedules
-            (:func:`adpart.learning.schedules.parse_schedule` spellings or objects).
-        max_steps_per_episode: the primitive-step limit of one episode.
-        eval_every: exact scoring of the greedy policies every this many episodes.
-        q_init: the starting Q-values (None: the learner's rule).
-        kernel: ``"numba"`` or ``"python"`` (None: the default kernel).
-        reference_values: ``V*`` to score against (None: solved).
-        progress: called as ``progress(done, episodes)`` after every evaluation.
-    """
-
-    runs: int = 10
-    episodes: int = 500
-    seed: int | None = None
-    alpha: Schedule | str | float = field(default_factory=lambda: visit_count(0.8))
-    epsilon: Schedule | str | float = field(default_factory=lambda: constant(0.1))
-    max_steps_per_episode: int = 1000
-    eval_every: int = 10
-    q_init: float | None = None
-    kernel: str | None = None
-    reference_values: np.ndarray | None = field(default=None, compare=False, repr=False)
-    progress: Callable[[int, int], object] | None = field(default=None, compare=False,
-                                                         repr=False)
+    return mdp

@@ -54,7 +54,7 @@ from adpart.learning.curves import (
 from adpart.learning.qlearning import BLOCK_ROWS
 from adpart.learning.result import LearnResult
 from adpart.learning.schedules import Schedule
-from adpart.learning.settings import Run, run_settings
+from adpart.learning.settings import Run, fresh_seed, require_mdp
 from adpart.mdp.evaluation import greedy_policy
 from adpart.mdp.model import FiniteMDP, SMDPModel
 from adpart.options.models import OptionModel, option_models
@@ -435,14 +435,10 @@ def smdp_q_learning(
     settings = SMDPQSettings() if settings is None else settings
     run = Run() if run is None else run
     include_primitives, intra_option = settings.include_primitives, settings.intra_option
-    q_init = 0.0 if run.q_init is None else run.q_init
-    reference_values, progress = run.reference_values, run.progress
-    cfg = run_settings("smdp_q_learning", mdp, runs=run.runs, episodes=run.episodes,
-                       eval_every=run.eval_every,
-                       max_steps_per_episode=run.max_steps_per_episode, seed=run.seed,
-                       alpha=run.alpha, epsilon=run.epsilon, q_init=q_init)
-    K, N, M, H, root_seed = cfg.runs, cfg.episodes, cfg.eval_every, cfg.horizon, cfg.seed
-    alpha_s, eps_s = cfg.alpha, cfg.epsilon
+    require_mdp("smdp_q_learning", mdp)
+    q_init, reference_values, progress = run.start_q, run.reference_values, run.progress
+    K, N, M, H = run.runs, run.episodes, run.eval_every, run.max_steps_per_episode
+    root_seed, alpha_s, eps_s = fresh_seed(run.seed), run.alpha, run.epsilon
     name, step_kernel = kernel_function(run.kernel)
     full, smdp = option_set(mdp, options, include_primitives=include_primitives, models=models)
     S = mdp.n_states

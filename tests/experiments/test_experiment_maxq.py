@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 
 from adpart.experiments import ExperimentConfig, get_experiment, run_experiment
 from adpart.experiments.maxq import evaluated, median_ci, steps_to_tolerance
+from adpart.learning.settings import Run
 
 
 def test_steps_to_tolerance_against_a_loop() -> None:
@@ -109,8 +110,8 @@ def test_taxi_settling_against_dietterich() -> None:
     mdp = absorb_unreachable(Taxi(fickle=True, gamma=1.0).mdp())
     common = {"runs": 6, "seed": 0, "alpha": "1/n^0.6", "epsilon": "1/n^0.5",
               "eval_every": 25, "max_steps_per_episode": 1000}
-    maxq = maxq_q(mdp, taxi_graph().compile(mdp), episodes=3000, **common).curve
-    flat = q_learning(mdp, episodes=12000, **common).curve
+    maxq = maxq_q(mdp, taxi_graph().compile(mdp), Run(episodes=3000, **common)).curve
+    flat = q_learning(mdp, Run(episodes=12000, **common)).curve
     med = {}
     for name, c in (("maxq", maxq), ("flat", flat)):
         st, _ = steps_to_tolerance(c.matrix("value_gap"), c.matrix("steps"),
@@ -144,8 +145,8 @@ def _parr_goal_states(maze, mdp):
     from adpart.subgoals import MonteCarloSettings, discover_monte_carlo
 
     first, _goal = _first_task(maze)
-    fr = q_learning(first, runs=1, episodes=3000, seed=0, alpha=ALPHA, epsilon=EPSILON,
-                    eval_every=300, max_steps_per_episode=5000)
+    fr = q_learning(first, Run(runs=1, episodes=3000, seed=0, alpha=ALPHA, epsilon=EPSILON,
+                               eval_every=300, max_steps_per_episode=5000))
     found = discover_monte_carlo(first, fr.greedy_policies()[0], np.random.default_rng(0),
                                  build_settings(MonteCarloSettings,
                                                 {"on_loop": "truncate", "max_samples": 5000}),

@@ -13,6 +13,7 @@ from adpart.experiments.sequential import (
 )
 from adpart.experiments.stats import gap_auc
 from adpart.learning.qlearning import q_learning
+from adpart.learning.settings import Run
 from tests.learning.conftest import slippery_grid
 
 ALPHA = 0.05
@@ -64,8 +65,8 @@ def test_identical_real_learners_with_different_seeds() -> None:
     """Flat Q on one slippery grid: 120 runs of one learner, split into 60 disjoint-at-a-time
     resampled pairs; and one pair launched with two different seeds."""
     mdp = slippery_grid(4)
-    res = q_learning(mdp, runs=120, episodes=40, seed=11, alpha="0.5", epsilon="0.2",
-                     eval_every=4)
+    res = q_learning(mdp, Run(runs=120, episodes=40, seed=11, alpha="0.5", epsilon="0.2",
+                              eval_every=4))
     ev = res.curve.evaluated_episodes()
     auc = gap_auc(res.curve.matrix("value_gap")[:, ev - 1], ev, cap=20.0)
     rng = np.random.default_rng(5)
@@ -76,8 +77,8 @@ def test_identical_real_learners_with_different_seeds() -> None:
         rejections += sequential_test(auc[idx[:20]], auc[idx[20:]], n_per_interim=5,
                                       interims=4, n_permutations=300, seed=t).rejected
     assert rejections / trials <= ALPHA + _slack(trials)
-    other = q_learning(mdp, runs=20, episodes=40, seed=12, alpha="0.5", epsilon="0.2",
-                       eval_every=4)
+    other = q_learning(mdp, Run(runs=20, episodes=40, seed=12, alpha="0.5", epsilon="0.2",
+                                eval_every=4))
     auc2 = gap_auc(other.curve.matrix("value_gap")[:, ev - 1], ev, cap=20.0)
     d = sequential_test(auc[:20], auc2, n_per_interim=5, interims=4)
     assert not d.rejected and d.runs_used == 20

@@ -7,6 +7,7 @@ import pytest
 from scipy import stats
 
 from adpart.experiments.stats import compare, episodes_to_threshold
+from adpart.learning.settings import Run
 
 
 def test_welch_interval_agrees_with_scipy_ttest():
@@ -43,7 +44,7 @@ def test_episodes_to_threshold_is_the_curves_episodes_to_gap():
     from adpart.learning.qlearning import q_learning
     from tests.learning.conftest import slippery_grid
 
-    curve = q_learning(slippery_grid(4), runs=6, episodes=30, seed=2, eval_every=3).curve
+    curve = q_learning(slippery_grid(4), Run(runs=6, episodes=30, seed=2, eval_every=3)).curve
     ev = curve.evaluated_episodes()
     for tol in (0.5, 2.0, 5.0):
         ours = episodes_to_threshold(curve.matrix("value_gap"), ev, tol)

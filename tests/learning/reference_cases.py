@@ -25,6 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
+from adpart.learning.settings import Run
+
 DATA = Path(__file__).parent / "data" / "reference_curves.npz"
 
 #: Curve columns pinned per case (``eval_value`` is NaN between evaluations; ``value_gap``
@@ -37,9 +39,9 @@ def _two_rooms(kernel: str):
     from adpart.learning import q_learning
 
     mdp = get_domain("two-rooms").mdp()
-    return q_learning(mdp, runs=4, episodes=40, seed=7, alpha="1/n^0.8",
-                      epsilon="exp:0.5,0.9,0.05", max_steps_per_episode=200, eval_every=10,
-                      kernel=kernel)
+    return q_learning(mdp, Run(runs=4, episodes=40, seed=7, alpha="1/n^0.8",
+                               epsilon="exp:0.5,0.9,0.05", max_steps_per_episode=200,
+                               eval_every=10, kernel=kernel))
 
 
 def _slippery(kernel: str):
@@ -47,9 +49,9 @@ def _slippery(kernel: str):
 
     from .conftest import slippery_grid
 
-    return q_learning(slippery_grid(), runs=3, episodes=30, seed=3, alpha=0.5,
-                      epsilon="0.3/n^0.5,0.05", q_init=1.0, max_steps_per_episode=50,
-                      eval_every=7, kernel=kernel)
+    return q_learning(slippery_grid(), Run(runs=3, episodes=30, seed=3, alpha=0.5,
+                                           epsilon="0.3/n^0.5,0.05", q_init=1.0,
+                                           max_steps_per_episode=50, eval_every=7, kernel=kernel))
 
 
 def _four_rooms(kernel: str, intra: bool = False):

@@ -8,6 +8,7 @@ from hypothesis import strategies as st
 from adpart.errors import TaskError
 from adpart.learning import LearningCurve, plot_curves, q_learning
 from adpart.learning.curves import COLUMNS, distinct_rows, start_values
+from adpart.learning.settings import Run
 from adpart.mdp.evaluation import policy_evaluation
 from adpart.mdp.model import FiniteMDP
 
@@ -16,7 +17,7 @@ from .conftest import slippery_grid
 
 @pytest.fixture(scope="module")
 def curve() -> LearningCurve:
-    return q_learning(slippery_grid(3), runs=3, episodes=12, seed=0, eval_every=4).curve
+    return q_learning(slippery_grid(3), Run(runs=3, episodes=12, seed=0, eval_every=4)).curve
 
 
 def test_columns_and_shapes(curve):

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from adpart.learning import q_learning
+from adpart.learning.settings import Run
 
 
 def _mdp(name: str):
@@ -32,7 +33,7 @@ def _mdp(name: str):
 def test_two_rooms_all_runs_reach_optimal_policy():
     mdp = _mdp("two-rooms")
     # Deterministic: alpha = 1 makes each update an exact sampled Bellman backup.
-    res = q_learning(mdp, runs=8, episodes=500, seed=0, alpha=1.0, epsilon=0.5, eval_every=100)
+    res = q_learning(mdp, Run(runs=8, episodes=500, seed=0, alpha=1.0, epsilon=0.5, eval_every=100))
     gaps = res.curve.matrix("value_gap")[:, -1]
     assert np.all(np.abs(gaps) < 1e-6), gaps
 
@@ -40,8 +41,8 @@ def test_two_rooms_all_runs_reach_optimal_policy():
 @pytest.mark.slow
 def test_four_rooms_all_runs_get_close_to_optimal():
     mdp = _mdp("four-rooms")
-    res = q_learning(mdp, runs=4, episodes=20_000, seed=0, alpha="1/n^0.8", epsilon=1.0,
-                     eval_every=5_000, max_steps_per_episode=10_000)
+    res = q_learning(mdp, Run(runs=4, episodes=20_000, seed=0, alpha="1/n^0.8", epsilon=1.0,
+                              eval_every=5_000, max_steps_per_episode=10_000))
     gaps = res.curve.matrix("value_gap")[:, -1]
     assert np.all(gaps < 1e-4), gaps
     assert np.all(gaps >= -1e-9)

@@ -7,6 +7,7 @@ import pytest
 
 from adpart.envs.registry import get_domain
 from adpart.learning import q_learning
+from adpart.learning.settings import Run
 from adpart.mdp.model import FiniteMDP
 from adpart.options import Option, hallway_options, primitive_options
 from tests.learning.conftest import corridor, slippery_grid
@@ -77,7 +78,7 @@ def test_without_intra_only_the_start_pair_learns():
 def test_primitive_options_with_intra_are_still_flat_q_learning(make):
     """A primitive action's one-step option is the only option consistent with its step."""
     mdp = make()
-    flat = q_learning(mdp, runs=3, episodes=25, seed=11, eval_every=5)
+    flat = q_learning(mdp, Run(runs=3, episodes=25, seed=11, eval_every=5))
     intra = smdp_q_run(mdp, primitive_options(mdp), runs=3, episodes=25, seed=11,
                             eval_every=5, intra_option=True)
     np.testing.assert_array_equal(intra.Q, flat.Q)

@@ -19,6 +19,7 @@ from adpart.learning.maxq import (
     recursively_optimal,
     taxi_graph,
 )
+from adpart.learning.settings import Run
 from adpart.mdp.solvers import value_iteration
 
 LANDMARKS = ((0, 0), (0, 4), (4, 0), (4, 3))
@@ -59,8 +60,8 @@ def test_exact_root_is_flat_v_star_and_navigate_is_shortest_paths(taxi) -> None:
 def test_learned_decomposition_equals_the_exact_one_on_deterministic_taxi(taxi) -> None:
     """alpha = 1 on a deterministic model: every C entry updated a few times is exact."""
     mdp, g, sol = taxi
-    res = maxq_q(mdp, g, runs=1, episodes=1000, seed=0, alpha="1", epsilon="0.5",
-                 eval_every=1000)
+    res = maxq_q(mdp, g, Run(runs=1, episodes=1000, seed=0, alpha="1", epsilon="0.5",
+                             eval_every=1000))
     tables = res.tables[0]
     V, _ = decomposed_values(g, tables)
     reach = reachable_states(mdp)
@@ -100,8 +101,8 @@ def test_learned_decomposition_approaches_the_exact_one_on_fickle_taxi() -> None
     mdp = Taxi(fickle=True, gamma=1.0).mdp()
     g = taxi_graph().compile(mdp)
     sol = recursively_optimal(mdp, g)
-    res = maxq_q(mdp, g, runs=1, episodes=3000, seed=0, alpha="1/n^0.6", epsilon="1/n^0.5",
-                 eval_every=3000)
+    res = maxq_q(mdp, g, Run(runs=1, episodes=3000, seed=0, alpha="1/n^0.6", epsilon="1/n^0.5",
+                             eval_every=3000))
     V, _ = decomposed_values(g, res.tables[0])
     reach = reachable_states(mdp)
     A = g.n_primitives

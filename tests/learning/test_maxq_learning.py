@@ -15,6 +15,7 @@ from adpart.envs.domains.taxi import Taxi
 from adpart.errors import TaskError
 from adpart.learning.maxq import Subtask, TaskGraph, decomposed_values, maxq_q, taxi_graph
 from adpart.learning.maxq.maxq_q import root_q
+from adpart.learning.settings import Run
 from adpart.mdp.evaluation import policy_evaluation
 from adpart.mdp.model import FiniteMDP
 from adpart.mdp.solvers import solve
@@ -134,8 +135,8 @@ def test_completion_values_satisfy_the_decomposed_bellman_equations(abstraction)
     """Deterministic corridor, GLIE exploration: the equations hold to rounding."""
     mdp = corridor(slip=1.0)
     g = corridor_graph().compile(mdp, abstraction=abstraction)
-    res = maxq_q(mdp, g, runs=1, episodes=5000, seed=3, alpha="0.5", epsilon="exp:0.5,0.998",
-                 eval_every=5000, max_steps_per_episode=200)
+    res = maxq_q(mdp, g, Run(runs=1, episodes=5000, seed=3, alpha="0.5", epsilon="exp:0.5,0.998",
+                             eval_every=5000, max_steps_per_episode=200))
     assert max(greedy_errors(mdp, g, res.tables[0])) < 1e-9
     # and V(Root, s) is the flat optimum (this hierarchy can express the optimal policy)
     V, _ = decomposed_values(g, res.tables[0])
@@ -149,8 +150,8 @@ def test_stochastic_completion_values_approach_the_oracle(abstraction):
     """Slippery corridor (moves succeed 0.8): stochastic approximation, so a tolerance."""
     mdp = corridor(slip=0.8)
     g = corridor_graph().compile(mdp, abstraction=abstraction)
-    res = maxq_q(mdp, g, runs=1, episodes=8000, seed=3, alpha="1/n^0.7",
-                 epsilon="exp:0.5,0.999", eval_every=8000, max_steps_per_episode=200)
+    res = maxq_q(mdp, g, Run(runs=1, episodes=8000, seed=3, alpha="1/n^0.7",
+                             epsilon="exp:0.5,0.999", eval_every=8000, max_steps_per_episode=200))
     assert max(greedy_errors(mdp, g, res.tables[0])) < 0.1
     assert res.curve.matrix("value_gap")[0, -1] == pytest.approx(0.0, abs=1e-9)
 
@@ -158,8 +159,8 @@ def test_stochastic_completion_values_approach_the_oracle(abstraction):
 def test_deterministic_taxi_greedy_policy_is_optimal_from_every_start():
     mdp = Taxi(gamma=1.0).mdp()
     g = taxi_graph().compile(mdp)
-    res = maxq_q(mdp, g, runs=1, episodes=1500, seed=1, alpha="0.5", epsilon="0.1",
-                 eval_every=500)
+    res = maxq_q(mdp, g, Run(runs=1, episodes=1500, seed=1, alpha="0.5", epsilon="0.1",
+                             eval_every=500))
     v_star = policy_evaluation(mdp, solve(mdp, 1e-12).policy)
     pi = res.policies[0]
     v_pi = policy_evaluation(mdp, pi)
@@ -188,7 +189,7 @@ def test_bad_settings():
     mdp = Taxi().mdp()
     g = taxi_graph().compile(mdp)
     with pytest.raises(TaskError, match="runs"):
-        maxq_q(mdp, g, runs=0)
+        maxq_q(mdp, g, Run(runs=0))
     with pytest.raises(TaskError, match="compiled on this MDP"):
         maxq_q(corridor(), g)
-    assert root_q(g, maxq_q(mdp, g, runs=1, episodes=1, seed=0).tables[0]).shape == (500, 6)
+    assert root_q(g, maxq_q(mdp, g, Run(runs=1, episodes=1, seed=0)).tables[0]).shape == (500, 6)

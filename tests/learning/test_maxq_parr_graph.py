@@ -18,6 +18,7 @@ from adpart.learning.maxq import (
     hierarchical_rollouts,
     maxq_q,
 )
+from adpart.learning.settings import Run
 
 MOVES = {"N": 0, "E": 1, "S": 2, "W": 3}
 
@@ -115,8 +116,8 @@ def test_bad_call_time_parameters():
 @pytest.mark.slow
 def test_learned_hierarchical_policy_reaches_the_goal_on_the_mini_maze(mini):
     mdp, g = mini
-    res = maxq_q(mdp, g, runs=1, episodes=1000, seed=0, alpha="0.5", epsilon="0.1",
-                 eval_every=1000, max_steps_per_episode=5000)
+    res = maxq_q(mdp, g, Run(runs=1, episodes=1000, seed=0, alpha="0.5", epsilon="0.1",
+                             eval_every=1000, max_steps_per_episode=5000))
     _, steps, done = hierarchical_rollouts(mdp, g, res.tables[0], 20, seed=1,
                                               max_steps=5000)
     assert done.mean() >= 0.9

@@ -7,6 +7,7 @@ import pytest
 
 from adpart.errors import ModelError, TaskError, UnknownNameError
 from adpart.learning import constant, exponential, q_learning, visit_count
+from adpart.learning.settings import Run
 from adpart.mdp.evaluation import policy_evaluation
 from adpart.mdp.generate import random_mdp
 from adpart.mdp.model import FiniteMDP
@@ -78,7 +79,7 @@ def _final_gaps(result) -> np.ndarray:
 
 def test_corridor_all_runs_reach_optimal_policy(corridor_mdp):
     # Budget: 60 episodes with epsilon = 0.2, alpha = 1/n^0.8 (docs/learning.md).
-    res = q_learning(corridor_mdp, runs=8, episodes=60, seed=1, epsilon=0.2, eval_every=10)
+    res = q_learning(corridor_mdp, Run(runs=8, episodes=60, seed=1, epsilon=0.2, eval_every=10))
     gaps = _final_gaps(res)
     assert np.all(np.abs(gaps) < 1e-6), gaps
     assert res.v_star_start == pytest.approx(0.9**4)
@@ -88,8 +89,8 @@ def test_corridor_all_runs_reach_optimal_policy(corridor_mdp):
 def test_slippery_grid_all_runs_reach_optimal_policy(grid_mdp):
     # Budget: 3,000 episodes of uniform exploration (epsilon = 1, off-policy), alpha = 1/n^0.8,
     # on the 4x4 grid with slip 0.2 (smallest non-zero optimal action gap 0.055).
-    res = q_learning(grid_mdp, runs=8, episodes=3000, seed=2, alpha="1/n^0.8", epsilon=1.0,
-                     eval_every=1000)
+    res = q_learning(grid_mdp, Run(runs=8, episodes=3000, seed=2, alpha="1/n^0.8", epsilon=1.0,
+                                   eval_every=1000))
     gaps = _final_gaps(res)
     assert np.all(np.abs(gaps) < 1e-6), gaps
     v_star = policy_evaluation(grid_mdp, solve(grid_mdp, 1e-10).policy)[0]
@@ -102,9 +103,9 @@ def test_slippery_grid_all_runs_reach_optimal_policy(grid_mdp):
 def test_same_seed_is_bit_identical_and_different_seeds_differ(grid_mdp):
     kw = {"runs": 3, "episodes": 20, "alpha": "1/n^0.7", "epsilon": "exp:0.5,0.9,0.05",
           "eval_every": 5}
-    a = q_learning(grid_mdp, seed=11, **kw)
-    b = q_learning(grid_mdp, seed=11, **kw)
-    c = q_learning(grid_mdp, seed=12, **kw)
+    a = q_learning(grid_mdp, Run(seed=11, **kw))
+    b = q_learning(grid_mdp, Run(seed=11, **kw))
+    c = q_learning(grid_mdp, Run(seed=12, **kw))
     assert np.array_equal(a.Q, b.Q)
     for col in a.curve.columns:
         assert np.array_equal(a.curve[col], b.curve[col], equal_nan=True), col
@@ -114,13 +115,13 @@ def test_same_seed_is_bit_identical_and_different_seeds_differ(grid_mdp):
 
 
 def test_runs_differ_from_each_other(grid_mdp):
-    res = q_learning(grid_mdp, runs=4, episodes=10, seed=0)
+    res = q_learning(grid_mdp, Run(runs=4, episodes=10, seed=0))
     assert len({res.Q[k].tobytes() for k in range(4)}) == 4
 
 
 def test_seed_none_is_recorded_and_reproduces(corridor_mdp):
-    a = q_learning(corridor_mdp, runs=2, episodes=5, seed=None)
-    b = q_learning(corridor_mdp, runs=2, episodes=5, seed=a.seed)
+    a = q_learning(corridor_mdp, Run(runs=2, episodes=5, seed=None))
+    b = q_learning(corridor_mdp, Run(runs=2, episodes=5, seed=a.seed))
     assert np.array_equal(a.Q, b.Q)
     assert a.parameters["seed"] == a.curve.metadata["seed"] == a.seed
 
@@ -131,8 +132,8 @@ def test_kernels_are_bit_identical(kernel):
     mdp = mdp.with_rewards(mdp.R, terminal=np.arange(12) == 11)
     kw = {"runs": 4, "episodes": 25, "seed": 9, "alpha": "1/n^0.8", "epsilon": "0.3/n^0.5,0.05",
               "max_steps_per_episode": 40, "eval_every": 7}
-    ref = q_learning(mdp, kernel="python", **kw)
-    res = q_learning(mdp, kernel=kernel, **kw)
+    ref = q_learning(mdp, Run(kernel="python", **kw))
+    res = q_learning(mdp, Run(kernel=kernel, **kw))
     assert np.array_equal(res.Q, ref.Q)
     assert np.array_equal(res.visits, ref.visits)
     for col in res.curve.columns:
@@ -142,15 +143,15 @@ def test_kernels_are_bit_identical(kernel):
 def test_the_numpy_kernel_name_runs_the_compiled_rule_with_a_warning(corridor_mdp):
     kw = {"runs": 2, "episodes": 6, "seed": 3, "eval_every": 3}
     with pytest.warns(FutureWarning, match=r"'numpy' no longer exists.*\['numba', 'python'\]"):
-        old = q_learning(corridor_mdp, kernel="numpy", **kw)
-    ref = q_learning(corridor_mdp, kernel="python", **kw)
+        old = q_learning(corridor_mdp, Run(kernel="numpy", **kw))
+    ref = q_learning(corridor_mdp, Run(kernel="python", **kw))
     assert old.parameters["kernel"] == "numba"
     assert np.array_equal(old.Q, ref.Q)
 
 
 def test_unknown_kernel_names_the_valid_ones(corridor_mdp):
     with pytest.raises(UnknownNameError, match=r"'cuda'; choose one of \['numba', 'python'\]"):
-        q_learning(corridor_mdp, episodes=2, kernel="cuda")
+        q_learning(corridor_mdp, Run(episodes=2, kernel="cuda"))
 
 
 def test_numba_kernel_past_its_power_table_matches_python():
@@ -161,8 +162,8 @@ def test_numba_kernel_past_its_power_table_matches_python():
     mdp = random_mdp(3, 2, density=0.6, seed=1)
     kw = {"runs": 2, "episodes": 3, "seed": 5, "alpha": "1/n^0.8", "epsilon": "0.5/n^0.3",
           "max_steps_per_episode": 6 * POW_TABLE, "eval_every": 3}
-    ref = q_learning(mdp, kernel="python", **kw)
-    res = q_learning(mdp, kernel="numba", **kw)
+    ref = q_learning(mdp, Run(kernel="python", **kw))
+    res = q_learning(mdp, Run(kernel="numba", **kw))
     assert ref.visits.max() > POW_TABLE
     assert np.array_equal(res.Q, ref.Q)
 
@@ -176,13 +177,13 @@ def test_numba_kernel_does_not_depend_on_threads_or_stride(threads, stride, monk
     mdp = mdp.with_rewards(mdp.R, terminal=np.arange(12) == 11)
     kw = {"runs": 5, "episodes": 40, "seed": 3, "alpha": "1/n^0.8", "epsilon": 0.2,
           "max_steps_per_episode": 50, "eval_every": 40}
-    ref = q_learning(mdp, kernel="python", **kw)
+    ref = q_learning(mdp, Run(kernel="python", **kw))
     monkeypatch.setitem(_kernels.KERNELS, "numba",
                         lambda st: _kernels.numba_kernel(st, stride=stride))
     before = numba.get_num_threads()
     numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
     try:
-        res = q_learning(mdp, kernel="numba", **kw)
+        res = q_learning(mdp, Run(kernel="numba", **kw))
     finally:
         numba.set_num_threads(before)
     assert np.array_equal(res.Q, ref.Q)
@@ -206,10 +207,10 @@ def test_python_kernel_in_strict_lock_step_matches_numba(monkeypatch):
     mdp = mdp.with_rewards(mdp.R, terminal=np.arange(12) == 11)
     kw = {"runs": 3, "episodes": 12, "seed": 8, "alpha": "0.9/n^0.6,0.01", "epsilon": 0.3,
           "max_steps_per_episode": 30, "eval_every": 4}
-    ref = q_learning(mdp, kernel="numba", **kw)
+    ref = q_learning(mdp, Run(kernel="numba", **kw))
     monkeypatch.setitem(_kernels.KERNELS, "python",
                         lambda st: _kernels.python_kernel(st, stride=1))
-    res = q_learning(mdp, kernel="python", **kw)
+    res = q_learning(mdp, Run(kernel="python", **kw))
     assert np.array_equal(res.Q, ref.Q)
     assert np.array_equal(res.visits, ref.visits)
     for col in res.curve.columns:
@@ -253,8 +254,8 @@ def test_kernel_keeps_the_greedy_policy_of_all_of_q(kernel, q_init):
 
 def test_run_does_not_depend_on_number_of_runs_or_eval_blocks(grid_mdp):
     kw = {"episodes": 30, "seed": 4, "alpha": 0.3, "epsilon": 0.2}
-    many = q_learning(grid_mdp, runs=5, eval_every=3, **kw)
-    one = q_learning(grid_mdp, runs=1, eval_every=30, **kw)
+    many = q_learning(grid_mdp, Run(runs=5, eval_every=3, **kw))
+    one = q_learning(grid_mdp, Run(runs=1, eval_every=30, **kw))
     assert np.array_equal(many.Q[0], one.Q[0])
     assert np.array_equal(many.curve.matrix("steps")[0], one.curve.matrix("steps")[0])
 
@@ -269,8 +270,8 @@ def test_run_does_not_depend_on_number_of_runs_or_eval_blocks(grid_mdp):
 )
 def test_lockstep_matches_independent_per_agent_reference(alpha, epsilon):
     mdp = slippery_grid(side=3, slip=0.3, gamma=0.9)
-    res = q_learning(mdp, runs=3, episodes=15, seed=21, alpha=alpha, epsilon=epsilon,
-                     max_steps_per_episode=30, eval_every=15)
+    res = q_learning(mdp, Run(runs=3, episodes=15, seed=21, alpha=alpha, epsilon=epsilon,
+                              max_steps_per_episode=30, eval_every=15))
     Q, steps = reference_q_learning(mdp, runs=3, episodes=15, seed=21, alpha=alpha,
                                     epsilon=epsilon, horizon=30)
     assert np.array_equal(res.curve.matrix("steps"), steps)
@@ -284,7 +285,7 @@ def test_admissible_actions_only():
     R = np.zeros((3, 3))
     mdp = FiniteMDP.from_dense(P, R, 0.9, admissible=adm, terminal=np.array([False, False, True]),
                                initial=np.array([0.5, 0.5, 0.0]))
-    res = q_learning(mdp, runs=3, episodes=200, seed=0, epsilon=1.0)
+    res = q_learning(mdp, Run(runs=3, episodes=200, seed=0, epsilon=1.0))
     assert np.all(res.visits[:, ~adm] == 0)
     assert np.all(np.isneginf(res.Q[:, ~adm]))
     assert np.all(res.visits.sum(axis=0)[adm & ~mdp.terminal[:, None]] > 0)
@@ -302,8 +303,8 @@ def test_terminal_target_does_not_bootstrap_and_cut_does():
     R = np.array([[2.0, 1.0], [0.0, 0.0]])
     mdp = FiniteMDP.from_dense(P, R, 0.5, terminal=np.array([False, True]),
                                initial=np.array([1.0, 0.0]))
-    res = q_learning(mdp, runs=2, episodes=50, seed=1, alpha=1.0, epsilon=1.0,
-                     max_steps_per_episode=3)
+    res = q_learning(mdp, Run(runs=2, episodes=50, seed=1, alpha=1.0, epsilon=1.0,
+                              max_steps_per_episode=3))
     # Arrival in the terminal state: target r = 2 exactly (its own Q row stays 0).
     assert np.all(res.Q[:, 0, 0] == 2.0)
     assert np.all(res.Q[:, 1, :] == 0.0)
@@ -315,8 +316,8 @@ def test_terminal_target_does_not_bootstrap_and_cut_does():
 
 
 def test_episode_columns(corridor_mdp):
-    res = q_learning(corridor_mdp, runs=3, episodes=40, seed=5, epsilon=0.3,
-                     max_steps_per_episode=50)
+    res = q_learning(corridor_mdp, Run(runs=3, episodes=40, seed=5, epsilon=0.3,
+                                       max_steps_per_episode=50))
     c = res.curve
     assert np.array_equal(c["decisions"], c["steps"])
     ended = c.matrix("steps") < 50
@@ -330,15 +331,15 @@ def test_episode_columns(corridor_mdp):
 
 def test_progress_is_called_per_block(corridor_mdp):
     calls = []
-    q_learning(corridor_mdp, runs=2, episodes=25, seed=0, eval_every=10,
-               progress=lambda done, total: calls.append((done, total)))
+    q_learning(corridor_mdp, Run(runs=2, episodes=25, seed=0, eval_every=10, progress=lambda done,
+                                 total: calls.append((done, total))))
     assert calls == [(10, 25), (20, 25), (25, 25)]
 
 
 def test_reference_values_are_used(corridor_mdp):
     V = np.zeros(corridor_mdp.n_states)
     V[0] = 5.0
-    res = q_learning(corridor_mdp, runs=2, episodes=10, seed=0, reference_values=V)
+    res = q_learning(corridor_mdp, Run(runs=2, episodes=10, seed=0, reference_values=V))
     assert res.v_star_start == 5.0
     gap = res.curve.matrix("value_gap")[:, -1]
     np.testing.assert_allclose(gap, 5.0 - res.curve.matrix("eval_value")[:, -1])
@@ -349,7 +350,7 @@ def test_start_mass_on_terminal_states_is_conditioned_away():
     initial = np.zeros(mdp.n_states)
     initial[[0, -1]] = 0.5
     mdp2 = mdp.with_rewards(mdp.R, initial=initial)
-    res = q_learning(mdp2, runs=2, episodes=30, seed=3, epsilon=0.2)
+    res = q_learning(mdp2, Run(runs=2, episodes=30, seed=3, epsilon=0.2))
     assert res.curve.matrix("steps").min() >= 1
     assert res.v_star_start == pytest.approx(0.9**4)
 
@@ -374,7 +375,7 @@ def test_start_mass_on_terminal_states_is_conditioned_away():
 )
 def test_bad_settings_raise_clear_errors(corridor_mdp, kwargs, error, needle):
     with pytest.raises(error, match=needle):
-        q_learning(corridor_mdp, **{"episodes": 2, **kwargs})
+        q_learning(corridor_mdp, Run(**{"episodes": 2, **kwargs}))
 
 
 def test_needs_a_finite_mdp(corridor_mdp):
@@ -387,7 +388,7 @@ def test_all_start_mass_on_terminal_raises():
     initial = np.zeros(mdp.n_states)
     initial[-1] = 1.0
     with pytest.raises(ModelError, match="terminal"):
-        q_learning(mdp.with_rewards(mdp.R, initial=initial), episodes=2)
+        q_learning(mdp.with_rewards(mdp.R, initial=initial), Run(episodes=2))
 
 
 def test_results_are_those_of_the_earlier_implementation():
@@ -398,7 +399,7 @@ def test_results_are_those_of_the_earlier_implementation():
     from adpart.mdp.generate import random_grid_mdp
 
     mdp = random_grid_mdp(400, gamma=0.9, seed=3, terminal_fraction=0.01)
-    r = q_learning(mdp, runs=6, episodes=30, max_steps_per_episode=60, eval_every=10, seed=11)
+    r = q_learning(mdp, Run(runs=6, episodes=30, max_steps_per_episode=60, eval_every=10, seed=11))
     h = hashlib.sha256()
     for a in (r.Q, r.visits, r.curve["steps"], r.curve["return"], r.curve["discounted_return"]):
         h.update(np.ascontiguousarray(a).tobytes())
@@ -417,7 +418,7 @@ def test_scored_policy_is_the_greedy_policy_of_all_of_q(grid_mdp):
     # the learner reads only visited rows of Q; the full-table greedy policy must score the same
     from adpart.learning.curves import start_distribution, start_values
 
-    r = q_learning(grid_mdp, runs=4, episodes=6, seed=5, eval_every=6, q_init=1.0)
+    r = q_learning(grid_mdp, Run(runs=4, episodes=6, seed=5, eval_every=6, q_init=1.0))
     mu = start_distribution(grid_mdp)
     np.testing.assert_array_equal(r.curve.matrix("eval_value")[:, -1],
                                   start_values(grid_mdp, r.greedy_policies(), mu))

@@ -9,6 +9,7 @@ from adpart.envs.registry import get_domain
 from adpart.errors import ModelError, UnknownNameError
 from adpart.learning import q_learning
 from adpart.learning.curves import start_distribution, start_values
+from adpart.learning.settings import Run
 from adpart.learning.smdp_q import compile_options, option_set
 from adpart.mdp.evaluation import policy_evaluation
 from adpart.mdp.solvers import solve
@@ -20,7 +21,7 @@ from tests.learning.hierarchical_run import smdp_q_run
 @pytest.mark.parametrize("make", [corridor, slippery_grid])
 def test_primitive_options_reproduce_flat_q_learning_bit_for_bit(make):
     mdp = make()
-    flat = q_learning(mdp, runs=3, episodes=25, seed=11, eval_every=5)
+    flat = q_learning(mdp, Run(runs=3, episodes=25, seed=11, eval_every=5))
     smdp = smdp_q_run(mdp, primitive_options(mdp), runs=3, episodes=25, seed=11, eval_every=5)
     np.testing.assert_array_equal(smdp.Q, flat.Q)
     for col in ("steps", "return", "discounted_return"):
@@ -65,7 +66,7 @@ def test_options_converge_faster_in_decisions_than_flat_q():
     """Four-rooms G1 (goal = a hallway): decisions until the gap stays <= 0.12 (10 runs)."""
     mdp = get_domain("four-rooms").mdp("G1")
     opts = hallway_options(mdp)
-    flat = q_learning(mdp, runs=10, episodes=1000, seed=1, eval_every=10)
+    flat = q_learning(mdp, Run(runs=10, episodes=1000, seed=1, eval_every=10))
     over = smdp_q_run(mdp, opts, runs=10, episodes=1000, seed=1, eval_every=10)
 
     def decisions_to(result, gap):

@@ -14,6 +14,7 @@ import pytest
 from scipy import stats
 
 from adpart.learning import q_learning
+from adpart.learning.settings import Run
 from adpart.mdp.model import FiniteMDP
 
 PROBS = np.array([0.2, 0.3, 0.5])
@@ -32,8 +33,8 @@ def fan_out() -> FiniteMDP:
 @pytest.mark.parametrize("kernel", ["python", "numba"])
 def test_successor_counts_follow_the_transition_probabilities(kernel):
     runs, episodes = 4, 2000
-    res = q_learning(fan_out(), runs=runs, episodes=episodes, seed=11, eval_every=episodes,
-                     kernel=kernel)
+    res = q_learning(fan_out(), Run(runs=runs, episodes=episodes, seed=11, eval_every=episodes,
+                                    kernel=kernel))
     counts = res.visits.sum(axis=0)[1:4, 0]
     assert counts.sum() == runs * episodes  # one of the three per episode
     limit = stats.chi2.ppf(0.999, df=2)
@@ -47,6 +48,7 @@ def test_successor_counts_follow_the_transition_probabilities(kernel):
 
 
 def test_both_kernels_draw_the_same_successors():
-    a, b = (q_learning(fan_out(), runs=3, episodes=500, seed=2, eval_every=500, kernel=k).visits
+    a, b = (q_learning(fan_out(), Run(runs=3, episodes=500, seed=2, eval_every=500,
+                                      kernel=k)).visits
             for k in ("python", "numba"))
     assert np.array_equal(a, b)

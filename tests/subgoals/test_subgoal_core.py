@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 
 from adpart.envs.registry import get_domain
 from adpart.errors import TaskError
+from adpart.learning.settings import Run
 from adpart.mdp.model import FiniteMDP
 from adpart.mdp.solvers import solve
 from adpart.params import build_settings
@@ -103,7 +104,7 @@ def test_subgoal_two_rooms_doorway_only_q_learned_policy():
     mdp = domain.mdp("reach-goal")
     door = int(np.flatnonzero(domain.dynamics().features["door"])[0])
     learn_on = mdp.with_rewards(mdp.R, initial=np.full(mdp.n_states, 1 / mdp.n_states))
-    q = q_learning(learn_on, runs=1, episodes=3000, seed=1, epsilon=0.2)
+    q = q_learning(learn_on, Run(runs=1, episodes=3000, seed=1, epsilon=0.2))
     policy = q.greedy_policies()[0]
     res = CountExhaustive().detect(mdp, policy, np.random.default_rng(0))
     assert res.subgoals.tolist() == [door]

@@ -37,7 +37,6 @@ from __future__ import annotations
 import math
 import weakref
 from bisect import bisect_right
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -52,7 +51,7 @@ from adpart.learning.curves import (
 from adpart.learning.maxq.taskgraph import CompiledGraph
 from adpart.learning.result import LearnResult
 from adpart.learning.schedules import Schedule, parse_schedule
-from adpart.learning.settings import count, run_settings
+from adpart.learning.settings import Run, fresh_seed, require_mdp
 from adpart.mdp.model import FiniteMDP
 
 __all__ = ["MaxQResult", "MaxQTables", "decomposed_values", "greedy_hierarchical_policy",
@@ -430,6 +429,13 @@ class AgentRun:
         self.episode += 1
         return self.steps, self.decisions, self.ret, self.dret
 
+def _count(value: object, what: str) -> int:
+    """``value`` as an int >= 1, else TaskError naming ``what``."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise TaskError(f"{what} = {value!r} must be an integer >= 1")
+    return int(value)
+
+
 def hierarchical_rollouts(
     mdp: FiniteMDP, graph: CompiledGraph, tables: MaxQTables, episodes: int, *,
     seed: int = 0, max_steps: int = 10_000, start: int | None = None,
@@ -444,8 +450,7 @@ def hierarchical_rollouts(
     episodes start from ``start`` or from the start distribution, children are chosen greedily
     on ``C~ + V`` (ties to the first), and the tables are not changed.
     """
-    n = count(episodes, "episodes")
-    H = count(max_steps, "max_steps")
+    n, H = _count(episodes, "episodes"), _count(max_steps, "max_steps")
     rng = np.random.default_rng(seed)
     agent = AgentRun(mdp, graph, rng, parse_schedule(0.0), parse_schedule(0.0), H)
     agent.C = [[t.tolist() for t in row] for row in tables.C]
@@ -464,43 +469,29 @@ def hierarchical_rollouts(
     return rets, steps, done
 
 
-def maxq_q(
-    mdp: FiniteMDP,
-    graph: CompiledGraph,
-    *,
-    runs: int = 10,
-    episodes: int = 500,
-    seed: int | None = None,
-    alpha: Schedule | str | float = "1/n^0.8",
-    epsilon: Schedule | str | float = "0.1",
-    max_steps_per_episode: int = 1000,
-    eval_every: int = 10,
-    reference_values: np.ndarray | None = None,
-    progress: Callable[[int, int], object] | None = None,
-) -> MaxQResult:
+def maxq_q(mdp: FiniteMDP, graph: CompiledGraph, run: Run | None = None) -> MaxQResult:
     """Learn ``mdp`` with ``runs`` independent MAXQ-Q agents over the compiled task ``graph``.
 
     Args:
         mdp: the flat task (its transitions are only *sampled*, via ``FiniteMDP.sample_next``;
             the exact model is used only to score the greedy policies).
         graph: ``TaskGraph.compile(mdp)``.
-        runs, episodes, seed, eval_every, progress, reference_values: as in
-            :func:`adpart.learning.qlearning.q_learning`.
-        alpha: step-size schedule; its visit count is the table entry's update count.
-        epsilon: exploration schedule; its visit count is the number of decisions the node has
-            taken in the state. Decaying schedules give a GLIE policy.
-        max_steps_per_episode: an episode is cut after this many primitive steps (the subtasks
-            in progress stop after their last update).
+        run: the run settings (:class:`~adpart.learning.settings.Run`, as in
+            :func:`adpart.learning.qlearning.q_learning`): ``alpha``'s visit count is the table
+            entry's update count; ``epsilon``'s is the number of decisions the node has taken
+            in the state (decaying schedules give a GLIE policy); an episode is cut after
+            ``max_steps_per_episode`` primitive steps (the subtasks in progress stop after
+            their last update). ``q_init`` and ``kernel`` do not apply.
 
     Returns:
         A :class:`MaxQResult`; its curve has one row per episode, ``decisions`` counting the
         root's choices.
     """
-    cfg = run_settings("maxq_q", mdp, runs=runs, episodes=episodes, eval_every=eval_every,
-                       max_steps_per_episode=max_steps_per_episode, seed=seed, alpha=alpha,
-                       epsilon=epsilon)
-    K, N, M, H, root_seed = cfg.runs, cfg.episodes, cfg.eval_every, cfg.horizon, cfg.seed
-    alpha_s, eps_s = cfg.alpha, cfg.epsilon
+    run = Run() if run is None else run
+    require_mdp("maxq_q", mdp)
+    K, N, M, H = run.runs, run.episodes, run.eval_every, run.max_steps_per_episode
+    root_seed, alpha_s, eps_s = fresh_seed(run.seed), run.alpha, run.epsilon
+    reference_values, progress = run.reference_values, run.progress
     if not isinstance(graph, CompiledGraph) or graph.n_states != mdp.n_states or (
             graph.n_primitives != mdp.n_actions):
         raise TaskError("graph must be a task graph compiled on this MDP: "

@@ -251,15 +251,20 @@ class TaskGraph:
                             f"no instance of {base!r} (parameter values {dict(sub.params)})")
         return out
 
-    def compile(self, mdp: FiniteMDP, *, abstraction: bool = True) -> CompiledGraph:
+    def compile(self, mdp: FiniteMDP, *, abstraction: bool | None = None) -> CompiledGraph:
         """Evaluate predicates and abstractions on ``mdp`` (see :class:`CompiledGraph`).
 
         Args:
             mdp: the flat model whose states, features and action names the graph refers to.
             abstraction: use the declared state abstractions; ``False`` gives every node a
                 table over its full running state set (Dietterich's "MAXQ without
-                abstraction").
+                abstraction"); None: :class:`~adpart.learning.maxq.graphs.GraphSettings`'
+                default.
         """
+        if abstraction is None:
+            from adpart.learning.maxq.graphs import GraphSettings
+
+            abstraction = GraphSettings().abstraction
         actions = tuple(mdp.action_names)
         self.validate(actions)
         by_name = {t.name: t for t in self.subtasks}

@@ -3,67 +3,43 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
+from typing import Any
 
+from adpart.learning.settings import LEARNER_FIELDS, Run
 from adpart.mdp.model import FiniteMDP
-from adpart.params import Param
+from adpart.params import build_settings, settings_params
 from adpart.plugins.hookspecs import hookimpl
 from adpart.plugins.registry import Registrar
 
-
-def _probability_schedule(what: str) -> Callable[[str], object]:
-    """A validator: the spelling parses to a schedule that stays in [0, 1] (checked up front)."""
-    def check(value: str) -> object:
-        from adpart.learning.settings import schedule
-
-        return schedule(value, what)
-
-    return check
+#: The parameters every sample-based learner takes: the update's fields of
+#: :class:`~adpart.learning.settings.Run` (one declaration, one --help text).
+LEARNER_PARAMS = settings_params(Run, only=LEARNER_FIELDS)
+_RULE_KEYWORDS = frozenset(p.keyword for p in LEARNER_PARAMS)  # max_steps, q_init, ...
 
 
-#: Parameters every sample-based learner declares alike (one declaration, one --help text).
-ALPHA = Param("alpha", "str", "1/n^0.8", "step-size schedule: 0.1 | 1/n^0.8 | exp:0.5,0.99",
-              check=_probability_schedule("alpha"))
-EPSILON = Param("epsilon", "str", "0.1", "exploration schedule, same forms as --alpha",
-                check=_probability_schedule("epsilon"))
-MAX_STEPS = Param("max-steps", "int", 1000, "primitive-step limit of one episode", min=1)
+class RunLearner:
+    """A learner plugin whose parameters include :data:`LEARNER_PARAMS`: it keeps them as a
+    checked :class:`Run` and completes it with the experiment's settings at :meth:`run`."""
+
+    def __init__(self, **values: Any) -> None:
+        rule = {k: values.pop(k) for k in list(values) if k in _RULE_KEYWORDS}
+        self.rule = build_settings(Run, rule)
+        self.values = values  # the plugin's own settings, for the subclass
+
+    def run(self, *, runs: int, episodes: int, seed: int, eval_every: int,
+            progress: Callable[[int, int], object] | None = None) -> Run:
+        """The checked run settings of one call of ``learn``."""
+        return replace(self.rule, runs=runs, episodes=episodes, seed=seed,
+                       eval_every=eval_every, progress=progress)
 
 
-#: The learners' starting value of every Q entry.
-Q_INIT = 0.0
-
-
-def q_init(what: str) -> Param:
-    return Param("q-init", "float", Q_INIT, f"initial value of every {what}")
-
-
-def kernel(*choices: str) -> Param:
-    return Param("kernel", "str", "auto", "step kernel", choices=("auto", *choices))
-
-
-class QLearner:
+class QLearner(RunLearner):
     """Flat epsilon-greedy Q-learning, K runs advanced together (see docs/learning.md)."""
 
     name = "q-learning"
     description = "flat epsilon-greedy Q-learning, all runs advanced together (numba, threaded)"
-    params = (
-        ALPHA,
-        EPSILON,
-        MAX_STEPS,
-        q_init("Q(s, a)"),
-        kernel("numba", "python"),
-    )
-
-    def __init__(
-        self,
-        alpha: str = "1/n^0.8",
-        epsilon: str = "0.1",
-        max_steps: int = 1000,
-        q_init: float = 0.0,
-        kernel: str = "auto",
-    ) -> None:
-        self.alpha, self.epsilon = alpha, epsilon
-        self.max_steps, self.q_init = max_steps, q_init
-        self.kernel = None if kernel == "auto" else kernel
+    params = LEARNER_PARAMS
 
     def learn(
         self,
@@ -77,19 +53,8 @@ class QLearner:
     ) -> object:
         from adpart.learning.qlearning import q_learning
 
-        return q_learning(
-            mdp,
-            runs=runs,
-            episodes=episodes,
-            seed=seed,
-            alpha=self.alpha,
-            epsilon=self.epsilon,
-            max_steps_per_episode=self.max_steps,
-            eval_every=eval_every,
-            progress=progress,
-            q_init=self.q_init,
-            kernel=self.kernel,
-        )
+        return q_learning(mdp, self.run(runs=runs, episodes=episodes, seed=seed,
+                                        eval_every=eval_every, progress=progress))
 
 
 class ValueIterationLearner:
