@@ -13,7 +13,7 @@ from collections.abc import Callable, Iterable
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any, TypeVar
 
-from adpart.params import Param
+from adpart.params import Param, build_settings, setting, settings, settings_params
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -56,13 +56,22 @@ class SerialExecutor(Executor):
         return [fn(item) for item in items]
 
 
+@settings
+class PoolSettings:
+    """The local executor's process pool."""
+
+    workers: int = setting(0, min=0, max=4096)
+    """Worker processes (0: one per core)."""
+
+
 class LocalExecutor(Executor):
     name = "local"
     description = "a pool of worker processes on this machine, one per core by default"
-    params = (Param("workers", "int", 0, "worker processes (0 = one per core)", min=0),)
+    params = settings_params(PoolSettings)
 
-    def __init__(self, workers: int = 0) -> None:
-        self.workers = workers or os.cpu_count() or 1
+    def __init__(self, **values: Any) -> None:
+        self.settings = build_settings(PoolSettings, values)
+        self.workers = self.settings.workers or os.cpu_count() or 1
         self._pool: ProcessPoolExecutor | None = None
 
     def _get_pool(self) -> ProcessPoolExecutor:

@@ -30,7 +30,7 @@ import numpy as np
 
 from adpart.errors import AdpartError
 from adpart.execution import WORKER_THREAD_ENV, Executor
-from adpart.params import Param
+from adpart.params import build_settings, setting, settings, settings_params
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -133,34 +133,33 @@ def _split_address(address: str) -> tuple[str, int] | None:
     return host.strip("[]"), int(port)
 
 
+@settings
+class RaySettings:
+    """Where the Ray executor runs its tasks and how it retries them."""
+
+    address: str | None = setting(None, kind="str", none="local")
+    """Ray cluster address host:port or ray://host:port (local: start a local Ray here)."""
+    num_cpus: int = setting(0, min=0, max=4096)
+    """CPUs of a local Ray started here (0: all cores)."""
+    max_retries: int = setting(3, min=0, max=1000)
+    """Re-runs of a task whose worker died."""
+    retry_exceptions: bool = setting(False)
+    """Also re-run tasks that raised an exception."""
+
+
 class RayExecutor(Executor):
     """Ray tasks on a local or remote Ray cluster; see the module docstring."""
 
     name = "ray"
     description = f"Ray tasks on a local or remote Ray cluster ({INSTALL_HINT})"
-    params = (
-        Param(
-            "address",
-            "str",
-            None,
-            "Ray cluster address host:port or ray://host:port (default: start a local Ray)",
-        ),
-        Param("num-cpus", "int", 0, "CPUs of a local Ray started here (0 = all cores)", min=0),
-        Param("max-retries", "int", 3, "re-runs of a task whose worker died", min=0),
-        Param("retry-exceptions", "bool", False, "also re-run tasks that raised an exception"),
-    )
+    params = settings_params(RaySettings)
 
-    def __init__(
-        self,
-        address: str | None = None,
-        num_cpus: int = 0,
-        max_retries: int = 3,
-        retry_exceptions: bool = False,
-    ) -> None:
-        self.address = address or None
-        self.num_cpus = num_cpus
-        self.max_retries = max_retries
-        self.retry_exceptions = retry_exceptions
+    def __init__(self, **values: Any) -> None:
+        self.settings = build_settings(RaySettings, values)
+        self.address = self.settings.address or None
+        self.num_cpus = self.settings.num_cpus
+        self.max_retries = self.settings.max_retries
+        self.retry_exceptions = self.settings.retry_exceptions
         self._started = False
         self._connected = False
         self._task: Any = None

@@ -57,11 +57,6 @@ __all__ = ["QLearningResult", "default_kernel", "q_learning"]
 BLOCK_ROWS = 8192
 
 
-#: Kernel names accepted for earlier ones: the numpy kernel was a third copy of the rule
-#: (strict lock-step, vectorised over agents) with the same results bit for bit; the compiled
-#: rule replaces it (and was ~25x faster).
-KERNEL_ALIASES = {"numpy": "numba"}
-
 default_kernel = _kernels.default_kernel
 
 
@@ -159,8 +154,7 @@ def q_learning(mdp: FiniteMDP, run: Run | None = None) -> QLearningResult:
             cut); exact scoring every ``eval_every`` episodes (and after the last) against
             ``reference_values`` (``V*``, solved when omitted); ``q_init`` (auto: 0); the
             kernel, ``"numba"`` (:func:`default_kernel`) or ``"python"`` (the same rule
-            interpreted: the reference), identical results (``"numpy"``, an earlier third copy
-            of the rule, runs ``"numba"`` with a ``FutureWarning``); and ``progress``, called as
+            interpreted: the reference), identical results; and ``progress``, called as
             ``progress(episodes_done_by_every_run, episodes)`` after each block.
 
     Returns:
@@ -177,7 +171,7 @@ def q_learning(mdp: FiniteMDP, run: Run | None = None) -> QLearningResult:
     root_seed, q_init = fresh_seed(run.seed), run.start_q
     alpha_s, eps_s = run.alpha, run.epsilon
     reference_values, progress = run.reference_values, run.progress
-    name = _kernels.resolve_kernel(run.kernel, "Q-learning", KERNEL_ALIASES)
+    name = _kernels.resolve_kernel(run.kernel, "Q-learning")
     step_kernel = _kernels.KERNELS[name]
 
     mu = start_distribution(mdp)

@@ -66,7 +66,7 @@ class Run:
     q_init: float | None = setting(None, kind="float", none="auto")
     """Starting value of every admissible Q entry (auto: 0, or the lower bound r_min/(1-gamma)
     under R-max exploration)."""
-    kernel: str | None = setting(None, kind="str", none="auto")
+    kernel: str | None = setting(None, kind="str", none="auto", choices=("numba", "python"))
     """Step kernel: numba (compiled) or python (the same rule interpreted, the reference);
     identical results."""
     reference_values: np.ndarray | None = hook()

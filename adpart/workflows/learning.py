@@ -19,9 +19,13 @@ import numpy as np
 from adpart.errors import PluginError, TaskError
 from adpart.execution import Executor, SerialExecutor
 from adpart.learning.curves import LearningCurve
+from adpart.learning.settings import Run
 from adpart.plugins import get_registry
 from adpart.workflows.resolve import resolve_domain
 from adpart.workflows.store import KnowledgeStore
+
+#: The run settings' defaults (one declaration: :class:`Run`).
+_RUN = Run()
 
 
 @dataclass(frozen=True)
@@ -48,10 +52,10 @@ class LearnRequest:
     task: str | None = None
     learner: str = "q-learning"
     params: dict[str, Any] = field(default_factory=dict)
-    runs: int = 10
-    episodes: int = 300
-    seed: int = 0
-    eval_every: int = 10
+    runs: int = _RUN.runs
+    episodes: int = _RUN.episodes
+    seed: int = _RUN.seed  # type: ignore[assignment]
+    eval_every: int = _RUN.eval_every
     runs_per_batch: int = 0
     options: str | None = None
     partition: str | None = None

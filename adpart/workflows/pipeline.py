@@ -43,6 +43,7 @@ import numpy as np
 from adpart.errors import TaskError
 from adpart.learning.comparison import best_final_run, ratio_to_flat, task_row
 from adpart.learning.curves import LearningCurve
+from adpart.learning.settings import Run
 from adpart.options.subgoal_options import InitiationSettings
 from adpart.partition.settings import PartitionSettings
 from adpart.workflows.discovery import discover_subgoals
@@ -62,6 +63,10 @@ from adpart.workflows.store import KnowledgeStore
 
 #: The hierarchical learner's mode in the pipeline (module docstring; docs/pipeline.md).
 DEFAULT_MODE = "reward-variation+inconsistency"
+
+
+#: The run settings' defaults, the pipeline's too (one declaration: :class:`Run`).
+_RUN = Run()
 
 
 @dataclass(frozen=True)
@@ -102,11 +107,11 @@ class PipelineConfig:
     partition: PartitionSettings = field(default_factory=PartitionSettings)
     criterion: str = DEFAULT_CRITERION
     criterion_params: dict[str, Any] = field(default_factory=dict)
-    runs: int = 20
-    episodes: int = 300
+    runs: int = _RUN.runs
+    episodes: int = _RUN.episodes
     first_episodes: int = 500
-    seed: int = 0
-    eval_every: int = 10
+    seed: int = _RUN.seed  # type: ignore[assignment]
+    eval_every: int = _RUN.eval_every
     flat_params: dict[str, Any] = field(default_factory=dict)
     hierarchical_params: dict[str, Any] = field(default_factory=dict)
     baseline: bool = True
@@ -117,6 +122,8 @@ class PipelineConfig:
     fallback: bool = True
 
     def __post_init__(self) -> None:
+        Run(runs=self.runs, episodes=self.episodes, seed=self.seed, eval_every=self.eval_every)
+        Run(episodes=self.first_episodes)  # the same checks, before any work
         if len(self.tasks) < 2:
             raise TaskError(
                 "a pipeline needs at least two tasks: the first is learned flat, later ones "

@@ -45,6 +45,7 @@ import numpy as np
 from adpart.errors import AdpartError, TaskError, UnknownNameError
 from adpart.execution import Executor, SerialExecutor
 from adpart.learning.curves import LearningCurve
+from adpart.learning.settings import Run
 from adpart.plugins import PluginError, get_registry
 from adpart.workflows.learning import LearnOutcome, LearnRequest, record_learning, run_learning
 from adpart.workflows.resolve import resolve_domain
@@ -81,6 +82,10 @@ class EnvironmentSpec:
     tasks: tuple[str, ...] | None = None
 
 
+#: The run settings' defaults (one declaration: :class:`Run`).
+_RUN = Run()
+
+
 @dataclass(frozen=True)
 class SweepConfig:
     """A validated sweep description (see the module docstring for the TOML form).
@@ -98,9 +103,9 @@ class SweepConfig:
     seeds: tuple[int, ...]
     params: Mapping[str, tuple[Any, ...]] = field(default_factory=dict)
     learner: str = "q-learning"
-    runs: int = 10
-    episodes: int = 300
-    eval_every: int = 10
+    runs: int = _RUN.runs
+    episodes: int = _RUN.episodes
+    eval_every: int = _RUN.eval_every
     runs_per_batch: int = 0
     name: str = "sweep"
     source: str = "<config>"

@@ -31,7 +31,7 @@ def test_learner_options_are_typed_and_show_each_plugins_default():
     assert _option_line(text, "--max-steps").startswith("--max-steps INTEGER")
     assert _option_line(text, "--q-init").startswith("--q-init FLOAT")
     assert "[default: 1/n^0.8]" in _option_line(text, "--alpha")  # the chosen learner's
-    assert "[default: 0.5]" in _option_line(_help("learn", "--learner", "maxq-q"), "--alpha")
+    assert "[default: 0.1]" in _option_line(_help("learn", "--learner", "sarsa"), "--alpha")
 
 
 def test_a_value_of_the_wrong_type_is_refused_before_anything_runs(tmp_path):
@@ -74,6 +74,6 @@ def builtins_only(monkeypatch):
 
 
 def test_the_documented_help_excerpt_is_what_learn_help_prints(builtins_only):
-    block = re.search(r"```\n(  --alpha.*?)```", DOCS.read_text(), re.DOTALL).group(1)
+    block = re.search(r"```\n(  --graph.*?)```", DOCS.read_text(), re.DOTALL).group(1)
     assert " ".join(block.split()) in _option_line(_help("learn", "--learner", "maxq-q"),
-                                                    "--alpha")
+                                                    "--graph")

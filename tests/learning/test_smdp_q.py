@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from adpart.envs.registry import get_domain
-from adpart.errors import ModelError, UnknownNameError
+from adpart.errors import ModelError, TaskError
 from adpart.learning import q_learning
 from adpart.learning.curves import start_distribution, start_values
 from adpart.learning.settings import Run
@@ -90,7 +90,7 @@ def test_bad_inputs_raise_adpart_errors():
     mdp = corridor()
     with pytest.raises(ModelError, match="no options"):
         smdp_q_run(mdp, [])
-    with pytest.raises(UnknownNameError, match="kernel"):
+    with pytest.raises(TaskError, match="kernel"):
         smdp_q_run(mdp, primitive_options(mdp), kernel="cuda")
     with pytest.raises(ModelError, match="Option objects"):
         smdp_q_run(mdp, ["left"])

@@ -293,6 +293,6 @@ class GraphSettings:
     """Which task graph MAXQ-Q learns over (Dietterich 2000; dissertation ch. 6)."""
 
     graph: str | None = setting(None, kind="str", none="auto", choices=tuple(GRAPHS))
-    """Task graph (auto: picked from the MDP's features, :func:`graph_for`)."""
+    """Task graph (auto: picked from the MDP's features)."""
     abstraction: bool = setting(True)
     """Use the graph's state abstractions (Dietterich's max-node and leaf irrelevance)."""
