@@ -301,6 +301,30 @@ def _nested(data: dict[str, Any], indent: int) -> list[str]:
     return lines
 
 
+def _run_layers(base: KnowledgeBase, run: Any) -> dict[str, str]:
+    """A layer learner's run: the stored layer it started on and those its runs ended on, each
+    with its block count (``partition:19 (48 blocks)``)."""
+    out: dict[str, str] = {}
+
+    def named(pid: int) -> str:
+        return f"partition:{pid} ({base.get('partition', pid).n_blocks} blocks)"
+
+    if run.partition_id is not None:
+        out["partition_id"] = named(run.partition_id)
+    final = run.metrics.get("final_partitions") or []
+    if final:
+        distinct = list(dict.fromkeys(final))
+        out["final_layers"] = (", ".join(named(p) for p in distinct[:3])
+                               + (f", ... ({len(distinct)} distinct over {len(final)} runs)"
+                                  if len(distinct) > 3 else ""))
+    knowledge = run.metrics.get("knowledge")
+    if knowledge:
+        from adpart.learning.knowledge import Knowledge
+
+        out["knowledge"] = Knowledge.from_dict(knowledge).label
+    return out
+
+
 def _show_lines(base: KnowledgeBase, record: Any) -> list[str]:
     """``kb show``: the record's fields, its nested specs/metrics, artifacts and provenance."""
     data = _plain(record)
@@ -321,6 +345,8 @@ def _show_lines(base: KnowledgeBase, record: Any) -> list[str]:
                                 f"(environment:{env_id})", **owner}
     shown = {k: v for k, v in fields.items()
              if k != "id" and not (owner and k in ("environment_id", "task_id"))}
+    if record.KIND == "run":
+        shown.update(_run_layers(base, record))
     lines = [f"{record.ref}", *_nested({**owner, **shown}, 2)]
     for key, value in data.items():
         if isinstance(value, dict) and key not in artifact_fields:

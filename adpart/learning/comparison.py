@@ -13,9 +13,14 @@ from typing import Any
 import numpy as np
 
 from adpart.learning.curves import LearningCurve, episodes_within
-from adpart.learning.transfer_metrics import km_median, metrics_from_curve
+from adpart.learning.transfer_metrics import (
+    km_median,
+    km_median_ratio,
+    logrank_sooner,
+    metrics_from_curve,
+)
 
-__all__ = ["TIE_TOLERANCE", "best_final_run", "episodes_to_bound", "measured",
+__all__ = ["TIE_TOLERANCE", "best_final_run", "best_observed_run", "episodes_to_bound", "measured",
            "ratio_of_medians_ci", "ratio_to_flat", "success_bound", "task_row"]
 
 #: Final gaps closer than this fraction of the value scale (``max(1, |V*(start)|)``) are a tie:
@@ -114,6 +119,17 @@ def best_final_run(curve: LearningCurve) -> int:
     return int(np.flatnonzero(final <= best + TIE_TOLERANCE * scale)[0])
 
 
+def best_observed_run(curve: LearningCurve, tail: float = 0.1) -> int:
+    """The run whose episodes earned the most, by what the agent observed: the highest mean
+    discounted return over the last ``tail`` of its episodes (at least one), the lowest run
+    index among ties. Unlike :func:`best_final_run` it reads no ``V*``, so a learner may pick
+    the policy it transfers from with it."""
+    returns = curve.matrix("discounted_return")
+    last = max(1, int(np.ceil(tail * returns.shape[1])))
+    score = returns[:, -last:].mean(axis=1)
+    return int(np.flatnonzero(score >= np.max(score))[0])
+
+
 def episodes_to_bound(curve: LearningCurve, fraction: float) -> np.ndarray:
     """Per run, the episode after which the gap stays within :func:`success_bound`; a run never
     within it counts as censored at the curve's episodes + 1."""
@@ -125,8 +141,24 @@ def episodes_to_bound(curve: LearningCurve, fraction: float) -> np.ndarray:
 
 def ratio_to_flat(method: LearningCurve, flat: LearningCurve, fraction: float, seed: int
                   ) -> dict[str, Any]:
-    """The method's median episodes to the bound over flat's, with a 95 % bootstrap CI."""
-    est, lo, hi = ratio_of_medians_ci(episodes_to_bound(method, fraction),
-                                      episodes_to_bound(flat, fraction), seed=seed)
-    return {"ratio": est, "ci95": [lo, hi], "censored_at": int(
-        method.evaluated_episodes()[-1]) + 1}
+    """The method's time to the bound over flat's, measured as survival analysis does.
+
+    Runs that never stay within the bound are censored at their last evaluation (not counted
+    as the budget plus one). For each unit, episodes and primitive steps: the ratio of the
+    Kaplan-Meier medians with a 95 % bootstrap CI over runs
+    (:func:`~adpart.learning.transfer_metrics.km_median_ratio`; a CI end of ``inf`` means no
+    bound) and the one-sided log-rank test that the method reaches the bound sooner
+    (:func:`~adpart.learning.transfer_metrics.logrank_sooner`). The episodes' figures are at
+    the top level, the steps' under ``"steps"``.
+    """
+    bound = success_bound(flat, fraction)
+    a, b = metrics_from_curve(method, bound), metrics_from_curve(flat, bound)
+    out: dict[str, dict[str, Any]] = {}
+    for unit in ("episodes", "steps"):
+        r = km_median_ratio(*a.event_times(unit), *b.event_times(unit), seed=seed)
+        test = logrank_sooner(*a.event_times(unit), *b.event_times(unit))
+        out[unit] = {"ratio": r.estimate, "ci95": [r.low, r.high],
+                     "logrank_z": test.statistic, "p_sooner": test.pvalue}
+    return {**out["episodes"], "steps": out["steps"],
+            "censored": [int(a.censored.sum()), int(b.censored.sum())],
+            "first_evaluation": int(method.evaluated_episodes()[0])}

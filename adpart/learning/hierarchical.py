@@ -149,6 +149,7 @@ from adpart.learning.hierarchical_settings import (
     TESTING_MODES,
     HierarchicalSettings,
 )
+from adpart.learning.knowledge import Knowledge, world
 from adpart.learning.result import LearnResult
 from adpart.learning.settings import Run, fresh_seed, require_mdp
 from adpart.learning.smdp_q import (
@@ -381,6 +382,27 @@ def starting_layer(mdp: FiniteMDP, options: Sequence[Option], partition: Partiti
 # --------------------------------------------------------------------------- the learner
 
 
+def hierarchical_knowledge(settings: HierarchicalSettings) -> Knowledge:
+    """What the hierarchical learner reads of the task it learns, by its settings (the
+    :mod:`adpart.learning.knowledge` record; the options' and the layer's own come on top).
+
+    In every mode it reads the true dynamics - the exact option models refine the layer (eqs.
+    4.6-4.7) - and the task's rewards and terminals: the reward floor ``r_min`` bounds the
+    grounded values and the refinement model's absorbing block is the task's terminal set.
+    """
+    uses = ["option models for refinement", "reward floor r_min", "terminal states"]
+    if settings.reward_options:
+        uses.append("options to the task's reward states, solved on the true model")
+    if settings.testing:
+        if settings.test.threshold is None:
+            uses.append("threshold L from V*")
+        if settings.test_reference != "learned":
+            uses.append(f"{settings.test_reference} reference from the option models")
+    if settings.directed:
+        uses.append("R-max on the counts")
+    return Knowledge("true-model", "known", tuple(uses))
+
+
 def hierarchical_learning(
     mdp: FiniteMDP,
     options: Sequence[Option],
@@ -421,8 +443,9 @@ def hierarchical_learning(
     seed = fresh_seed(run.seed)
     kernel_name, step_kernel = kernel_function(run.kernel)
     part0, full, smdp, extra = starting_layer(mdp, options, partition, settings, models)
-    mu = start_distribution(mdp)
-    v_star = optimal_start_value(mdp, mu, run.reference_values)
+    with world():  # the start distribution and V* are the environment's, for scoring
+        mu = start_distribution(mdp)
+        v_star = optimal_start_value(mdp, mu, run.reference_values)
     L = (default_threshold(v_star, scale=test.threshold_scale) if test.threshold is None
          else float(test.threshold))
     lower = flat_lower_bound(mdp, H)
@@ -442,13 +465,14 @@ def hierarchical_learning(
         explore_known=settings.exploration.explore_known,
     )
     B0 = part0.n_blocks
-    st = make_state(
-        mdp, full, np.broadcast_to(part0.labels, (K, S)),
-        np.broadcast_to(part0.admissible, (K, B0, len(full))), episodes=N, horizon=H,
-        alpha=run.alpha, epsilon=run.epsilon, q_init=q0, mu=mu,
-        capacity=min(S, max(2 * B0, B0 + 64)), intra=2 if settings.intra_option else 0,
-        test=arrays,
-    )
+    with world():  # the simulator of the environment
+        st = make_state(
+            mdp, full, np.broadcast_to(part0.labels, (K, S)),
+            np.broadcast_to(part0.admissible, (K, B0, len(full))), episodes=N, horizon=H,
+            alpha=run.alpha, epsilon=run.epsilon, q_init=q0, mu=mu,
+            capacity=min(S, max(2 * B0, B0 + 64)), intra=2 if settings.intra_option else 0,
+            test=arrays,
+        )
     parts = [part0] * K
     events: list[dict[str, int]] = []
 
@@ -459,7 +483,8 @@ def hierarchical_learning(
     def score() -> np.ndarray:
         Qs = lifted_values(settings.layer_values, st, parts, smdp, mdp, lower)
         policies = greedy_policy(Qs.reshape(K * S, -1)).reshape(K, S)
-        return start_values(smdp, policies, mu)
+        with world():
+            return start_values(smdp, policies, mu)
 
     eval_value = drive(st, step_kernel, seed, episodes=N, eval_every=run.eval_every,
                        score=score, progress=run.progress, on_fire=on_fire if check else None)
@@ -483,6 +508,7 @@ def hierarchical_learning(
         "kernel": kernel_name, "intra_option": settings.intra_option, "options": list(names),
         "extra_subgoals": [o.subgoal for o in extra], "initial_blocks": B0,
         "reference": "given" if run.reference_values is not None else "solved",
+        "knowledge": hierarchical_knowledge(settings).to_dict(),
     }
     curve = LearningCurve.from_matrices(
         steps=st.out_steps, decisions=st.out_dec, returns=st.out_ret,

@@ -43,6 +43,7 @@ from adpart.learning.curves import (
     optimal_start_value,
     start_distribution,
 )
+from adpart.learning.knowledge import FLAT, world
 from adpart.learning.result import LearnResult
 from adpart.learning.schedules import Schedule
 from adpart.learning.settings import Run, fresh_seed, require_mdp
@@ -174,12 +175,13 @@ def q_learning(mdp: FiniteMDP, run: Run | None = None) -> QLearningResult:
     name = _kernels.resolve_kernel(run.kernel, "Q-learning")
     step_kernel = _kernels.KERNELS[name]
 
-    mu = start_distribution(mdp)
-    v_star = optimal_start_value(mdp, mu, reference_values)
-    st = _initial_state(mdp, K, N, H, alpha_s, eps_s, q_init, mu)
+    with world():  # the environment (its simulator) and the scoring, not knowledge
+        mu = start_distribution(mdp)
+        v_star = optimal_start_value(mdp, mu, reference_values)
+        st = _initial_state(mdp, K, N, H, alpha_s, eps_s, q_init, mu)
+        score = StartValues(mdp, mu, K)  # re-scores the runs whose greedy policy moved, once
     rngs = np.random.default_rng(root_seed).spawn(K)
     st.state[:] = [st.start_state(rng.random()) for rng in rngs]
-    score = StartValues(mdp, mu, K)  # re-scores the runs whose greedy policy moved, once each
 
     boundaries = sorted({*range(M, N + 1, M), N})
     eval_value = np.full((K, N), np.nan)
@@ -189,7 +191,8 @@ def q_learning(mdp: FiniteMDP, run: Run | None = None) -> QLearningResult:
             for k in np.flatnonzero((st.cursor == BLOCK_ROWS) & (st.episode < st.target)):
                 rngs[k].random(out=st.U[k])
                 st.cursor[k] = 0
-        eval_value[:, boundary - 1] = score(st.policy, st.changed)
+        with world():
+            eval_value[:, boundary - 1] = score(st.policy, st.changed)
         if progress is not None:
             progress(boundary, N)
 
@@ -204,6 +207,7 @@ def q_learning(mdp: FiniteMDP, run: Run | None = None) -> QLearningResult:
         "q_init": float(q_init),
         "kernel": name,
         "reference": "given" if reference_values is not None else "solved",
+        "knowledge": FLAT.to_dict(),
     }
     metadata = {
         "learner": "q-learning",

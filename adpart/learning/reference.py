@@ -18,6 +18,7 @@ from adpart.learning.curves import (
     start_distribution,
     start_values,
 )
+from adpart.learning.knowledge import PLANNER
 from adpart.learning.result import LearnResult
 from adpart.mdp.evaluation import greedy_policy
 from adpart.mdp.model import FiniteMDP
@@ -51,7 +52,7 @@ def value_iteration_curve(mdp: FiniteMDP, *, sweeps: int, seed: int) -> Referenc
     eval_value = start_values(mdp, policies, mu)[None, :]
     backups = np.full((1, sweeps), int(mdp.admissible.sum()), dtype=np.int64)
     nan = np.full((1, sweeps), np.nan)
-    parameters = {"sweeps": sweeps, "seed": seed}
+    parameters = {"sweeps": sweeps, "seed": seed, "knowledge": PLANNER.to_dict()}
     curve = LearningCurve.from_matrices(
         steps=backups,
         decisions=backups,

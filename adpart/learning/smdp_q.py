@@ -51,6 +51,7 @@ from adpart.learning.curves import (
     start_distribution,
     start_values,
 )
+from adpart.learning.knowledge import FLAT, world
 from adpart.learning.qlearning import BLOCK_ROWS
 from adpart.learning.result import LearnResult
 from adpart.learning.schedules import Schedule
@@ -440,19 +441,23 @@ def smdp_q_learning(
     K, N, M, H = run.runs, run.episodes, run.eval_every, run.max_steps_per_episode
     root_seed, alpha_s, eps_s = fresh_seed(run.seed), run.alpha, run.epsilon
     name, step_kernel = kernel_function(run.kernel)
-    full, smdp = option_set(mdp, options, include_primitives=include_primitives, models=models)
+    with world():  # the options' exact models score the greedy policies; nothing else reads them
+        full, smdp = option_set(mdp, options, include_primitives=include_primitives,
+                                models=models)
+        mu = start_distribution(mdp)
+        v_star = optimal_start_value(mdp, mu, reference_values)
     S = mdp.n_states
     state_adm = smdp.admissible  # terminal rows: every option, never chosen (episode over)
-    mu = start_distribution(mdp)
-    v_star = optimal_start_value(mdp, mu, reference_values)
     labels = np.broadcast_to(np.arange(S, dtype=np.int64), (K, S))
-    st = make_state(mdp, full, labels, np.broadcast_to(state_adm, (K, S, len(full))),
-                    episodes=N, horizon=H, alpha=alpha_s, epsilon=eps_s, q_init=q_init, mu=mu,
-                    capacity=S, intra=1 if intra_option else 0)
+    with world():  # the simulator of the environment
+        st = make_state(mdp, full, labels, np.broadcast_to(state_adm, (K, S, len(full))),
+                        episodes=N, horizon=H, alpha=alpha_s, epsilon=eps_s, q_init=q_init,
+                        mu=mu, capacity=S, intra=1 if intra_option else 0)
 
     def score() -> np.ndarray:
         policies = greedy_policy(st.Q.reshape(K * S, -1)).reshape(K, S)
-        return start_values(smdp, policies, mu)
+        with world():
+            return start_values(smdp, policies, mu)
 
     eval_value = drive(st, step_kernel, root_seed, episodes=N, eval_every=M, score=score,
                        progress=progress)
@@ -463,6 +468,7 @@ def smdp_q_learning(
         "q_init": float(q_init), "kernel": name, "include_primitives": bool(include_primitives),
         "intra_option": bool(intra_option),
         "options": list(names), "reference": "given" if reference_values is not None else "solved",
+        "knowledge": FLAT.to_dict(),
     }
     curve = LearningCurve.from_matrices(
         steps=st.out_steps, decisions=st.out_dec, returns=st.out_ret,

@@ -22,6 +22,7 @@ from adpart.learning.curves import LearningCurve
 from adpart.learning.settings import Run
 from adpart.plugins import get_registry
 from adpart.workflows.resolve import resolve_domain
+from adpart.workflows.run_knowledge import run_knowledge
 from adpart.workflows.store import KnowledgeStore
 
 #: The run settings' defaults (one declaration: :class:`Run`).
@@ -91,6 +92,8 @@ class LearnOutcome:
     n_actions: int
     model_hash: str
     option_ids: tuple[int, ...] = ()
+    final_layers: tuple[tuple[np.ndarray, np.ndarray], ...] = ()
+    """Per run, the decision layer a layer learner ended on: ``(labels, block actions)``."""
 
     def q_columns(self, action_names: Sequence[str]) -> list[str] | None:
         """Names of Q's columns when they are not just the primitive actions (option learners).
@@ -158,6 +161,8 @@ def _learn_batch(job: dict[str, Any]) -> dict[str, Any]:
         "curve": result.curve.to_dict(),
         "metadata": dict(result.curve.metadata),
         "v_star_start": result.v_star_start,
+        "layers": [(np.asarray(p.labels), np.asarray(p.admissible))
+                   for p in getattr(result, "partitions", ())],
     }
 
 
@@ -249,6 +254,7 @@ def run_learning(
         n_actions=mdp.n_actions,
         model_hash=mdp.content_hash,
         option_ids=option_ids,
+        final_layers=tuple(layer for r in results for layer in r.get("layers", ())),
     )
 
 
@@ -405,6 +411,13 @@ def _record_learning(kb: KnowledgeStore, outcome: LearnOutcome) -> dict[str, Any
         from adpart.workflows.refs import parse_ref
 
         partition_id = parse_ref(request.partition, "partition")
+    start = kb.get("partition", partition_id) if partition_id is not None else None
+    knowledge = run_knowledge(outcome.curve.metadata.get("knowledge"), outcome.option_ids, start)
+    if knowledge is not None:
+        metrics["knowledge"] = knowledge.to_dict()
+    final = _put_final_layers(kb, environment, task_rec, outcome, partition_id)
+    if final:
+        metrics["final_partitions"] = final
     run = kb.put_run(
         task_rec,
         request.learner,
@@ -426,6 +439,38 @@ def _record_learning(kb: KnowledgeStore, outcome: LearnOutcome) -> dict[str, Any
         "run": f"run:{run.id}",
         "policies": [f"policy:{p.id}" for p in policies],
     }
+
+
+def _put_final_layers(kb: KnowledgeStore, environment: Any, task: Any, outcome: LearnOutcome,
+                      start: int | None) -> list[int]:
+    """Store the distinct layers the runs ended on (kind ``learned``, the starting layer their
+    parent); return each run's partition id. A layer whose columns are not the primitives
+    followed by the stored options (reward-state options of the learner's own) is not stored."""
+    if not outcome.final_layers:
+        return []
+    n_cols = outcome.n_actions + len(outcome.option_ids)
+    meta = outcome.curve.metadata
+    delta = float(meta.get("delta") or 0.0)
+    epsilon = meta.get("epsilon")
+    stored: dict[bytes, int] = {}
+    ids = []
+    for labels, admissible in outcome.final_layers:
+        if admissible.shape[1] != n_cols:
+            return []
+        key = labels.astype(np.int64).tobytes() + admissible.astype(bool).tobytes()
+        if key not in stored:
+            rec = kb.put_partition(
+                environment, "learned", labels.astype(np.int64), options=list(outcome.option_ids),
+                includes_primitives=True, block_actions=admissible.astype(bool),
+                epsilon=float("inf") if epsilon is None else float(epsilon), delta=delta,
+                parents=[start] if start is not None else [], task=task,
+                plugin=outcome.request.learner, plugin_version=outcome.learner_version,
+                parameters={"refined_by": outcome.request.learner,
+                            "blocks": int(labels.max()) + 1},
+            )
+            stored[key] = rec.id
+        ids.append(stored[key])
+    return ids
 
 
 def canonical_request(request: LearnRequest) -> dict[str, Any]:

@@ -7,14 +7,18 @@
    used, phase 3 once it is - or, with ``hierarchy=NAME``, build the layer for each later task
    with that ``hierarchy-estimator`` plugin from the tasks of the sequence learned before it
    (section 4.4, Algorithm 3; :mod:`adpart.hierarchy`);
-5. learn every later task on that decision layer with the hierarchical learner (refinement
-   where flat and abstract values disagree), and flat without transfer for comparison. The
-   learner's mode is ``reward-variation+inconsistency`` unless ``--hier-opt mode=`` names
-   another (:data:`DEFAULT_MODE`): the states where the new task pays more than its step
-   reward become subgoals too (4.3.1; the task's rewards are known, as phase 3 already uses
-   them), the learner builds its layer from the discovered and these options, and the
-   inconsistency test (4.3.3) refines it where a primitive beats every offered option. With
-   ``hierarchy=NAME`` the built layer's blocks are offered those options instead.
+5. learn every later task on that decision layer with the hierarchical learner, refining it where
+   flat and abstract values disagree (section 4.3.3, the learner's default ``inconsistency``
+   mode), and flat without transfer for comparison. The run is linked to the stored layer it
+   started on and to the layers its runs ended on (kind ``learned``). ``--hier-opt mode=``
+   names another mode: the reward-variation modes (4.3.1) add options to the new task's reward
+   states, solved on its true model, and build their own layer from them; their rows say so.
+
+Every row carries what its learner knew (:mod:`adpart.learning.knowledge`): the layer
+learner's own knowledge together with its inputs' (option policies solved on the true
+dynamics; a layer partitioned on the new task's model and split by its rewards), and beside it
+the planner that knows as much (value iteration on the same model: no episodes, its compute
+time).
 
 Two outcomes end the abstraction and are reported, not raised: the detector finds **no
 subgoals** (stage ``no-subgoals``), and the knowledge base **predicts that abstraction will not
@@ -41,8 +45,10 @@ from typing import Any
 import numpy as np
 
 from adpart.errors import TaskError
-from adpart.learning.comparison import best_final_run, ratio_to_flat, task_row
+from adpart.learning.comparison import best_observed_run, ratio_to_flat, task_row
 from adpart.learning.curves import LearningCurve
+from adpart.learning.hierarchical_settings import HierarchicalSettings
+from adpart.learning.knowledge import PLANNER, Knowledge
 from adpart.learning.settings import Run
 from adpart.options.subgoal_options import InitiationSettings
 from adpart.partition.settings import PartitionSettings
@@ -60,10 +66,6 @@ from adpart.workflows.partitioning import DEFAULT_CRITERION, partition_environme
 from adpart.workflows.pipeline_figures import write_figures
 from adpart.workflows.refs import parse_ref
 from adpart.workflows.store import KnowledgeStore
-
-#: The hierarchical learner's mode in the pipeline (module docstring; docs/pipeline.md).
-DEFAULT_MODE = "reward-variation+inconsistency"
-
 
 #: The run settings' defaults, the pipeline's too (one declaration: :class:`Run`).
 _RUN = Run()
@@ -174,10 +176,36 @@ def _learn(kb: KnowledgeStore, request: LearnRequest, report: PipelineReport, st
         ids = record_learning(kb, run_learning(request, kb=kb))
     run = kb.get("run", parse_ref(ids["run"], "run"))
     curve = load_curve(kb, run)
+    known = run.metrics.get("knowledge")
+    curve.metadata["run_knowledge"] = (Knowledge.from_dict(known).label if known
+                                       else "not declared by the learner")
     report.stages.append(
         Stage(stage, request.task, ids["run"], reused, time.perf_counter() - start)
     )
     return ids, curve
+
+
+def _row(task: str, label: str, curve: LearningCurve, fraction: float,
+         extra: dict[str, Any]) -> dict[str, Any]:
+    """:func:`task_row` with what the learner knew (the run's knowledge record)."""
+    return task_row(task, label, curve, fraction,
+                    {"knowledge": curve.metadata.get("run_knowledge"), **extra})
+
+
+def planner_row(env: str, task: str) -> dict[str, Any]:
+    """The learner that knows what a layer learner on the true model knows: value iteration
+    on the task's exact model. It needs no episode; its cost is its compute time."""
+    from adpart.mdp.solvers import solve
+    from adpart.workflows.resolve import resolve_domain
+
+    mdp = resolve_domain(env).mdp(task)
+    start = time.perf_counter()
+    solve(mdp)
+    seconds = time.perf_counter() - start
+    return {"task": task, "learner": "planner", "runs": 1, "runs_within_bound": 1,
+            "bound": float("nan"),  # no curve: nothing to draw
+            "episodes_to_bound_median": 0.0, "final_gap_mean": 0.0, "final_gap_max": 0.0,
+            "steps_total_mean": 0.0, "compute_seconds": seconds, "knowledge": PLANNER.label}
 
 
 # --------------------------------------------------------------------------- hierarchy layers
@@ -298,7 +326,8 @@ def run_pipeline(
     # a firing refines its block with the thresholds the layer was built with (eqs. 4.6-4.7)
     hierarchical = {**defaults, "delta": config.partition.delta,
                     "partition-epsilon": config.partition.reward_epsilon,
-                    "mode": DEFAULT_MODE, **config.hierarchical_params}
+                    **config.hierarchical_params}
+    hierarchical.setdefault("mode", HierarchicalSettings().mode)  # the seed's: inconsistency
     from adpart.learning.hierarchical import REWARD_OPTION_MODES
 
     # without --hierarchy, the reward-variation modes build their layer from the options plus the
@@ -324,9 +353,9 @@ def run_pipeline(
     )
     first_ids, first_curve = _learn(kb, first_req, report, "learn-flat")
     report.curves[first] = {"flat": first_curve}
-    report.rows.append(task_row(first, "flat", first_curve, config.gap_fraction, {}))
+    report.rows.append(_row(first, "flat", first_curve, config.gap_fraction, {}))
 
-    best = best_final_run(first_curve)
+    best = best_observed_run(first_curve)  # by its returns: V* is for scoring only
     policy = kb.get("policy", parse_ref(first_ids["policies"][best], "policy"))
     say(f"discovering subgoals in {policy.ref} with {config.detector}")
     found = discover_subgoals(
@@ -352,10 +381,10 @@ def run_pipeline(
         for task in later:
             _, curve = learn_flat(task, config.episodes)
             report.curves[task] = {"flat (no subgoals)": curve}
-            report.rows.append(task_row(task, "flat-fallback", curve, config.gap_fraction,
+            report.rows.append(_row(task, "flat-fallback", curve, config.gap_fraction,
                                         {"fallback": reason}))
             if config.baseline:
-                report.rows.append(task_row(task, "flat", curve, config.gap_fraction, {}))
+                report.rows.append(_row(task, "flat", curve, config.gap_fraction, {}))
         write_figures(kb, report, config, out)
         return report
     option_ids: list[int] = []
@@ -413,11 +442,11 @@ def run_pipeline(
                 say(reason)
                 ids, curve = learn_flat(task, config.episodes)
                 report.curves[task] = {"flat (fallback)": curve}
-                report.rows.append(task_row(task, "flat-fallback", curve, config.gap_fraction,
+                report.rows.append(_row(task, "flat-fallback", curve, config.gap_fraction,
                                             {"fallback": reason}))
                 if config.baseline:
                     report.curves[task]["flat (no transfer)"] = curve
-                    report.rows.append(task_row(task, "flat", curve, config.gap_fraction, {}))
+                    report.rows.append(_row(task, "flat", curve, config.gap_fraction, {}))
                 tid = parse_ref(ids["task"], "task")
                 if tid not in learned:
                     learned.append(tid)
@@ -454,7 +483,7 @@ def run_pipeline(
                                               f"{int(np.median(after))} after)")
         report.curves[task] = {label: hier_curve}
         report.rows.append(
-            task_row(
+            _row(
                 task,
                 "hierarchical",
                 hier_curve,
@@ -472,9 +501,10 @@ def run_pipeline(
             report.curves[task]["flat (no transfer)"] = base_curve
             report.rows[-1]["ratio_to_flat"] = ratio_to_flat(hier_curve, base_curve,
                                                              config.gap_fraction, config.seed)
-            report.rows.append(task_row(task, "flat", base_curve, config.gap_fraction, {}))
+            report.rows.append(_row(task, "flat", base_curve, config.gap_fraction, {}))
             if report.rows[-1]["runs_within_bound"] > 0 and task_id not in evidence:
                 evidence.append(task_id)
+        report.rows.append(planner_row(config.env, task))
         if task_id not in learned:
             learned.append(task_id)
     write_figures(kb, report, config, out)

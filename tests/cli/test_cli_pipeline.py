@@ -67,9 +67,25 @@ def test_pipeline_runs_stores_everything_and_a_second_run_recomputes_nothing(tmp
     assert not any(s["reused"] for s in summary["stages"])
     rows = {(r["task"], r["learner"]): r for r in summary["tasks"]}
     hier = rows[("goal:x=9,y=5", "hierarchical")]
-    # the default mode: the learner's own layer over the doorway option and the goal's states
-    assert hier["mode"] == "reward-variation+inconsistency" and hier["partition"] is None
-    assert hier["initial_blocks"] < 55
+    # the default chain (4.3.3): the learner starts on the layer step 4 stored, and says what it
+    # knew - the true model, and the new task's rewards through the layer's phase 3
+    layer = next(s for s in summary["stages"] if s["stage"] == "partition")
+    assert hier["mode"] == "inconsistency" and hier["partition"] == layer["result"]
+    assert hier["initial_blocks"] == layer["detail"]["final_blocks"]
+    assert "dynamics true-model, rewards known" in hier["knowledge"]
+    assert "phase-3 split by the task's rewards" in hier["knowledge"]
+    assert rows[("goal:x=9,y=5", "flat")]["knowledge"] == "dynamics none, rewards observed"
+    planner = rows[("goal:x=9,y=5", "planner")]
+    assert planner["episodes_to_bound_median"] == 0 and planner["compute_seconds"] > 0
+    kb = KnowledgeBase.open(str(kb_dir))
+    try:  # the run is linked to the layer it started on and to the layers its runs ended on
+        run = kb.get("run", int(summary["stages"][4]["result"].split(":")[1]))
+        assert f"partition:{run.partition_id}" == layer["result"]
+        finals = [kb.get("partition", p) for p in run.metrics["final_partitions"]]
+        assert len(finals) == 3 and all(p.kind == "learned" for p in finals)
+        assert all(p.parent_ids == (run.partition_id,) for p in finals)
+    finally:
+        kb.close()
     assert (out / "summary.json").exists() and (out / "goal-x-9-y-5.png").exists()
     # the subgoal map of the first task and the layer of the second, beside the curves
     drawn = {Path(f).name for f in summary["figures"]}
@@ -219,24 +235,28 @@ def test_no_subgoals_is_a_reported_outcome_and_the_flat_learner_is_a_choice(tmp_
 
 def test_without_a_learned_first_task_only_the_reward_variation_modes_use_the_layer(tmp_path):
     """One episode does not learn two-rooms' first task, so the knowledge base holds no values to
-    predict from: in inconsistency mode the later task is learned flat (stage ``fallback``); the
-    default mode builds its layer from the later task's own rewards and learns on it (stage
-    ``predict`` says why). Betweenness finds the doorway without a learned policy."""
+    predict from: in the default inconsistency mode the later task is learned flat (stage
+    ``fallback``); a reward-variation mode builds its layer from the later task's own rewards and
+    learns on it (stage ``predict`` says why), and its row says the rewards were known.
+    Betweenness finds the doorway without a learned policy."""
     args = ["pipeline", "two-rooms", "--tasks", "reach-goal,goal:x=9,y=5", "--detector",
             "betweenness", "--runs", "3", "--episodes", "30", "--first-episodes", "1",
             "--eval-every", "10", "--no-baseline", "--kb", str(tmp_path / "kb"), "--out",
             str(tmp_path / "o"), "--json"]
-    default = json.loads(CliRunner().invoke(cli, args).output)
-    assert default["tasks"][0]["runs_within_bound"] == 0  # the first task is not learned
-    stage = next(s for s in default["stages"] if s["task"] == "goal:x=9,y=5")
+    variation = json.loads(CliRunner().invoke(cli, [
+        *args, "--hier-opt", "mode=reward-variation+inconsistency"]).output)
+    assert variation["tasks"][0]["runs_within_bound"] == 0  # the first task is not learned
+    stage = next(s for s in variation["stages"] if s["task"] == "goal:x=9,y=5")
     assert stage["stage"] == "predict" and "holds no values to predict from" in (
         stage["detail"]["reason"])
-    assert default["tasks"][1]["learner"] == "hierarchical"
-    alone = json.loads(CliRunner().invoke(cli, [*args, "--hier-opt",
-                                                "mode=inconsistency"]).output)
-    stage = next(s for s in alone["stages"] if s["task"] == "goal:x=9,y=5")
+    assert variation["tasks"][1]["learner"] == "hierarchical"
+    assert "options to the task's reward states, solved on the true model" in (
+        variation["tasks"][1]["knowledge"])
+    assert "rewards known" in variation["tasks"][1]["knowledge"]
+    default = json.loads(CliRunner().invoke(cli, args).output)
+    stage = next(s for s in default["stages"] if s["task"] == "goal:x=9,y=5")
     assert stage["stage"] == "fallback" and "is learned flat" in stage["detail"]["reason"]
-    assert alone["tasks"][1]["learner"] == "flat-fallback"
+    assert default["tasks"][1]["learner"] == "flat-fallback"
 
 
 def test_directed_exploration_is_a_learner_option_and_a_bad_count_is_refused(tmp_path):

@@ -48,6 +48,7 @@ from adpart.learning.curves import (
     start_distribution,
     start_values,
 )
+from adpart.learning.knowledge import Knowledge
 from adpart.learning.maxq.taskgraph import CompiledGraph
 from adpart.learning.result import LearnResult
 from adpart.learning.schedules import Schedule, parse_schedule
@@ -526,6 +527,8 @@ def maxq_q(mdp: FiniteMDP, graph: CompiledGraph, run: Run | None = None) -> MaxQ
         "runs": K, "episodes": N, "seed": root_seed, "alpha": alpha_s.to_dict(),
         "epsilon": eps_s.to_dict(), "max_steps_per_episode": H, "eval_every": M,
         "graph": graph.graph, "abstraction": graph.abstraction,
+        "knowledge": Knowledge("none", "known", ("hand-designed task graph of the task",)
+                               ).to_dict(),
         "table_size": graph.table_size(),
         "reference": "given" if reference_values is not None else "solved",
     }

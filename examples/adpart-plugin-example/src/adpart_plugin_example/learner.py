@@ -34,6 +34,7 @@ import numpy as np
 from adpart.errors import TaskError
 from adpart.learning import LearningCurve, LearnResult, parse_schedule
 from adpart.learning.curves import optimal_start_value, start_distribution, start_values
+from adpart.learning.knowledge import FLAT
 from adpart.mdp.evaluation import greedy_policy
 from adpart.mdp.model import FiniteMDP
 from adpart.params import Param
@@ -213,6 +214,7 @@ def sarsa(
         "runs": K, "episodes": N, "seed": seed, "alpha": alpha_s.to_dict(),
         "epsilon": eps_s.to_dict(), "max_steps_per_episode": H, "eval_every": M,
         "q_init": float(q_init),
+        "knowledge": FLAT.to_dict(),  # what it read of the task: samples and observed rewards
     }
     steps = np.stack([a.steps for a in agents])
     curve = LearningCurve.from_matrices(
