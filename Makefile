@@ -44,7 +44,7 @@ demo: $(BASE)
 		--eval-every 25 -q --out $(DEMO)/learn-three-floor
 	$(ADPART) env show three-floor --task reach-goal --out $(DEMO)/three-floor-vstar.png --json
 	$(ADPART) pipeline three-floor --tasks reach-goal,reach-top-west --runs 20 --episodes 500 \
-		--eval-every 10 --out $(DEMO)/pipeline
+		--eval-every 1 --out $(DEMO)/pipeline
 	$(ADPART) kb info
 
 # One BLAS thread per test worker: two workers already fill the two cores, and threaded BLAS

@@ -25,6 +25,7 @@ from adpart.options.subgoal_options import InitiationSettings
 from adpart.partition.settings import PartitionSettings
 from adpart.store.location import KBLocation
 from adpart.workflows.partitioning import DEFAULT_CRITERION
+from adpart.workflows.pipeline_table import comparison_lines
 from adpart.workflows.reports import folder_name
 
 
@@ -64,71 +65,6 @@ def split_tasks(text: str) -> tuple[str, ...]:
         else:
             tasks.append(token)
     return tuple(tasks)
-
-
-def _table(rows: list[dict[str, Any]]) -> list[str]:
-    """The comparison: a line per learner and task, what each knew, and the survival figures
-    of every layer learner against flat (Kaplan-Meier medians; censored runs stay censored)."""
-    header = (
-        f"{'task':<22} {'learner':<13} {'blocks':>6} {'within':>7} {'KM episodes':>16} "
-        f"{'KM steps':>18}"
-    )
-    lines = [header, "-" * len(header)]
-    for r in rows:
-        blocks = str(r.get("initial_blocks", "-"))
-        km = r.get("time_to_bound_km") or {}
-        if r["learner"] == "planner":
-            ep, st = "0", f"0 ({r['compute_seconds']:.2g} s)"
-        else:
-            ep, st = (_km(km.get(u)) for u in ("episodes", "steps"))
-        lines.append(
-            f"{r['task'][:22]:<22} {r['learner']:<13} {blocks:>6} "
-            f"{r['runs_within_bound']:>3}/{r['runs']:<3} {ep:>16} {st:>18}"
-        )
-    lines.append("")
-    lines.append("what each learner knew:")
-    seen: set[tuple[str, str]] = set()
-    for r in rows:
-        key = (r["learner"], str(r.get("knowledge")))
-        if r.get("knowledge") and key not in seen:
-            seen.add(key)
-            lines.append(f"  {r['learner']}: {r['knowledge']}")
-    for r in rows:
-        if "ratio_to_flat" in r:
-            q = r["ratio_to_flat"]
-            lines.append(
-                f"{r['task']}: Kaplan-Meier median time to the bound, {r['learner']} / flat = "
-                f"{q['ratio']:.3g} episodes (95% CI {_ci(q['ci95'])}; log-rank p = "
-                f"{q['p_sooner']:.2g}), {q['steps']['ratio']:.3g} primitive steps (95% CI "
-                f"{_ci(q['steps']['ci95'])}); censored runs {q['censored'][0]} and "
-                f"{q['censored'][1]}")
-            if q["ratio"] > 0 and _sets_it(r, q["first_evaluation"]):
-                lines.append(f"  (the first evaluation, after episode {q['first_evaluation']}, "
-                             f"sets {r['learner']}'s median: evaluate more often with "
-                             "--eval-every to measure it)")
-    return lines
-
-
-def _sets_it(row: dict[str, Any], first: int) -> bool:
-    """Whether a learner's Kaplan-Meier median time is its first evaluation point."""
-    km = (row.get("time_to_bound_km") or {}).get("episodes")
-    return bool(km) and km[0] <= first
-
-
-def _km(median: list[float] | None) -> str:
-    """``median [low, high]`` of a Kaplan-Meier median; ``never`` where under half arrive."""
-    if not median:
-        return "-"
-    est, lo, hi = median
-
-    def f(x: float) -> str:
-        return "never" if x == float("inf") else f"{x:.3g}"
-
-    return f"{f(est)} [{f(lo)}, {f(hi)}]"
-
-
-def _ci(ci: list[float]) -> str:
-    return "-".join("inf" if x == float("inf") else f"{x:.3g}" for x in ci)
 
 
 def _say(quiet: bool):  # type: ignore[no-untyped-def]
@@ -308,7 +244,7 @@ def pipeline_cmd(
         if stage.detail.get("reason"):
             click.echo(f"  {stage.detail['reason']}")
     click.echo("")
-    for line in _table(report.rows):
+    for line in comparison_lines(report.rows):
         click.echo(line)
     click.echo(f"\nwrote {out}/: summary.json " + " ".join(Path(f).name for f in report.figures))
 
@@ -422,6 +358,6 @@ def transfer_cmd(
     if as_json:
         echo_json(summary)
         return
-    for line in _table(rows):
+    for line in comparison_lines(rows):
         click.echo(line)
     click.echo(f"\nstored {', '.join(ids.values())}; wrote {out}/transfer.png summary.json")

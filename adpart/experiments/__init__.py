@@ -24,6 +24,7 @@ EXPERIMENT_MODULES: tuple[str, ...] = (
     "adpart.experiments.arm_planned",
     "adpart.experiments.maxq",
     "adpart.experiments.maxq_parr",
+    "adpart.experiments.comparisons",
 )
 
 
