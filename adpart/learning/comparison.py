@@ -150,15 +150,30 @@ def ratio_to_flat(method: LearningCurve, flat: LearningCurve, fraction: float, s
     bound) and the one-sided log-rank test that the method reaches the bound sooner
     (:func:`~adpart.learning.transfer_metrics.logrank_sooner`). The episodes' figures are at
     the top level, the steps' under ``"steps"``.
+
+    Where fewer than half of flat's runs reach the bound its median is beyond the budget, and a
+    ratio to it is no number: ``ratio`` is then None and ``at_most`` the bound the runs give,
+    the method's median over the latest time a flat run was still censored (likewise ``at_least``
+    where the method's median is beyond its budget and flat's is not).
     """
     bound = success_bound(flat, fraction)
     a, b = metrics_from_curve(method, bound), metrics_from_curve(flat, bound)
     out: dict[str, dict[str, Any]] = {}
     for unit in ("episodes", "steps"):
-        r = km_median_ratio(*a.event_times(unit), *b.event_times(unit), seed=seed)
-        test = logrank_sooner(*a.event_times(unit), *b.event_times(unit))
-        out[unit] = {"ratio": r.estimate, "ci95": [r.low, r.high],
-                     "logrank_z": test.statistic, "p_sooner": test.pvalue}
+        ta, ca = a.event_times(unit)
+        tb, cb = b.event_times(unit)
+        r = km_median_ratio(ta, ca, tb, cb, seed=seed)
+        test = logrank_sooner(ta, ca, tb, cb)
+        ma, mb = km_median(ta, ca).estimate, km_median(tb, cb).estimate
+        entry: dict[str, Any] = {"ratio": r.estimate, "ci95": [r.low, r.high],
+                                 "logrank_z": test.statistic, "p_sooner": test.pvalue}
+        if not np.isfinite(mb) or not np.isfinite(ma):
+            entry["ratio"] = None
+            if np.isfinite(ma):
+                entry["at_most"] = float(ma / np.max(tb[cb]))
+            elif np.isfinite(mb):
+                entry["at_least"] = float(np.max(ta[ca]) / mb)
+        out[unit] = entry
     return {**out["episodes"], "steps": out["steps"],
             "censored": [int(a.censored.sum()), int(b.censored.sum())],
             "first_evaluation": int(method.evaluated_episodes()[0])}

@@ -192,6 +192,23 @@ def _row(task: str, label: str, curve: LearningCurve, fraction: float,
                     {"knowledge": curve.metadata.get("run_knowledge"), **extra})
 
 
+#: The stages that compute the layer off-line, before the later task is learned.
+OFFLINE_STAGES = ("discover", "options", "predict", "partition", "hierarchy")
+
+
+def _chain_cost(report: PipelineReport, config: PipelineConfig) -> dict[str, Any]:
+    """What the layer cost before the later task began: the first task's episodes and primitive
+    steps per run, and this run's seconds in the off-line stages (a reused stage counts its
+    look-up only)."""
+    first = report.rows[0]
+    return {"first_task_episodes": config.first_episodes,
+            "first_task_steps_mean": first["steps_total_mean"],
+            "offline_seconds": sum(s.seconds for s in report.stages
+                                   if s.stage in OFFLINE_STAGES),
+            "offline_reused": all(s.reused for s in report.stages
+                                  if s.stage in OFFLINE_STAGES and s.stage != "predict")}
+
+
 def planner_row(env: str, task: str) -> dict[str, Any]:
     """The learner that knows what a layer learner on the true model knows: value iteration
     on the task's exact model. It needs no episode; its cost is its compute time."""
@@ -491,7 +508,8 @@ def run_pipeline(
                 {"initial_blocks": start_blocks,
                  "partition": None if own_layer or layer is None else layer.ref,
                  "partition_blocks": None if own_layer or layer is None else layer.blocks,
-                 "mode": hierarchical["mode"]},
+                 "mode": hierarchical["mode"],
+                 "chain_cost": _chain_cost(report, config)},
             )
         )
         task_id = parse_ref(hier_ids["task"], "task")

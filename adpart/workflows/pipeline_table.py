@@ -40,15 +40,34 @@ def comparison_lines(rows: list[dict[str, Any]]) -> list[str]:
             q = r["ratio_to_flat"]
             lines.append(
                 f"{r['task']}: Kaplan-Meier median time to the bound, {r['learner']} / flat = "
-                f"{q['ratio']:.3g} episodes (95% CI {_ci(q['ci95'])}; log-rank p = "
-                f"{q['p_sooner']:.2g}), {q['steps']['ratio']:.3g} primitive steps (95% CI "
-                f"{_ci(q['steps']['ci95'])}); censored runs {q['censored'][0]} and "
+                f"{_ratio(q)} episodes (log-rank p = {q['p_sooner']:.2g}), "
+                f"{_ratio(q['steps'])} primitive steps; censored runs {q['censored'][0]} and "
                 f"{q['censored'][1]}")
-            if q["ratio"] > 0 and _sets_it(r, q["first_evaluation"]):
+            if "chain_cost" in r:
+                c = r["chain_cost"]
+                lines.append(
+                    f"  the layer's cost before {r['task']}: {c['first_task_episodes']} episodes "
+                    f"of the first task per run ({c['first_task_steps_mean']:.3g} primitive "
+                    "steps), "
+                    f"{c['offline_seconds']:.2g} s off-line"
+                    + (" (looked up in the knowledge base)" if c["offline_reused"] else ""))
+            if _sets_it(r, q["first_evaluation"]):
                 lines.append(f"  (the first evaluation, after episode {q['first_evaluation']}, "
                              f"sets {r['learner']}'s median: evaluate more often with "
                              "--eval-every to measure it)")
     return lines
+
+
+def _ratio(q: dict[str, Any]) -> str:
+    """A ratio of medians with its CI, or the bound the censored runs give when a median is
+    beyond the budget."""
+    if q["ratio"] is not None:
+        return f"{q['ratio']:.3g} (95% CI {_ci(q['ci95'])})"
+    if "at_most" in q:
+        return f"at most {q['at_most']:.3g} (flat's median is beyond its budget)"
+    if "at_least" in q:
+        return f"at least {q['at_least']:.3g} (the layer's median is beyond its budget)"
+    return "undefined (neither median is within the budget)"
 
 
 def _sets_it(row: dict[str, Any], first: int) -> bool:
