@@ -5,7 +5,7 @@ PY     := $(VENV)/bin/python
 BASE   := $(VENV)/.installed
 STAMP  := $(VENV)/.installed-dev
 
-.PHONY: demo test test-processes test-all bench lint docs clean
+.PHONY: demo test test-processes test-all bench lint docs results clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -73,6 +73,12 @@ test-processes: $(STAMP)
 test-all: $(STAMP)
 	$(WARM_KERNELS)
 	$(SINGLE_THREAD) $(PY) -m pytest -n 2 -q -m ""
+
+# The result tables the docs show, regenerated: the pipeline's defaults on the benchmark's cells
+# (adpart experiment comparisons, a few minutes), its summary copied to docs/results/.
+results: $(BASE)
+	$(ADPART) experiment comparisons --out build/results/comparisons
+	mkdir -p docs/results && cp build/results/comparisons/summary.md docs/results/comparisons.md
 
 bench: $(VENV)/.installed-bench
 	$(PY) -m benchmarks

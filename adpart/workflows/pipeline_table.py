@@ -51,7 +51,7 @@ def comparison_lines(rows: list[dict[str, Any]]) -> list[str]:
                     "steps), "
                     f"{c['offline_seconds']:.2g} s off-line"
                     + (" (looked up in the knowledge base)" if c["offline_reused"] else ""))
-            if _sets_it(r, q["first_evaluation"]):
+            if q["first_evaluation"] > 1 and _sets_it(r, q["first_evaluation"]):
                 lines.append(f"  (the first evaluation, after episode {q['first_evaluation']}, "
                              f"sets {r['learner']}'s median: evaluate more often with "
                              "--eval-every to measure it)")
