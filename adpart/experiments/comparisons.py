@@ -63,6 +63,34 @@ def _cell_table(pipe: Any) -> list[str]:
     return comparison_lines(pipe.rows)
 
 
+#: Taylor & Stone's measures shown per learner beside the table (TransferMetrics attributes).
+MEASURES = (("jumpstart", "jumpstart gap"), ("auc_episodes", "gap area (episodes)"),
+            ("auc_steps", "gap area (steps)"), ("asymptotic_gap", "asymptotic gap"))
+
+
+def _measures(pipe: Any, task: str, seed: int) -> tuple[list[str], dict[str, Any]]:
+    """Per learner of ``task``: the run means of :data:`MEASURES` with 95 % bootstrap CIs."""
+    from adpart.experiments.stats import bootstrap_ci
+    from adpart.learning.comparison import success_bound
+    from adpart.learning.transfer_metrics import metrics_from_curve
+
+    curves = pipe.curves.get(task, {})
+    flat = curves.get("flat (no transfer)") or next(iter(curves.values()), None)
+    if flat is None:
+        return [], {}
+    bound = success_bound(flat, pipe.config.gap_fraction)
+    lines = [f"{'curve':<60} " + " ".join(f"{title:>26}" for _, title in MEASURES)]
+    data: dict[str, Any] = {}
+    for label, curve in curves.items():
+        m = metrics_from_curve(curve, bound)
+        cis = {name: bootstrap_ci(getattr(m, name), statistic="mean", seed=seed)
+               for name, _ in MEASURES}
+        data[label] = {name: list(ci) for name, ci in cis.items()}
+        cells = " ".join(f"{f'{e:.3g} [{lo:.3g}, {hi:.3g}]':>26}" for e, lo, hi in cis.values())
+        lines.append(f"{label[:60]:<60} {cells}")
+    return lines, data
+
+
 def _ratios(pipe: Any, task: str) -> np.ndarray | None:
     """Per layer run, its episodes to the bound over flat's KM median (censored: inf)."""
     curves = pipe.curves.get(task, {})
@@ -115,12 +143,15 @@ def comparisons(config: ExperimentConfig) -> ExperimentReport:
                                   **{"eval_every": 1, **sizes, **cell.options})
             pipe = run_pipeline(kb, pcfg, out=out / _folder(cell.env),
                                 progress=config.progress)
-            tables[cell.env] = _cell_table(pipe)
+            measures, measured = _measures(pipe, cell.tasks[1], config.seed)
+            title = (f"{cell.tasks[1]}, run means with 95 % bootstrap CIs (Taylor & Stone "
+                     "2009; gaps scored as in docs/transfer-metrics.md):")
+            tables[cell.env] = [*_cell_table(pipe), "", title, *measures]
             r = _ratios(pipe, cell.tasks[1])
             if r is not None:
                 ratios.append(r)
             cell_data.append({"env": cell.env, "tasks": list(cell.tasks), "note": cell.note,
-                              "rows": pipe.rows,
+                              "rows": pipe.rows, "measures": measured,
                               "stages": [s.stage for s in pipe.stages],
                               "figures": [str(Path(f).relative_to(out)) for f in pipe.figures]})
     report.data["cells"] = cell_data

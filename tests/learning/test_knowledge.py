@@ -86,3 +86,26 @@ def test_a_runs_knowledge_is_the_most_of_its_parts():
     assert (both.dynamics, both.rewards) == ("true-model", "known")
     assert both.uses == ("option policies", "phase-3 reward split")
     assert combine([]) == FLAT and "rewards observed" in FLAT.label
+
+
+def test_the_value_iteration_reference_reads_the_whole_model_and_says_so():
+    from adpart.learning.knowledge import PLANNER
+    from adpart.learning.reference import value_iteration_curve
+
+    mdp = goal_grid()
+    res = value_iteration_curve(guard(mdp, PLANNER), sweeps=5, seed=0)
+    assert Knowledge.from_dict(res.parameters["knowledge"]) == PLANNER
+    with pytest.raises(KnowledgeError):
+        value_iteration_curve(guard(mdp, Knowledge("true-model", "observed")), sweeps=5, seed=0)
+
+
+def test_maxq_samples_only_and_declares_its_hand_designed_graph():
+    from adpart.envs.domains.taxi import Taxi
+    from adpart.learning.maxq import maxq_q, taxi_graph
+    from adpart.learning.maxq.maxq_q import MAXQ_KNOWLEDGE
+
+    mdp = Taxi().mdp()
+    graph = taxi_graph().compile(mdp)
+    res = maxq_q(guard(mdp, FLAT), graph, Run(runs=1, episodes=3, seed=0, eval_every=3))
+    assert Knowledge.from_dict(res.parameters["knowledge"]) == MAXQ_KNOWLEDGE
+    assert MAXQ_KNOWLEDGE.rewards == "known"  # the graph is the designer's knowledge of the task

@@ -48,7 +48,7 @@ from adpart.learning.curves import (
     start_distribution,
     start_values,
 )
-from adpart.learning.knowledge import Knowledge
+from adpart.learning.knowledge import Knowledge, world
 from adpart.learning.maxq.taskgraph import CompiledGraph
 from adpart.learning.result import LearnResult
 from adpart.learning.schedules import Schedule, parse_schedule
@@ -430,6 +430,11 @@ class AgentRun:
         self.episode += 1
         return self.steps, self.decisions, self.ret, self.dret
 
+#: MAXQ-Q samples the environment; its task graph, designed by hand for the task, is knowledge of
+#: the task's structure (the subtasks' termination predicates include the task's own goal).
+MAXQ_KNOWLEDGE = Knowledge("none", "known", ("hand-designed task graph of the task",))
+
+
 def _count(value: object, what: str) -> int:
     """``value`` as an int >= 1, else TaskError naming ``what``."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
@@ -498,11 +503,12 @@ def maxq_q(mdp: FiniteMDP, graph: CompiledGraph, run: Run | None = None) -> MaxQ
         raise TaskError("graph must be a task graph compiled on this MDP: "
                         "TaskGraph.compile(mdp)")
 
-    mu = start_distribution(mdp)
-    v_star = optimal_start_value(mdp, mu, reference_values)
-    cdf = np.cumsum(mu)
     rngs = np.random.default_rng(root_seed).spawn(K)
-    agents = [AgentRun(mdp, graph, rngs[k], alpha_s, eps_s, H) for k in range(K)]
+    with world():  # the environment: start distribution, V* for scoring, each agent's simulator
+        mu = start_distribution(mdp)
+        v_star = optimal_start_value(mdp, mu, reference_values)
+        agents = [AgentRun(mdp, graph, rngs[k], alpha_s, eps_s, H) for k in range(K)]
+    cdf = np.cumsum(mu)
     out = {c: np.zeros((K, N), dtype=np.int64) for c in ("steps", "decisions")}
     out_r = {c: np.zeros((K, N)) for c in ("return", "discounted_return")}
     eval_value = np.full((K, N), np.nan)
@@ -518,7 +524,8 @@ def maxq_q(mdp: FiniteMDP, graph: CompiledGraph, run: Run | None = None) -> MaxQ
                 out_r["return"][k, e], out_r["discounted_return"][k, e] = ret, dret
         policies = np.stack([greedy_hierarchical_policy(graph, a.tables(), mdp.admissible)
                              for a in agents])
-        eval_value[:, boundary - 1] = start_values(mdp, policies, mu)
+        with world():
+            eval_value[:, boundary - 1] = start_values(mdp, policies, mu)
         done = boundary
         if progress is not None:
             progress(boundary, N)
@@ -527,8 +534,7 @@ def maxq_q(mdp: FiniteMDP, graph: CompiledGraph, run: Run | None = None) -> MaxQ
         "runs": K, "episodes": N, "seed": root_seed, "alpha": alpha_s.to_dict(),
         "epsilon": eps_s.to_dict(), "max_steps_per_episode": H, "eval_every": M,
         "graph": graph.graph, "abstraction": graph.abstraction,
-        "knowledge": Knowledge("none", "known", ("hand-designed task graph of the task",)
-                               ).to_dict(),
+        "knowledge": MAXQ_KNOWLEDGE.to_dict(),
         "table_size": graph.table_size(),
         "reference": "given" if reference_values is not None else "solved",
     }
