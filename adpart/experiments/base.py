@@ -75,9 +75,34 @@ class ExperimentReport:
         lines += [f"- {line}" for line in self.seed_reports] + [""]
         lines += ["## What we measured", ""]
         lines += [f"- {line}" for line in self.findings] + [""]
+        known = knowledge_of(self.data)
+        if known:
+            note = ("Each run's knowledge record (docs/knowledge.md); where the experiment gave "
+                    "a learner a layer itself, the layer's comes on top: every layer is built "
+                    "on the task's model.")
+            lines += ["## What each learner knew", "", note, ""]
+            lines += [f"- {learner}: {label}" for learner, label in known] + [""]
         lines += ["## Figures", ""] + [f"![{Path(f).stem}]({Path(f).name})" for f in self.figures]
         (out / "summary.md").write_text("\n".join(lines) + "\n")
         return {"json": str(out / "summary.json"), "markdown": str(out / "summary.md")}
+
+
+def knowledge_of(data: Any) -> list[tuple[str, str]]:
+    """The distinct ``(learner, knowledge label)`` of every row in ``data`` (any depth)."""
+    found: dict[tuple[str, str], None] = {}
+
+    def walk(node: Any) -> None:
+        if isinstance(node, dict):
+            if isinstance(node.get("learner"), str) and isinstance(node.get("knowledge"), str):
+                found[(node["learner"], node["knowledge"])] = None
+            for value in node.values():
+                walk(value)
+        elif isinstance(node, (list, tuple)):
+            for value in node:
+                walk(value)
+
+    walk(data)
+    return list(found)
 
 
 ExperimentFn = Callable[[ExperimentConfig], ExperimentReport]

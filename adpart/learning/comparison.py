@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from adpart.learning.curves import LearningCurve, episodes_within
+from adpart.learning.knowledge import Knowledge
 from adpart.learning.transfer_metrics import (
     km_median,
     km_median_ratio,
@@ -61,9 +62,12 @@ def task_row(
     within = episodes_within(curve.matrix("value_gap"), curve.evaluated_episodes(), bound)
     to_bound = np.where(within < 0, np.inf, within)  # never within: inf (null in JSON)
     final = curve.matrix("value_gap")[:, -1]
+    known = curve.metadata.get("knowledge")
     return {
         "task": task,
         "learner": label,
+        # the learner's own record; a workflow that knows the run's inputs puts theirs on top
+        "knowledge": Knowledge.from_dict(known).label if known else None,
         "runs": curve.n_runs,
         "v_star_start": v_star,
         "bound": bound,

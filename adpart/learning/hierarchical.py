@@ -149,7 +149,7 @@ from adpart.learning.hierarchical_settings import (
     TESTING_MODES,
     HierarchicalSettings,
 )
-from adpart.learning.knowledge import Knowledge, world
+from adpart.learning.knowledge import OPTION_POLICIES, Knowledge, world
 from adpart.learning.result import LearnResult
 from adpart.learning.settings import Run, fresh_seed, require_mdp
 from adpart.learning.smdp_q import (
@@ -390,7 +390,8 @@ def hierarchical_knowledge(settings: HierarchicalSettings) -> Knowledge:
     4.6-4.7) - and the task's rewards and terminals: the reward floor ``r_min`` bounds the
     grounded values and the refinement model's absorbing block is the task's terminal set.
     """
-    uses = ["option models for refinement", "reward floor r_min", "terminal states"]
+    uses = ["option models for refinement", "reward floor r_min", "terminal states",
+            *OPTION_POLICIES.uses]
     if settings.reward_options:
         uses.append("options to the task's reward states, solved on the true model")
     if settings.testing:

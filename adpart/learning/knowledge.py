@@ -33,8 +33,8 @@ from typing import Any
 
 from adpart.errors import AdpartError
 
-__all__ = ["DYNAMICS", "FLAT", "PLANNER", "REWARDS", "Knowledge", "KnowledgeError", "combine",
-           "guard", "world"]
+__all__ = ["DYNAMICS", "FLAT", "OPTION_POLICIES", "PLANNER", "REWARDS", "Knowledge",
+           "KnowledgeError", "combine", "guard", "world"]
 
 #: What a learner may know of the dynamics, least first.
 DYNAMICS = ("none", "true-model")
@@ -81,6 +81,10 @@ class Knowledge:
 
 #: A model-free learner that samples the environment and observes its rewards.
 FLAT = Knowledge()
+#: What a learner over options knows through them: every option adpart builds is a policy
+#: solved on the environment's true dynamics (to its subgoal, with a pseudo-reward: 4.1).
+OPTION_POLICIES = Knowledge("true-model", "observed",
+                            ("option policies solved on the true dynamics",))
 #: A planner on the task's exact model (value iteration): it needs no episode at all.
 PLANNER = Knowledge("true-model", "known", ("value iteration on the exact model",))
 

@@ -51,7 +51,7 @@ from adpart.learning.curves import (
     start_distribution,
     start_values,
 )
-from adpart.learning.knowledge import FLAT, world
+from adpart.learning.knowledge import FLAT, OPTION_POLICIES, world
 from adpart.learning.qlearning import BLOCK_ROWS
 from adpart.learning.result import LearnResult
 from adpart.learning.schedules import Schedule
@@ -468,7 +468,7 @@ def smdp_q_learning(
         "q_init": float(q_init), "kernel": name, "include_primitives": bool(include_primitives),
         "intra_option": bool(intra_option),
         "options": list(names), "reference": "given" if reference_values is not None else "solved",
-        "knowledge": FLAT.to_dict(),
+        "knowledge": (OPTION_POLICIES if options else FLAT).to_dict(),
     }
     curve = LearningCurve.from_matrices(
         steps=st.out_steps, decisions=st.out_dec, returns=st.out_ret,

@@ -21,13 +21,9 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from adpart.learning.knowledge import Knowledge, combine
+from adpart.learning.knowledge import OPTION_POLICIES, Knowledge, combine
 
-__all__ = ["OPTIONS_KNOWLEDGE", "partition_knowledge", "run_knowledge"]
-
-#: What a run over stored options knows through them.
-OPTIONS_KNOWLEDGE = Knowledge("true-model", "observed",
-                              ("option policies solved on the true dynamics",))
+__all__ = ["partition_knowledge", "run_knowledge"]
 
 
 def partition_knowledge(kind: str, task_id: int | None) -> Knowledge:
@@ -56,7 +52,7 @@ def run_knowledge(learner: dict[str, Any] | None, option_ids: Sequence[int],
         return None
     parts = [Knowledge.from_dict(learner)]
     if option_ids:
-        parts.append(OPTIONS_KNOWLEDGE)
+        parts.append(OPTION_POLICIES)
     if partition is not None:
         parts.append(partition_knowledge(partition.kind, partition.task_id))
     return combine(parts)

@@ -55,11 +55,15 @@ def test_flat_q_learning_only_samples_and_declares_so():
     assert Knowledge.from_dict(guarded.parameters["knowledge"]) == FLAT
 
 
-def test_smdp_q_over_given_options_only_samples():
+def test_smdp_q_over_given_options_only_samples_and_knows_through_its_options():
+    from adpart.learning.knowledge import OPTION_POLICIES
+
     mdp = goal_grid()
     opts = [subgoal_option(mdp, 0, initiation="reachable")]
     res = smdp_q_learning(guard(mdp, FLAT), opts, SMDPQSettings(include_primitives=True), RUN)
-    assert Knowledge.from_dict(res.parameters["knowledge"]) == FLAT
+    assert Knowledge.from_dict(res.parameters["knowledge"]) == OPTION_POLICIES
+    alone = smdp_q_learning(guard(mdp, FLAT), [], SMDPQSettings(include_primitives=True), RUN)
+    assert Knowledge.from_dict(alone.parameters["knowledge"]) == FLAT
 
 
 @pytest.mark.parametrize("mode", ["inconsistency", "reward-variation"])
