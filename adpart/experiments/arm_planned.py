@@ -25,7 +25,6 @@ from typing import Any
 import numpy as np
 
 from adpart.experiments.base import ExperimentConfig, ExperimentReport, experiment
-from adpart.experiments.stats import compare
 from adpart.experiments.transfer import (
     DELTA,
     EPSILON,
@@ -39,6 +38,7 @@ from adpart.experiments.transfer import (
     plot_blocks,
     setup_settings,
 )
+from adpart.learning.comparison import ratio_to_flat, survival_sentence
 
 #: R-max's known count: the tries of every pair the sample limit measured as enough.
 PLANNED_KNOWN = 30
@@ -99,9 +99,9 @@ def three_floor_arm_planned(config: ExperimentConfig) -> ExperimentReport:
             f"max {row['final_gap_max']:.3g}.")
     comparisons = []
     for a, b_ in ((LEARNERS[1], "flat Q"), (LEARNERS[1], LEARNERS[0])):
-        comp = compare(reached[a], reached[b_], a, b_, seed=config.seed)
-        comparisons.append(comp.to_dict())
-        report.findings.append(comp.sentence("episodes to the 5% bound"))
+        q = ratio_to_flat(curves[a], curves[b_], GAP_FRACTION, config.seed)
+        comparisons.append({"a": a, "b": b_, **q})
+        report.findings.append(survival_sentence(a, b_, q) + ".")
     report.data["comparisons"] = comparisons
     _report_layers(report, results, ctx)
     out = Path(config.out)

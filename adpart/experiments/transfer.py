@@ -44,7 +44,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from adpart.experiments.base import ExperimentConfig, ExperimentReport, experiment
-from adpart.experiments.stats import compare
+from adpart.learning.comparison import ratio_to_flat, survival_sentence
 from adpart.learning.hierarchical_settings import HierarchicalSettings
 from adpart.learning.settings import Run
 from adpart.params import build_settings
@@ -257,9 +257,9 @@ def _finish(config: ExperimentConfig, setup: TransferSetup, report: ExperimentRe
         if a in curves and b in curves]
     comparisons = []
     for a, b in pairs:
-        comp = compare(reached[a], reached[b], a, b, seed=config.seed)
-        comparisons.append(comp.to_dict())
-        report.findings.append(comp.sentence("episodes to the 5% bound"))
+        q = ratio_to_flat(curves[a], curves[b], GAP_FRACTION, config.seed)
+        comparisons.append({"a": a, "b": b, **q})
+        report.findings.append(survival_sentence(a, b, q) + ".")
     report.data["comparisons"] = comparisons
     report.findings.append(
         f"blocks before/after refinement: {blocks['refinement'][:, 0].min()} at the start -> "

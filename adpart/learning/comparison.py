@@ -22,7 +22,8 @@ from adpart.learning.transfer_metrics import (
 )
 
 __all__ = ["TIE_TOLERANCE", "best_final_run", "best_observed_run", "episodes_to_bound", "measured",
-           "ratio_of_medians_ci", "ratio_to_flat", "success_bound", "task_row"]
+           "ratio_of_medians_ci", "ratio_to_flat", "success_bound", "survival_sentence",
+           "task_row"]
 
 #: Final gaps closer than this fraction of the value scale (``max(1, |V*(start)|)``) are a tie:
 #: exact evaluations of equally good policies differ by rounding (1.8e-15 on three-floor), and
@@ -181,3 +182,21 @@ def ratio_to_flat(method: LearningCurve, flat: LearningCurve, fraction: float, s
     return {**out["episodes"], "steps": out["steps"],
             "censored": [int(a.censored.sum()), int(b.censored.sum())],
             "first_evaluation": int(method.evaluated_episodes()[0])}
+
+
+def survival_sentence(a: str, b: str, q: dict[str, Any]) -> str:
+    """One sentence of :func:`ratio_to_flat`'s figures for ``a`` against ``b``."""
+
+    def ratio(entry: dict[str, Any]) -> str:
+        if entry["ratio"] is not None:
+            low, high = ("inf" if x == float("inf") else f"{x:.3g}" for x in entry["ci95"])
+            return f"{entry['ratio']:.3g} (95% CI {low}-{high})"
+        if "at_most" in entry:
+            return f"at most {entry['at_most']:.3g} ({b}'s median is beyond its budget)"
+        if "at_least" in entry:
+            return f"at least {entry['at_least']:.3g} ({a}'s median is beyond its budget)"
+        return "undefined (neither median is within the budget)"
+
+    return (f"Kaplan-Meier median time to the bound, {a} / {b} = {ratio(q)} episodes (log-rank "
+            f"p = {q['p_sooner']:.2g}), {ratio(q['steps'])} primitive steps; censored runs "
+            f"{q['censored'][0]} and {q['censored'][1]}")

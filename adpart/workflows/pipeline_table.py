@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from adpart.learning.comparison import survival_sentence
+
 __all__ = ["comparison_lines"]
 
 
@@ -38,11 +40,7 @@ def comparison_lines(rows: list[dict[str, Any]]) -> list[str]:
     for r in rows:
         if "ratio_to_flat" in r:
             q = r["ratio_to_flat"]
-            lines.append(
-                f"{r['task']}: Kaplan-Meier median time to the bound, {r['learner']} / flat = "
-                f"{_ratio(q)} episodes (log-rank p = {q['p_sooner']:.2g}), "
-                f"{_ratio(q['steps'])} primitive steps; censored runs {q['censored'][0]} and "
-                f"{q['censored'][1]}")
+            lines.append(f"{r['task']}: {survival_sentence(r['learner'], 'flat', q)}")
             if "chain_cost" in r:
                 c = r["chain_cost"]
                 lines.append(
@@ -56,18 +54,6 @@ def comparison_lines(rows: list[dict[str, Any]]) -> list[str]:
                              f"sets {r['learner']}'s median: evaluate more often with "
                              "--eval-every to measure it)")
     return lines
-
-
-def _ratio(q: dict[str, Any]) -> str:
-    """A ratio of medians with its CI, or the bound the censored runs give when a median is
-    beyond the budget."""
-    if q["ratio"] is not None:
-        return f"{q['ratio']:.3g} (95% CI {_ci(q['ci95'])})"
-    if "at_most" in q:
-        return f"at most {q['at_most']:.3g} (flat's median is beyond its budget)"
-    if "at_least" in q:
-        return f"at least {q['at_least']:.3g} (the layer's median is beyond its budget)"
-    return "undefined (neither median is within the budget)"
 
 
 def _sets_it(row: dict[str, Any], first: int) -> bool:

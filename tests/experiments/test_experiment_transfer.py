@@ -72,7 +72,8 @@ def test_three_floor_quick(tmp_path):
     assert rv["runs_within_bound"] == 2 and rv["final_gap_max"] <= rv["bound"]
     assert report.data["hand_designed"]["blocks"] > 1
     assert "about 63" in (tmp_path / "out" / "summary.md").read_text()
-    labels = [(c["label_a"], c["label_b"]) for c in report.data["comparisons"]]
+    labels = [(c["a"], c["b"]) for c in report.data["comparisons"]]
+    assert all("steps" in c and "p_sooner" in c for c in report.data["comparisons"])
     assert ("partition, refinement", "partition, reward variation") in labels
 
 
