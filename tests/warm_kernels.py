@@ -29,6 +29,11 @@ def learning() -> None:
             continue
         for kernel in kernels:
             learn(kernel)
+    from adpart.learning.model_based import known_dynamics_learning
+    from adpart.learning.settings import Run
+    from adpart.mdp.generate import random_grid_mdp
+
+    known_dynamics_learning(random_grid_mdp(9, seed=0), Run(runs=1, episodes=1, kernel="numba"))
 
 
 def structure() -> None:

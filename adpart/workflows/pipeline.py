@@ -90,6 +90,9 @@ class PipelineConfig:
         seed, eval_every: root seed; exact scoring every this many episodes.
         flat_params, hierarchical_params: learner parameters (as on the command line).
         baseline: also learn each later task flat (no transfer) for the comparison.
+        model_baseline: also learn each later task that is learned on a layer with the
+            ``known-dynamics`` learner, which knows the true dynamics and observes the rewards
+            (:mod:`adpart.learning.model_based`).
         gap_fraction: a run has "learned" a task once its greedy policy's value gap stays below
             this fraction of ``|V*|`` at the start distribution (reported as episodes-to-bound).
         hierarchy: a ``hierarchy-estimator`` plugin (``expected-learning-time``,
@@ -117,6 +120,7 @@ class PipelineConfig:
     flat_params: dict[str, Any] = field(default_factory=dict)
     hierarchical_params: dict[str, Any] = field(default_factory=dict)
     baseline: bool = True
+    model_baseline: bool = True
     gap_fraction: float = 0.05
     hierarchy: str | None = None
     hierarchy_params: dict[str, Any] = field(default_factory=dict)
@@ -513,15 +517,28 @@ def run_pipeline(
             )
         )
         task_id = parse_ref(hier_ids["task"], "task")
+        hier_row = len(report.rows) - 1
         if config.baseline:
             say(f"learning {task} flat for comparison")
             _, base_curve = learn_flat(task, config.episodes)
             report.curves[task]["flat (no transfer)"] = base_curve
-            report.rows[-1]["ratio_to_flat"] = ratio_to_flat(hier_curve, base_curve,
+            report.rows[hier_row]["ratio_to_flat"] = ratio_to_flat(hier_curve, base_curve,
                                                              config.gap_fraction, config.seed)
             report.rows.append(_row(task, "flat", base_curve, config.gap_fraction, {}))
             if report.rows[-1]["runs_within_bound"] > 0 and task_id not in evidence:
                 evidence.append(task_id)
+        if config.model_baseline:
+            say(f"learning {task} with the true dynamics (known-dynamics) for comparison")
+            model_req = LearnRequest(
+                env=config.env, task=task, learner="known-dynamics",
+                params=learner_defaults("known-dynamics", defaults), runs=config.runs,
+                episodes=config.episodes, seed=config.seed, eval_every=config.eval_every)
+            _, model_curve = _learn(kb, model_req, report, "learn-known-dynamics")
+            report.curves[task]["known dynamics (flat)"] = model_curve
+            report.rows[hier_row]["ratio_to_known_dynamics"] = ratio_to_flat(
+                hier_curve, model_curve, config.gap_fraction, config.seed)
+            report.rows.append(_row(task, "known-dynamics", model_curve, config.gap_fraction,
+                                    {}))
         report.rows.append(planner_row(config.env, task))
         if task_id not in learned:
             learned.append(task_id)

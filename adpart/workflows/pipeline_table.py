@@ -41,6 +41,9 @@ def comparison_lines(rows: list[dict[str, Any]]) -> list[str]:
         if "ratio_to_flat" in r:
             q = r["ratio_to_flat"]
             lines.append(f"{r['task']}: {survival_sentence(r['learner'], 'flat', q)}")
+            if "ratio_to_known_dynamics" in r:
+                lines.append(f"{r['task']}: " + survival_sentence(
+                    r["learner"], "known-dynamics", r["ratio_to_known_dynamics"]))
             if "chain_cost" in r:
                 c = r["chain_cost"]
                 lines.append(

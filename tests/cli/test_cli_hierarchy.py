@@ -45,9 +45,9 @@ def test_pipeline_with_hierarchy_learns_each_task_on_the_built_layer_and_reuses_
     stages = [(s["stage"], s["task"]) for s in summary["stages"]]
     assert stages[3:] == [
         ("hierarchy", "goal:x=9,y=5"), ("learn-hierarchical", "goal:x=9,y=5"),
-        ("learn-flat", "goal:x=9,y=5"),
+        ("learn-flat", "goal:x=9,y=5"), ("learn-known-dynamics", "goal:x=9,y=5"),
         ("hierarchy", "goal:x=2,y=2"), ("learn-hierarchical", "goal:x=2,y=2"),
-        ("learn-flat", "goal:x=2,y=2"),
+        ("learn-flat", "goal:x=2,y=2"), ("learn-known-dynamics", "goal:x=2,y=2"),
     ]
     layers = [s for s in summary["stages"] if s["stage"] == "hierarchy"]
     # the first layer is built from the first task alone, the second from the first two
@@ -73,7 +73,7 @@ def test_pipeline_with_hierarchy_learns_each_task_on_the_built_layer_and_reuses_
     before = counts(kb_dir)
     again = CliRunner().invoke(cli, [*PIPELINE, "--kb", str(kb_dir), "--out", str(root / "o")])
     assert again.exit_code == 0, again.output
-    assert again.output.count("reused") == 9
+    assert again.output.count("reused") == 11
     assert counts(kb_dir) == before
 
 

@@ -62,6 +62,7 @@ def test_pipeline_runs_stores_everything_and_a_second_run_recomputes_nothing(tmp
         "partition",
         "learn-hierarchical",
         "learn-flat",
+        "learn-known-dynamics",
     ]
     assert summary["stages"][1]["detail"]["subgoals"] == [23]  # the doorway
     assert not any(s["reused"] for s in summary["stages"])
@@ -75,6 +76,9 @@ def test_pipeline_runs_stores_everything_and_a_second_run_recomputes_nothing(tmp
     assert "dynamics true-model, rewards known" in hier["knowledge"]
     assert "phase-3 split by the task's rewards" in hier["knowledge"]
     assert rows[("goal:x=9,y=5", "flat")]["knowledge"] == "dynamics none, rewards observed"
+    model = rows[("goal:x=9,y=5", "known-dynamics")]  # the flat learner with the same dynamics
+    assert model["knowledge"].startswith("dynamics true-model, rewards observed")
+    assert "ratio_to_known_dynamics" in hier
     planner = rows[("goal:x=9,y=5", "planner")]
     assert planner["episodes_to_bound_median"] == 0 and planner["compute_seconds"] > 0
     kb = KnowledgeBase.open(str(kb_dir))
@@ -96,7 +100,7 @@ def test_pipeline_runs_stores_everything_and_a_second_run_recomputes_nothing(tmp
 
     again = CliRunner().invoke(cli, [*PIPELINE, "--kb", str(kb_dir), "--out", str(out)])
     assert again.exit_code == 0, again.output
-    assert again.output.count("reused") == 6
+    assert again.output.count("reused") == 7
     assert "episodes" in again.output and "hierarchical" in again.output  # the final table
     assert counts(kb_dir) == before  # nothing stored twice
 

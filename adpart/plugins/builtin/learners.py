@@ -57,6 +57,32 @@ class QLearner(RunLearner):
                                         eval_every=eval_every, progress=progress))
 
 
+class KnownDynamicsLearner(RunLearner):
+    """Certainty-equivalent control with the true dynamics and observed rewards: the flat
+    baseline that knows what a layer learner on the true model knows of the dynamics
+    (:mod:`adpart.learning.model_based`)."""
+
+    name = "known-dynamics"
+    description = ("flat certainty-equivalent control: the true dynamics, rewards as observed "
+                   "(optimistic where untried), re-planned after each episode")
+    params = settings_params(Run, only=("epsilon", "max_steps_per_episode", "kernel"))
+
+    def learn(
+        self,
+        mdp: FiniteMDP,
+        *,
+        runs: int,
+        episodes: int,
+        seed: int,
+        eval_every: int,
+        progress: Callable[[int, int], object] | None = None,
+    ) -> object:
+        from adpart.learning.model_based import known_dynamics_learning
+
+        return known_dynamics_learning(mdp, self.run(runs=runs, episodes=episodes, seed=seed,
+                                                     eval_every=eval_every, progress=progress))
+
+
 class ValueIterationLearner:
     """The model-based reference: one curve row per value-iteration sweep."""
 
@@ -86,4 +112,5 @@ class ValueIterationLearner:
 @hookimpl
 def register_learners(register: Registrar) -> None:
     register(QLearner)
+    register(KnownDynamicsLearner)
     register(ValueIterationLearner)
