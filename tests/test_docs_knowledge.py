@@ -1,17 +1,21 @@
-"""docs/knowledge.md's command blocks print what the page shows (numbers aside)."""
+"""docs/knowledge.md's and docs/learning.md's command blocks print what the pages show (numbers
+aside)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
+
 from tests.plugins.test_example_package import _console_blocks, _run_documented, _shape
 
-PAGE = Path(__file__).resolve().parents[1] / "docs" / "knowledge.md"
+DOCS = Path(__file__).resolve().parents[1] / "docs"
 
 
-def test_the_pages_commands_print_what_it_shows(tmp_path, monkeypatch):
-    blocks = _console_blocks(PAGE.read_text())
-    assert len(blocks) == 2
+@pytest.mark.parametrize(("page", "n"), [("knowledge.md", 2), ("learning.md", 1)])
+def test_the_pages_commands_print_what_it_shows(page, n, tmp_path, monkeypatch):
+    blocks = _console_blocks((DOCS / page).read_text())
+    assert len(blocks) == n
     monkeypatch.chdir(tmp_path)
     for command, expected in blocks:
         assert _shape(_run_documented(command), tmp_path) == _shape(expected, tmp_path), command
