@@ -96,7 +96,7 @@ def test_the_check_catches_an_incompatible_method():
 
 def test_the_workflows_call_only_what_the_protocol_lists():
     """Every ``kb.<name>`` in the workflows is a Protocol member, or ``close`` of a knowledge
-    base they opened themselves (:func:`adpart.workflows.knowledge.working_kb`)."""
+    base they opened themselves (:func:`adpart.workflows.working_kb.working_kb`)."""
     methods, attributes = _members()
     used: dict[str, str] = {}
     for path in sorted((PACKAGE / "workflows").glob("*.py")):
@@ -106,4 +106,4 @@ def test_the_workflows_call_only_what_the_protocol_lists():
                 used.setdefault(node.attr, f"{path.name}:{node.lineno}")
     extra = {n: where for n, where in used.items() if n not in {*methods, *attributes}}
     assert set(extra) <= {"close"}, extra
-    assert extra.get("close", "knowledge.py").startswith("knowledge.py"), extra
+    assert extra.get("close", "working_kb.py").startswith("working_kb.py"), extra

@@ -118,8 +118,8 @@ def _ratios(pipe: Any, task: str) -> np.ndarray | None:
 def comparisons(config: ExperimentConfig) -> ExperimentReport:
     """Run the pipeline's defaults on every cell and tabulate the comparison (module docstring)."""
     from adpart.learning.transfer_metrics import iqm
-    from adpart.workflows.knowledge import working_kb
     from adpart.workflows.pipeline import PipelineConfig, run_pipeline
+    from adpart.workflows.working_kb import working_kb
 
     out = Path(config.out)
     out.mkdir(parents=True, exist_ok=True)

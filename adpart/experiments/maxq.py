@@ -139,8 +139,8 @@ def _taxi_settings(config: ExperimentConfig) -> dict[str, Any]:
 
 
 def _taxi_pipeline(config: ExperimentConfig, s: dict[str, Any]) -> tuple[Any, dict[str, Any]]:
-    from adpart.workflows.knowledge import working_kb
     from adpart.workflows.pipeline import PipelineConfig, run_pipeline
+    from adpart.workflows.working_kb import working_kb
 
     pc = PipelineConfig(env="taxi-fickle", tasks=("deliver", "deliver"), detector="count-mc",
                         detector_params={"on_loop": "truncate"}, runs=s["runs"],

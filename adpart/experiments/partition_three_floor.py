@@ -140,13 +140,13 @@ def partition_three_floor(config: ExperimentConfig) -> ExperimentReport:
     """Partition three-floor over hand-designed and discovered subgoal options; learn a new task."""
     from adpart.mdp.solvers import solve
     from adpart.subgoals import discover_exhaustive
-    from adpart.workflows.knowledge import working_kb
     from adpart.workflows.partitioning import (
         environment_record,
         partition_environment,
         plot_partition,
         task_record,
     )
+    from adpart.workflows.working_kb import working_kb
 
     out = Path(config.out)
     out.mkdir(parents=True, exist_ok=True)

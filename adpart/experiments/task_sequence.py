@@ -134,9 +134,9 @@ def task_sequence(config: ExperimentConfig) -> ExperimentReport:
     """Five urban tasks on automatically built layers vs flat; task five vs all-subgoals."""
     from adpart.options.subgoal_options import InitiationSettings
     from adpart.workflows.hierarchy import hierarchy_layer
-    from adpart.workflows.knowledge import working_kb
     from adpart.workflows.pipeline import PipelineConfig, run_pipeline
     from adpart.workflows.refs import parse_ref
+    from adpart.workflows.working_kb import working_kb
 
     out = Path(config.out)
     out.mkdir(parents=True, exist_ok=True)

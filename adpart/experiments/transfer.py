@@ -145,9 +145,9 @@ def pipeline_layer(config: ExperimentConfig, setup: TransferSetup, report: Exper
     task's pipeline learners) and return its stored layer, with the options' models on the new
     task and the settings the experiment's own learners share."""
     from adpart.options.models import option_models
-    from adpart.workflows.knowledge import working_kb
     from adpart.workflows.pipeline import PipelineConfig, run_pipeline
     from adpart.workflows.resolve import resolve_domain as get_domain
+    from adpart.workflows.working_kb import working_kb
 
     out = Path(config.out)
     out.mkdir(parents=True, exist_ok=True)
