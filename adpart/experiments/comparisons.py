@@ -75,7 +75,7 @@ def _measures(pipe: Any, task: str, seed: int) -> tuple[list[str], dict[str, Any
     from adpart.learning.transfer_metrics import metrics_from_curve
 
     curves = pipe.curves.get(task, {})
-    flat = curves.get("flat (no transfer)") or next(iter(curves.values()), None)
+    flat = curves.get("flat (no transfer)") or next(iter(curves.values()), None)  # or fallback
     if flat is None:
         return [], {}
     bound = success_bound(flat, pipe.config.gap_fraction)
@@ -94,7 +94,7 @@ def _measures(pipe: Any, task: str, seed: int) -> tuple[list[str], dict[str, Any
 def _ratios(pipe: Any, task: str) -> np.ndarray | None:
     """Per layer run, its episodes to the bound over flat's KM median (censored: inf)."""
     curves = pipe.curves.get(task, {})
-    layer = next((c for label, c in curves.items() if not label.startswith("flat")), None)
+    layer = next((c for label, c in curves.items() if label.startswith("hierarchical")), None)
     flat = curves.get("flat (no transfer)")
     if layer is None or flat is None:
         return None

@@ -495,9 +495,9 @@ def run_pipeline(
         hier_ids, hier_curve = _learn(kb, hier_req, report, "learn-hierarchical")
         start_blocks = int(hier_curve.metadata["initial_blocks"])
         if own_layer or layer is None:
-            label = f"{hierarchical['mode']} ({start_blocks} blocks)"
+            label = f"hierarchical, {hierarchical['mode']} ({start_blocks} blocks)"
         else:  # the blocks it started from: the layer's, split where offered reward options
-            label = f"{config.hierarchy or 'partition'} ({start_blocks} blocks)"
+            label = f"hierarchical on the {config.hierarchy or 'partition'} ({start_blocks} blocks)"
         after = hier_curve.metadata.get("final_blocks")
         if after:
             label = label.replace(" blocks)", f" blocks before refinement, median "
