@@ -79,7 +79,8 @@ def _measures(pipe: Any, task: str, seed: int) -> tuple[list[str], dict[str, Any
     if flat is None:
         return [], {}
     bound = success_bound(flat, pipe.config.gap_fraction)
-    lines = [f"{'curve':<72} " + " ".join(f"{title:>26}" for _, title in MEASURES)]
+    width = max(map(len, curves), default=5)
+    lines = [f"{'curve':<{width}} " + " ".join(f"{title:>26}" for _, title in MEASURES)]
     data: dict[str, Any] = {}
     for label, curve in curves.items():
         m = metrics_from_curve(curve, bound)
@@ -87,7 +88,7 @@ def _measures(pipe: Any, task: str, seed: int) -> tuple[list[str], dict[str, Any
                for name, _ in MEASURES}
         data[label] = {name: list(ci) for name, ci in cis.items()}
         cells = " ".join(f"{f'{e:.3g} [{lo:.3g}, {hi:.3g}]':>26}" for e, lo, hi in cis.values())
-        lines.append(f"{label[:72]:<72} {cells}")
+        lines.append(f"{label:<{width}} {cells}")
     return lines, data
 
 
