@@ -142,8 +142,7 @@ def _say(quiet: bool):  # type: ignore[no-untyped-def]
 @click.option("--baseline/--no-baseline", default=True, show_default=True,
               help="Also learn each later task flat, for comparison.")
 @click.option("--model-baseline/--no-model-baseline", default=True, show_default=True,
-              help="Also learn each later task learned on a layer with known-dynamics, the flat "
-              "learner that knows the true dynamics and observes the rewards.")
+              help="Also learn them with known-dynamics (the true dynamics, rewards observed).")
 @click.option(
     "--hierarchy",
     metavar="NAME",
@@ -194,13 +193,9 @@ def pipeline_cmd(
     """Learn the first task, discover subgoals, learn options, partition, transfer to the rest.
 
     \b
-    Later tasks are learned on the decision layer (--hier-opt: the hierarchical learner's
-    settings; --hierarchy NAME: start from an estimator's layer, section 4.4) and, with
-    --baseline, flat. Every step is stored in the knowledge base and reused when asked again,
-    so a rerun or a resumed crash recomputes nothing it has. A task the knowledge base predicts
-    abstraction will not pay for is learned flat, saying why (--no-fallback: always the layer).
-    Ends with a table of every learner's Kaplan-Meier time to the bound and what it knew, the
-    layer's time over the baselines', and a figure per task (docs/pipeline.md).
+    Later tasks are learned on the stored layer, refined by 4.3.3, beside the baselines. Every
+    step is stored and reused, so a rerun or a resumed crash recomputes nothing. Ends with
+    each learner's Kaplan-Meier time to the bound and what it knew (docs/pipeline.md).
     """
     from adpart.store import KnowledgeBase
     from adpart.workflows.pipeline import PipelineConfig, run_pipeline

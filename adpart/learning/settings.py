@@ -49,14 +49,13 @@ class Run:
     """
 
     runs: int = setting(20, min=1, max=100_000)
-    """Independent runs K, advanced together (20 give the summaries' confidence intervals)."""
+    """Independent runs, advanced together (20: the fewest for a CI)."""
     episodes: int = setting(300, min=1, max=10_000_000)
     """Episodes per run."""
     seed: int | None = setting(0, kind="int", min=0, max=MAX_SEED, none="fresh")
-    """Root seed: run k uses numpy's default_rng(seed).spawn(runs)[k] (fresh: one drawn from
-    OS entropy, recorded with the result)."""
+    """Root seed of default_rng(seed).spawn(runs); fresh: drawn from OS entropy, recorded."""
     eval_every: int = setting(10, min=1)
-    """Score the greedy policies exactly every N episodes (and after the last)."""
+    """Score the greedy policies exactly every N episodes."""
     max_steps_per_episode: int = setting(1000, min=1, option="max-steps")
     """Primitive-step limit of one episode; a cut episode bootstraps through the cut."""
     alpha: Schedule = setting("1/n^0.8", kind="str", parse=_probability_schedule("alpha"))
