@@ -44,6 +44,12 @@ def _check_plugin_params(kind: str, name: str, params: dict[str, Any], option: s
 
 def check_pipeline_options(config: Any) -> None:
     """Every value of a pipeline's config checked up front (plugins, parameters, tasks)."""
+    from adpart.workflows.pipeline import check_tasks
+
+    try:
+        check_tasks(config.env, config.tasks)
+    except AdpartError as exc:
+        raise CLIError(f"--tasks: {exc}") from None
     _check_plugin_params("subgoal-detector", config.detector, config.detector_params,
                          "--detector-opt")
     _check_plugin_params("learner", config.flat_learner, config.flat_params, "--flat-opt")

@@ -331,6 +331,17 @@ def predict_fallback(kb: KnowledgeStore, env: str, task_ids: list[int], params: 
             "flat_estimate": res.flat_estimate, "blocks": res.n_blocks}
 
 
+def check_tasks(env: str, tasks: tuple[str, ...]) -> None:
+    """Resolve every task of the sequence before any work is done: an unknown task name or a
+    goal that matches no state raises here, naming it, not after the earlier tasks were learned
+    and stored."""
+    from adpart.workflows.resolve import resolve_domain
+
+    domain = resolve_domain(env)
+    for task in tasks:
+        domain.task(task)
+
+
 def run_pipeline(
     kb: KnowledgeStore,
     config: PipelineConfig,
@@ -339,6 +350,7 @@ def run_pipeline(
     progress: Callable[[str], object] | None = None,
 ) -> PipelineReport:
     """Run (or resume) the pipeline for ``config``; figures go to ``out`` when given."""
+    check_tasks(config.env, config.tasks)
     say = progress or (lambda message: None)
     report = PipelineReport(config)
     first, *later = config.tasks

@@ -303,3 +303,17 @@ def test_directed_exploration_is_a_learner_option_and_a_bad_count_is_refused(tmp
     layer = next(r for r in split["tasks"] if r["learner"] == "hierarchical")
     assert layer["runs_within_bound"] == layer["runs"] == 3
     assert split["config"]["hierarchical_params"]["split-offered"] == "true"
+
+
+@pytest.mark.parametrize(("tasks", "message"), [
+    ("reach-goal,no-such-task", "--tasks: environment 'two-rooms' has no task 'no-such-task'"),
+    ("reach-goal,goal:x=99", "--tasks: no state matches the goal"),
+])
+def test_a_bad_later_task_is_refused_before_anything_is_learned_or_stored(tasks, message,
+                                                                          tmp_path):
+    kb_dir = tmp_path / "kb"
+    result = CliRunner().invoke(cli, ["pipeline", "two-rooms", "--tasks", tasks, "--kb",
+                                      str(kb_dir), "-q"])
+    assert result.exit_code == 2, result.output
+    assert result.output.strip().startswith(f"Error: {message}")
+    assert not kb_dir.exists()  # nothing was learned, nothing stored
