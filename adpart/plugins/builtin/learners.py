@@ -33,14 +33,6 @@ class RunLearner:
         return replace(self.rule, runs=runs, episodes=episodes, seed=seed,
                        eval_every=eval_every, progress=progress)
 
-
-class QLearner(RunLearner):
-    """Flat epsilon-greedy Q-learning, K runs advanced together (see docs/learning.md)."""
-
-    name = "q-learning"
-    description = "flat epsilon-greedy Q-learning, all runs advanced together (numba, threaded)"
-    params = LEARNER_PARAMS
-
     def learn(
         self,
         mdp: FiniteMDP,
@@ -51,10 +43,26 @@ class QLearner(RunLearner):
         eval_every: int,
         progress: Callable[[int, int], object] | None = None,
     ) -> object:
+        """The learner contract's ``learn``: :meth:`learn_run` with the completed :class:`Run`
+        (a subclass whose learner takes options or a layer overrides this)."""
+        return self.learn_run(mdp, self.run(runs=runs, episodes=episodes, seed=seed,
+                                            eval_every=eval_every, progress=progress))
+
+    def learn_run(self, mdp: FiniteMDP, run: Run) -> object:
+        raise NotImplementedError(f"{type(self).__name__} defines learn_run or learn")
+
+
+class QLearner(RunLearner):
+    """Flat epsilon-greedy Q-learning, K runs advanced together (see docs/learning.md)."""
+
+    name = "q-learning"
+    description = "flat epsilon-greedy Q-learning, all runs advanced together (numba, threaded)"
+    params = LEARNER_PARAMS
+
+    def learn_run(self, mdp: FiniteMDP, run: Run) -> object:
         from adpart.learning.qlearning import q_learning
 
-        return q_learning(mdp, self.run(runs=runs, episodes=episodes, seed=seed,
-                                        eval_every=eval_every, progress=progress))
+        return q_learning(mdp, run)
 
 
 class KnownDynamicsLearner(RunLearner):
@@ -67,20 +75,10 @@ class KnownDynamicsLearner(RunLearner):
                    "(optimistic where untried), re-planned after each episode")
     params = settings_params(Run, only=("epsilon", "max_steps_per_episode", "kernel"))
 
-    def learn(
-        self,
-        mdp: FiniteMDP,
-        *,
-        runs: int,
-        episodes: int,
-        seed: int,
-        eval_every: int,
-        progress: Callable[[int, int], object] | None = None,
-    ) -> object:
+    def learn_run(self, mdp: FiniteMDP, run: Run) -> object:
         from adpart.learning.model_based import known_dynamics_learning
 
-        return known_dynamics_learning(mdp, self.run(runs=runs, episodes=episodes, seed=seed,
-                                                     eval_every=eval_every, progress=progress))
+        return known_dynamics_learning(mdp, run)
 
 
 class ValueIterationLearner:

@@ -3,8 +3,6 @@ built-in task graph (docs/maxq.md)."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 from adpart.learning.maxq.graphs import GraphSettings, get_graph, graph_for
 from adpart.learning.maxq.maxq_q import MaxQResult, maxq_q
 from adpart.learning.settings import Run
@@ -32,20 +30,10 @@ class MaxQLearner(RunLearner):
         super().__init__(**values)
         self.settings = build_settings(GraphSettings, self.values)
 
-    def learn(
-        self,
-        mdp: FiniteMDP,
-        *,
-        runs: int,
-        episodes: int,
-        seed: int,
-        eval_every: int,
-        progress: Callable[[int, int], object] | None = None,
-    ) -> MaxQResult:
+    def learn_run(self, mdp: FiniteMDP, run: Run) -> MaxQResult:
         name = self.settings.graph or graph_for(mdp)
         compiled = get_graph(name).compile(mdp, abstraction=self.settings.abstraction)
-        return maxq_q(mdp, compiled, self.run(runs=runs, episodes=episodes, seed=seed,
-                                              eval_every=eval_every, progress=progress))
+        return maxq_q(mdp, compiled, run)
 
 
 @hookimpl
