@@ -38,7 +38,7 @@ from adpart.experiments.transfer import (
     plot_blocks,
     setup_settings,
 )
-from adpart.learning.comparison import ratio_to_flat, survival_sentence
+from adpart.learning.comparison import survival_sentence, time_ratio
 
 #: R-max's known count: the tries of every pair the sample limit measured as enough.
 PLANNED_KNOWN = 30
@@ -99,7 +99,7 @@ def three_floor_arm_planned(config: ExperimentConfig) -> ExperimentReport:
             f"max {row['final_gap_max']:.3g}.")
     comparisons = []
     for a, b_ in ((LEARNERS[1], "flat Q"), (LEARNERS[1], LEARNERS[0])):
-        q = ratio_to_flat(curves[a], curves[b_], GAP_FRACTION, config.seed)
+        q = time_ratio(curves[a], curves[b_], GAP_FRACTION, config.seed)
         comparisons.append({"a": a, "b": b_, **q})
         report.findings.append(survival_sentence(a, b_, q) + ".")
     report.data["comparisons"] = comparisons

@@ -44,7 +44,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from adpart.experiments.base import ExperimentConfig, ExperimentReport, experiment
-from adpart.learning.comparison import ratio_to_flat, survival_sentence
+from adpart.learning.comparison import survival_sentence, time_ratio
 from adpart.learning.hierarchical_settings import HierarchicalSettings
 from adpart.learning.settings import Run
 from adpart.params import build_settings
@@ -257,7 +257,7 @@ def _finish(config: ExperimentConfig, setup: TransferSetup, report: ExperimentRe
         if a in curves and b in curves]
     comparisons = []
     for a, b in pairs:
-        q = ratio_to_flat(curves[a], curves[b], GAP_FRACTION, config.seed)
+        q = time_ratio(curves[a], curves[b], GAP_FRACTION, config.seed)
         comparisons.append({"a": a, "b": b, **q})
         report.findings.append(survival_sentence(a, b, q) + ".")
     report.data["comparisons"] = comparisons

@@ -22,8 +22,8 @@ from adpart.learning.transfer_metrics import (
 )
 
 __all__ = ["TIE_TOLERANCE", "best_final_run", "best_observed_run", "episodes_to_bound", "measured",
-           "ratio_of_medians_ci", "ratio_to_flat", "success_bound", "survival_sentence",
-           "task_row"]
+           "ratio_of_medians_ci", "success_bound", "survival_sentence", "task_row",
+           "time_ratio"]
 
 #: Final gaps closer than this fraction of the value scale (``max(1, |V*(start)|)``) are a tie:
 #: exact evaluations of equally good policies differ by rounding (1.8e-15 on three-floor), and
@@ -144,9 +144,10 @@ def episodes_to_bound(curve: LearningCurve, fraction: float) -> np.ndarray:
     return np.where(within < 0, episodes + 1.0, within.astype(np.float64))
 
 
-def ratio_to_flat(method: LearningCurve, flat: LearningCurve, fraction: float, seed: int
-                  ) -> dict[str, Any]:
-    """The method's time to the bound over flat's, measured as survival analysis does.
+def time_ratio(method: LearningCurve, baseline: LearningCurve, fraction: float, seed: int
+               ) -> dict[str, Any]:
+    """The method's time to the bound over a baseline's (flat Q-learning, known-dynamics, or
+    another learner on the same task), measured as survival analysis does.
 
     Runs that never stay within the bound are censored at their last evaluation (not counted
     as the budget plus one). For each unit, episodes and primitive steps: the ratio of the
@@ -156,13 +157,14 @@ def ratio_to_flat(method: LearningCurve, flat: LearningCurve, fraction: float, s
     (:func:`~adpart.learning.transfer_metrics.logrank_sooner`). The episodes' figures are at
     the top level, the steps' under ``"steps"``.
 
-    Where fewer than half of flat's runs reach the bound its median is beyond the budget, and a
-    ratio to it is no number: ``ratio`` is then None and ``at_most`` the bound the runs give,
-    the method's median over the latest time a flat run was still censored (likewise ``at_least``
-    where the method's median is beyond its budget and flat's is not).
+    Where fewer than half of the baseline's runs reach the bound its median is beyond the
+    budget, and a ratio to it is no number: ``ratio`` is then None and ``at_most`` the bound the
+    runs give, the method's median over the latest time a baseline run was still censored
+    (likewise ``at_least`` where the method's median is beyond its budget and the baseline's
+    is not).
     """
-    bound = success_bound(flat, fraction)
-    a, b = metrics_from_curve(method, bound), metrics_from_curve(flat, bound)
+    bound = success_bound(baseline, fraction)
+    a, b = metrics_from_curve(method, bound), metrics_from_curve(baseline, bound)
     out: dict[str, dict[str, Any]] = {}
     for unit in ("episodes", "steps"):
         ta, ca = a.event_times(unit)
@@ -185,7 +187,7 @@ def ratio_to_flat(method: LearningCurve, flat: LearningCurve, fraction: float, s
 
 
 def survival_sentence(a: str, b: str, q: dict[str, Any]) -> str:
-    """One sentence of :func:`ratio_to_flat`'s figures for ``a`` against ``b``."""
+    """One sentence of :func:`time_ratio`'s figures for ``a`` against ``b``."""
 
     def ratio(entry: dict[str, Any]) -> str:
         if entry["ratio"] is not None:

@@ -40,12 +40,12 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from adpart.errors import TaskError
-from adpart.learning.comparison import best_observed_run, ratio_to_flat, task_row
+from adpart.learning.comparison import best_observed_run, task_row, time_ratio
 from adpart.learning.curves import LearningCurve
 from adpart.learning.hierarchical_settings import HierarchicalSettings
 from adpart.learning.knowledge import PLANNER, Knowledge
@@ -171,8 +171,17 @@ class PipelineReport:
         }
 
 
+class Learned(NamedTuple):
+    """A learn stage's result: the stored ids, the curve, and what the run knew (its knowledge
+    record's label)."""
+
+    ids: dict[str, Any]
+    curve: LearningCurve
+    knowledge: str
+
+
 def _learn(kb: KnowledgeStore, request: LearnRequest, report: PipelineReport, stage: str
-           ) -> tuple[dict, Any]:
+           ) -> Learned:
     start = time.perf_counter()
     ids = find_learning(kb, request)
     reused = ids is not None
@@ -181,19 +190,19 @@ def _learn(kb: KnowledgeStore, request: LearnRequest, report: PipelineReport, st
     run = kb.get("run", parse_ref(ids["run"], "run"))
     curve = load_curve(kb, run)
     known = run.metrics.get("knowledge")
-    curve.metadata["run_knowledge"] = (Knowledge.from_dict(known).label if known
-                                       else "not declared by the learner")
     report.stages.append(
         Stage(stage, request.task, ids["run"], reused, time.perf_counter() - start)
     )
-    return ids, curve
+    return Learned(ids, curve, Knowledge.from_dict(known).label if known
+                   else "not declared by the learner")
 
 
-def _row(task: str, label: str, curve: LearningCurve, fraction: float,
+def _row(task: str, label: str, learned: Learned, fraction: float,
          extra: dict[str, Any]) -> dict[str, Any]:
-    """:func:`task_row` with what the learner knew (the run's knowledge record)."""
-    return task_row(task, label, curve, fraction,
-                    {"knowledge": curve.metadata.get("run_knowledge"), **extra})
+    """:func:`task_row` of a learn stage with what its run knew (its knowledge record, the
+    learner's with its inputs')."""
+    return task_row(task, label, learned.curve, fraction,
+                    {"knowledge": learned.knowledge, **extra})
 
 
 #: The stages that compute the layer off-line, before the later task is learned.
@@ -367,7 +376,7 @@ def run_pipeline(
     # task's reward states; on a --hierarchy layer they offer those options in its blocks
     own_layer = hierarchical["mode"] in REWARD_OPTION_MODES and not config.hierarchy
 
-    def learn_flat(task: str, episodes: int, stage: str = "learn-flat") -> tuple[dict, Any]:
+    def learn_flat(task: str, episodes: int, stage: str = "learn-flat") -> Learned:
         req = LearnRequest(env=config.env, task=task, learner=config.flat_learner,
                            params=dict(flat), runs=config.runs, episodes=episodes,
                            seed=config.seed, eval_every=config.eval_every)
@@ -384,9 +393,10 @@ def run_pipeline(
         seed=config.seed,
         eval_every=config.eval_every,
     )
-    first_ids, first_curve = _learn(kb, first_req, report, "learn-flat")
+    first_learned = _learn(kb, first_req, report, "learn-flat")
+    first_ids, first_curve = first_learned.ids, first_learned.curve
     report.curves[first] = {"flat": first_curve}
-    report.rows.append(_row(first, "flat", first_curve, config.gap_fraction, {}))
+    report.rows.append(_row(first, "flat", first_learned, config.gap_fraction, {}))
 
     best = best_observed_run(first_curve)  # by its returns: V* is for scoring only
     policy = kb.get("policy", parse_ref(first_ids["policies"][best], "policy"))
@@ -412,12 +422,12 @@ def run_pipeline(
         report.stages.append(Stage("no-subgoals", first, found.record.ref, found.reused, 0.0,
                                    {"reason": reason}))
         for task in later:
-            _, curve = learn_flat(task, config.episodes)
-            report.curves[task] = {"flat (no subgoals)": curve}
-            report.rows.append(_row(task, "flat-fallback", curve, config.gap_fraction,
-                                        {"fallback": reason}))
+            flat_run = learn_flat(task, config.episodes)
+            report.curves[task] = {"flat (no subgoals)": flat_run.curve}
+            report.rows.append(_row(task, "flat-fallback", flat_run, config.gap_fraction,
+                                    {"fallback": reason}))
             if config.baseline:
-                report.rows.append(_row(task, "flat", curve, config.gap_fraction, {}))
+                report.rows.append(_row(task, "flat", flat_run, config.gap_fraction, {}))
         write_figures(kb, report, config, out)
         return report
     option_ids: list[int] = []
@@ -473,14 +483,14 @@ def run_pipeline(
                                        time.perf_counter() - start, {**verdict, "reason": reason}))
             if verdict["fallback"]:
                 say(reason)
-                ids, curve = learn_flat(task, config.episodes)
-                report.curves[task] = {"flat (fallback)": curve}
-                report.rows.append(_row(task, "flat-fallback", curve, config.gap_fraction,
-                                            {"fallback": reason}))
+                flat_run = learn_flat(task, config.episodes)
+                report.curves[task] = {"flat (fallback)": flat_run.curve}
+                report.rows.append(_row(task, "flat-fallback", flat_run, config.gap_fraction,
+                                        {"fallback": reason}))
                 if config.baseline:
-                    report.curves[task]["flat (no transfer)"] = curve
-                    report.rows.append(_row(task, "flat", curve, config.gap_fraction, {}))
-                tid = parse_ref(ids["task"], "task")
+                    report.curves[task]["flat (no transfer)"] = flat_run.curve
+                    report.rows.append(_row(task, "flat", flat_run, config.gap_fraction, {}))
+                tid = parse_ref(flat_run.ids["task"], "task")
                 if tid not in learned:
                     learned.append(tid)
                 if report.rows[-1]["runs_within_bound"] > 0 and tid not in evidence:
@@ -504,7 +514,8 @@ def run_pipeline(
             partition=None if own_layer or layer is None else layer.ref,
             options=(",".join(f"option:{i}" for i in option_ids) or None) if own_layer else None,
         )
-        hier_ids, hier_curve = _learn(kb, hier_req, report, "learn-hierarchical")
+        hier_run = _learn(kb, hier_req, report, "learn-hierarchical")
+        hier_curve = hier_run.curve
         start_blocks = int(hier_curve.metadata["initial_blocks"])
         if own_layer or layer is None:
             label = f"hierarchical, {hierarchical['mode']} ({start_blocks} blocks)"
@@ -519,7 +530,7 @@ def run_pipeline(
             _row(
                 task,
                 "hierarchical",
-                hier_curve,
+                hier_run,
                 config.gap_fraction,
                 {"initial_blocks": start_blocks,
                  "partition": None if own_layer or layer is None else layer.ref,
@@ -528,15 +539,15 @@ def run_pipeline(
                  "chain_cost": _chain_cost(report, config)},
             )
         )
-        task_id = parse_ref(hier_ids["task"], "task")
+        task_id = parse_ref(hier_run.ids["task"], "task")
         hier_row = len(report.rows) - 1
         if config.baseline:
             say(f"learning {task} flat for comparison")
-            _, base_curve = learn_flat(task, config.episodes)
-            report.curves[task]["flat (no transfer)"] = base_curve
-            report.rows[hier_row]["ratio_to_flat"] = ratio_to_flat(hier_curve, base_curve,
-                                                             config.gap_fraction, config.seed)
-            report.rows.append(_row(task, "flat", base_curve, config.gap_fraction, {}))
+            base = learn_flat(task, config.episodes)
+            report.curves[task]["flat (no transfer)"] = base.curve
+            report.rows[hier_row]["ratio_to_flat"] = time_ratio(hier_curve, base.curve,
+                                                                config.gap_fraction, config.seed)
+            report.rows.append(_row(task, "flat", base, config.gap_fraction, {}))
             if report.rows[-1]["runs_within_bound"] > 0 and task_id not in evidence:
                 evidence.append(task_id)
         if config.model_baseline:
@@ -545,12 +556,11 @@ def run_pipeline(
                 env=config.env, task=task, learner="known-dynamics",
                 params=learner_defaults("known-dynamics", defaults), runs=config.runs,
                 episodes=config.episodes, seed=config.seed, eval_every=config.eval_every)
-            _, model_curve = _learn(kb, model_req, report, "learn-known-dynamics")
-            report.curves[task]["known dynamics (flat)"] = model_curve
-            report.rows[hier_row]["ratio_to_known_dynamics"] = ratio_to_flat(
-                hier_curve, model_curve, config.gap_fraction, config.seed)
-            report.rows.append(_row(task, "known-dynamics", model_curve, config.gap_fraction,
-                                    {}))
+            model = _learn(kb, model_req, report, "learn-known-dynamics")
+            report.curves[task]["known dynamics (flat)"] = model.curve
+            report.rows[hier_row]["ratio_to_known_dynamics"] = time_ratio(
+                hier_curve, model.curve, config.gap_fraction, config.seed)
+            report.rows.append(_row(task, "known-dynamics", model, config.gap_fraction, {}))
         report.rows.append(planner_row(config.env, task))
         if task_id not in learned:
             learned.append(task_id)

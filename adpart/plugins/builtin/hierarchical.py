@@ -10,11 +10,12 @@ keywords of :meth:`learn` (``options=`` a list of :class:`adpart.options.Option`
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 
 from adpart.errors import TaskError
 from adpart.learning.hierarchical_settings import HierarchicalSettings
 from adpart.learning.result import LearnResult
+from adpart.learning.settings import Run
 from adpart.learning.smdp_q import SMDPQSettings
 from adpart.mdp.model import FiniteMDP
 from adpart.options.option import Option
@@ -41,18 +42,14 @@ class SMDPQLearner(RunLearner):
         super().__init__(**values)
         self.settings = build_settings(SMDPQSettings, self.values)
 
-    def learn(self, mdp: FiniteMDP, *, runs: int, episodes: int, seed: int, eval_every: int,
-              progress: Callable[[int, int], object] | None = None,
-              options: Sequence[Option] | None = None,
-              partition: Partition | None = None) -> LearnResult:
+    def learn_run(self, mdp: FiniteMDP, run: Run, options: Sequence[Option] | None = None,
+                  partition: Partition | None = None) -> LearnResult:
         from dataclasses import replace
 
         from adpart.learning.smdp_q import smdp_q_learning
 
         opts = list(options or [])
         settings = self.settings if opts else replace(self.settings, include_primitives=True)
-        run = self.run(runs=runs, episodes=episodes, seed=seed, eval_every=eval_every,
-                       progress=progress)
         return smdp_q_learning(mdp, opts, settings, run)
 
 
@@ -73,10 +70,8 @@ class HierarchicalLearner(RunLearner):
         super().__init__(**values)
         self.settings = build_settings(HierarchicalSettings, self.values)
 
-    def learn(self, mdp: FiniteMDP, *, runs: int, episodes: int, seed: int, eval_every: int,
-              progress: Callable[[int, int], object] | None = None,
-              options: Sequence[Option] | None = None,
-              partition: Partition | None = None) -> LearnResult:
+    def learn_run(self, mdp: FiniteMDP, run: Run, options: Sequence[Option] | None = None,
+                  partition: Partition | None = None) -> LearnResult:
         from adpart.learning.hierarchical import hierarchical_learning
 
         if not options and not self.settings.reward_options:
@@ -85,8 +80,6 @@ class HierarchicalLearner(RunLearner):
                 "--options ID (and --partition ID) from the knowledge base, or use a "
                 "reward-variation mode, which makes options to the task's reward states"
             )
-        run = self.run(runs=runs, episodes=episodes, seed=seed, eval_every=eval_every,
-                       progress=progress)
         return hierarchical_learning(mdp, list(options or []), partition, self.settings, run)
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
@@ -18,9 +19,10 @@ LEARNER_PARAMS = settings_params(Run, only=LEARNER_FIELDS)
 _RULE_KEYWORDS = frozenset(p.keyword for p in LEARNER_PARAMS)  # max_steps, q_init, ...
 
 
-class RunLearner:
+class RunLearner(ABC):
     """A learner plugin whose parameters include :data:`LEARNER_PARAMS`: it keeps them as a
-    checked :class:`Run` and completes it with the experiment's settings at :meth:`run`."""
+    checked :class:`Run`, completes it with the experiment's settings at each :meth:`learn`
+    and hands it to :meth:`learn_run`, the one method a subclass writes."""
 
     def __init__(self, **values: Any) -> None:
         rule = {k: values.pop(k) for k in list(values) if k in _RULE_KEYWORDS}
@@ -42,14 +44,16 @@ class RunLearner:
         seed: int,
         eval_every: int,
         progress: Callable[[int, int], object] | None = None,
+        **inputs: Any,
     ) -> object:
         """The learner contract's ``learn``: :meth:`learn_run` with the completed :class:`Run`
-        (a subclass whose learner takes options or a layer overrides this)."""
+        and the ``options``/``partition`` a learner that ``accepts`` them is given."""
         return self.learn_run(mdp, self.run(runs=runs, episodes=episodes, seed=seed,
-                                            eval_every=eval_every, progress=progress))
+                                            eval_every=eval_every, progress=progress), **inputs)
 
-    def learn_run(self, mdp: FiniteMDP, run: Run) -> object:
-        raise NotImplementedError(f"{type(self).__name__} defines learn_run or learn")
+    @abstractmethod
+    def learn_run(self, mdp: FiniteMDP, run: Run, **inputs: Any) -> object:
+        """Learn ``mdp`` with the checked run settings ``run``."""
 
 
 class QLearner(RunLearner):
