@@ -98,3 +98,21 @@ def test_no_compiled_function_takes_more_than_twenty_parameters():
     assert not offenders, (
         f"numba-compiled functions with more than {MAX_PARAMETERS} parameters (group the "
         "arguments by role in tuples):\n" + "\n".join(offenders))
+
+
+def test_the_learners_take_their_model_inputs_settings_and_run_only():
+    """Issue 35's bound: ``hierarchical_learning(mdp, options, partition, settings, run,
+    models)`` and the other learners take at most six parameters."""
+    import inspect
+
+    from adpart.learning.hierarchical import hierarchical_learning
+    from adpart.learning.maxq.maxq_q import maxq_q
+    from adpart.learning.model_based import known_dynamics_learning
+    from adpart.learning.qlearning import q_learning
+    from adpart.learning.smdp_q import smdp_q_learning
+
+    for learner in (hierarchical_learning, smdp_q_learning, q_learning, maxq_q,
+                    known_dynamics_learning):
+        assert len(inspect.signature(learner).parameters) <= 6, learner.__name__
+    assert list(inspect.signature(hierarchical_learning).parameters) == [
+        "mdp", "options", "partition", "settings", "run", "models"]
