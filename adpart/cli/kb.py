@@ -435,8 +435,9 @@ def export(kb_location: KBLocation, ref: str, out: Path, field_name: str | None)
             value = base.read_artifact(record)
         else:
             fields = list(type(record).ARTIFACTS)
-            if field_name is None and len(fields) == 1:
-                field_name = fields[0]
+            present = [f for f in fields if getattr(record, f) is not None]
+            if field_name is None and len(present) == 1:  # the record's only artifact
+                field_name = present[0]
             if field_name not in fields:
                 raise KBError(
                     f"{record.ref} has artifact fields {', '.join(fields) or 'none'}; "

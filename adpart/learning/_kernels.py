@@ -64,7 +64,7 @@ import numpy as np
 from numba import prange
 
 from adpart.errors import UnknownNameError
-from adpart.mdp._sampling import first_above, successor
+from adpart.mdp._sampling import first_above
 
 #: Uniforms per agent-step (explore?, which action, successor, next start).
 UNIFORMS_PER_STEP = 4
@@ -179,7 +179,8 @@ class LockStepState(ScheduledAgents):
     positive start probability; ``gamma``; ``horizon`` (steps per episode).
 
     Per agent (K leading axis), the table: ``Q`` (K, S, A) with ``-inf`` on inadmissible pairs;
-    ``n_sa`` (K, S, A) and ``n_s`` (K, S) visit counts; the agents: ``state``; ``episode``
+    ``n_sa`` (K, S, A) and ``n_s`` (K, S) visit counts; ``n_next`` (K, nnz) the agent's
+    experience, how often each transition (CSR entry ``a*S + s -> s'``) was taken; the agents: ``state``; ``episode``
     (completed episodes); ``target`` (episodes to complete before returning); ``t_ep``, ``ret``,
     ``dret``, ``gpow`` (steps, undiscounted and discounted return, ``gamma**t`` of the current
     episode); ``alpha_ep`` / ``eps_ep`` (``scale * rate**episode`` of each schedule); ``U``
@@ -207,6 +208,7 @@ class LockStepState(ScheduledAgents):
     Q: np.ndarray
     n_sa: np.ndarray
     n_s: np.ndarray
+    n_next: np.ndarray
     state: np.ndarray
     episode: np.ndarray
     target: np.ndarray
@@ -235,7 +237,7 @@ class LockStepState(ScheduledAgents):
             (*self.alpha, *self.eps, visit_power_table(self.alpha[2], POW_TABLE),
              visit_power_table(self.eps[2], POW_TABLE)),
             stride,
-            (self.Q, self.n_sa, self.n_s),
+            (self.Q, self.n_sa, self.n_s, self.n_next),
             (self.state, self.episode, self.target, self.t_ep, self.ret, self.dret, self.gpow,
              self.alpha_ep, self.eps_ep, self.U, self.cursor),
             (self.out_steps, self.out_ret, self.out_dret, self.policy, self.changed),
@@ -250,7 +252,7 @@ def lockstep(model, schedules, stride, table, agents, outputs):
     (keys, indptr, indices, R, terminal, adm_ptr, adm_idx, start_cdf, last_start, gamma,
      horizon) = model
     a_scale, a_rate, a_omega, a_floor, e_scale, e_rate, e_omega, e_floor, a_pow, e_pow = schedules
-    Q, n_sa, n_s = table
+    Q, n_sa, n_s, n_next = table
     (state, episode, target, t_ep, ret, dret, gpow, alpha_ep, eps_ep, U, cursor) = agents
     out_steps, out_ret, out_dret, policy, changed = outputs
     K = Q.shape[0]
@@ -309,7 +311,11 @@ def lockstep(model, schedules, stride, table, agents, outputs):
                                     a = b
                                     break
                                 j -= 1
-                s2 = successor(a * S + s, u2, keys, indptr, indices)
+                row = a * S + s  # the successor: FiniteMDP.sample_next with u2
+                hi = indptr[row + 1]
+                pos = min(first_above(keys, row + u2, indptr[row], hi), hi - 1)
+                s2 = indices[pos]
+                n_next[k, pos] += 1
                 r = R[s, a]
                 n_sa[k, s, a] += 1
                 alpha = alpha_ep[k]

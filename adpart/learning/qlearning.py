@@ -48,6 +48,7 @@ from adpart.learning.result import LearnResult
 from adpart.learning.schedules import Schedule
 from adpart.learning.settings import Run, fresh_seed, require_mdp
 from adpart.mdp.evaluation import greedy_policy
+from adpart.mdp.experience import Experience
 from adpart.mdp.model import FiniteMDP
 
 __all__ = ["QLearningResult", "default_kernel", "q_learning"]
@@ -68,11 +69,15 @@ class QLearningResult(LearnResult):
     Attributes:
         Q: ``(K, S, A)`` float64 action values of every run; ``-inf`` on inadmissible pairs.
         visits: ``(K, S, A)`` int64 number of updates of each pair.
+        experience: the transitions every run took, counted and summed over the runs
+            (:class:`~adpart.mdp.experience.Experience`): what a learner that estimates the dynamics
+            from these runs may read.
         curve, seed, v_star_start, parameters: as :class:`~adpart.learning.result.LearnResult`
             (the seed is drawn from OS entropy and recorded when none was given).
     """
 
     visits: np.ndarray
+    experience: Experience
 
 
 def _policy_dtype(n_actions: int) -> np.dtype:
@@ -118,6 +123,7 @@ def _initial_state(
         Q=Q,
         n_sa=np.zeros((runs, S, A), dtype=np.int64),
         n_s=np.zeros((runs, S), dtype=np.int64),
+        n_next=np.zeros((runs, mdp.P.nnz), dtype=np.int64),
         state=np.zeros(runs, dtype=np.int64),
         episode=np.zeros(runs, dtype=np.int64),
         target=np.zeros(runs, dtype=np.int64),
@@ -228,7 +234,9 @@ def q_learning(mdp: FiniteMDP, run: Run | None = None) -> QLearningResult:
     )
     for arr in (st.Q, st.n_sa):
         arr.setflags(write=False)
+    with world():  # the CSR layout the counts were kept in names each successor
+        experience = Experience.from_positions(mdp.P, st.n_next)
     return QLearningResult(
         Q=st.Q, visits=st.n_sa, curve=curve, seed=root_seed, v_star_start=v_star,
-        parameters=parameters,
+        parameters=parameters, experience=experience,
     )

@@ -135,15 +135,18 @@ class Partition(Record):
 
 @dataclass(frozen=True)
 class Run(Record):
-    """One learning run of a task, optionally on a partition; ``curve`` is a table artifact."""
+    """One learning run of a task, optionally on a partition; ``curve`` is a table artifact,
+    ``experience`` (schema 3) the counts of the primitive transitions its runs took, a table
+    ``(state, action, next_state, count)``, when the learner recorded them."""
 
     KIND: ClassVar[str] = "run"
-    ARTIFACTS: ClassVar[dict[str, str]] = {"curve": "table"}
+    ARTIFACTS: ClassVar[dict[str, str]] = {"curve": "table", "experience": "table"}
     task_id: int
     partition_id: int | None
     learner: str
     seed: int | None
     curve: str | None
+    experience: str | None
     metrics: dict[str, Any]
     provenance: Provenance = field(repr=False, compare=False)
 

@@ -603,17 +603,22 @@ class KnowledgeBase(Queries, Tables, Maintenance):
                 metrics: Mapping[str, Any] | None = None,
                 partition: E.Partition | int | None = None,
                 seed: int | None = None, plugin: str = "", plugin_version: str = "",
-                parameters: Mapping[str, Any] | None = None) -> E.Run:
-        """Store a learning run: ``curve`` a table (episodes, steps, value gap, ...), metrics."""
+                parameters: Mapping[str, Any] | None = None, experience: Any = None) -> E.Run:
+        """Store a learning run: ``curve`` a table (episodes, steps, value gap, ...), metrics,
+        and ``experience``, a table of the transitions its runs took (``state, action,
+        next_state, count``), when the learner recorded them."""
         metrics = dict(metrics or {})
         _json(metrics, "metrics")
         task_id = _id(task)
         curve_art = self._table(curve, "curve")
+        experience_art = self._table(experience, "experience")
         with self._session(write=True) as s:
             self._need(s, SqlTask, task_id, "task")
             self._ensure_rows(s, curve_art)
+            self._ensure_rows(s, experience_art)
             row = SqlRun(task_id=task_id, partition_id=_id(partition), learner=learner, seed=seed,
-                         curve_sha=self._sha(curve_art), metrics=metrics,
+                         curve_sha=self._sha(curve_art),
+                         experience_sha=self._sha(experience_art), metrics=metrics,
                          **self._prov(plugin or learner, plugin_version, parameters))
             s.add(row)
             s.flush()

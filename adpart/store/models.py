@@ -204,6 +204,9 @@ class SqlRun(Provenance, Base):
     learner: Mapped[str] = mapped_column(String(255))
     seed: Mapped[int | None] = mapped_column(BigInteger)
     curve_sha: Mapped[str | None] = _artifact_ref()
+    # added by schema 3's ALTER TABLE: a plain column (no foreign key or index, which SQLite
+    # cannot add to a table in place); gc and `kb check` follow it through ARTIFACT_COLUMNS
+    experience_sha: Mapped[str | None] = mapped_column(_SHA, nullable=True)
     metrics: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
 
 
@@ -221,5 +224,5 @@ ARTIFACT_COLUMNS: dict[type[Base], tuple[str, ...]] = {
     SqlOption: ("initiation_sha", "policy_sha", "termination_sha", "reward_sha",
                 "transitions_sha"),
     SqlPartition: ("labels_sha", "block_actions_sha"),
-    SqlRun: ("curve_sha",),
+    SqlRun: ("curve_sha", "experience_sha"),
 }

@@ -91,7 +91,7 @@ class Queries:
                                row.block_actions_sha, tuple(r.id for r in row.parents), p)
         if isinstance(row, SqlRun):
             return E.Run(row.id, row.task_id, row.partition_id, row.learner, row.seed,
-                         row.curve_sha, dict(row.metrics or {}), p)
+                         row.curve_sha, row.experience_sha, dict(row.metrics or {}), p)
         raise TypeError(type(row).__name__)
 
     @staticmethod

@@ -19,8 +19,9 @@ from adpart.store.integrity import ROW_SHA, row_digest
 from adpart.store.models import HASHED_TABLES, Base, SqlSchema, partition_parents
 
 #: the schema version this adpart reads and writes
-#: (2: every metadata row carries ``row_sha``, its content hash, checked by ``adpart kb check``)
-SCHEMA_VERSION = 2
+#: (2: every metadata row carries ``row_sha``, its content hash, checked by ``adpart kb check``;
+#: 3: a run may reference its experience, the transitions its runs took: ``runs.experience_sha``)
+SCHEMA_VERSION = 3
 
 
 def stamp_all_rows(conn: Connection) -> None:
@@ -42,14 +43,21 @@ def stamp_all_rows(conn: Connection) -> None:
 
 
 def _add_row_hashes(conn: Connection) -> None:
-    """Schema 1 -> 2: a ``row_sha`` column on every metadata table, filled for existing rows."""
+    """Schema 1 -> 2: a ``row_sha`` column on every metadata table (filled once the last step
+    has run: a row's hash covers the columns of the current schema)."""
     for table in HASHED_TABLES:
         conn.execute(text(f"ALTER TABLE {table.name} ADD COLUMN {ROW_SHA} VARCHAR(64)"))
-    stamp_all_rows(conn)
+
+
+def _add_run_experience(conn: Connection) -> None:
+    """Schema 2 -> 3: ``runs.experience_sha``, empty for existing runs (their row hashes are
+    recomputed over it once the last step has run)."""
+    conn.execute(text("ALTER TABLE runs ADD COLUMN experience_sha VARCHAR(64)"))
 
 
 #: MIGRATIONS[v] upgrades a version-v database to version v + 1 inside one transaction
-MIGRATIONS: dict[int, Callable[[Connection], None]] = {1: _add_row_hashes}
+MIGRATIONS: dict[int, Callable[[Connection], None]] = {1: _add_row_hashes,
+                                                       2: _add_run_experience}
 
 
 def read_version(conn: Connection, location: str) -> tuple[int, str] | None:
@@ -115,4 +123,6 @@ def upgrade_schema(conn: Connection, location: str) -> tuple[int, int]:
         step(conn)
         version += 1
         conn.execute(SqlSchema.__table__.update().values(version=version, written_by=__version__))
+    if version != start:  # every row's hash, over the columns of the schema it now has
+        stamp_all_rows(conn)
     return start, version

@@ -22,9 +22,11 @@ def reference_q_learning(mdp: FiniteMDP, *, runs, episodes, seed, alpha, epsilon
     """An independent per-agent implementation of the documented rule (docs/learning.md).
 
     Run k draws from ``default_rng(seed).spawn(runs)[k]``: one uniform for the first start, then
-    four per step (explore?, which action, successor by inverse CDF, next start).
+    four per step (explore?, which action, successor by inverse CDF, next start). Returns the
+    runs' Q tables, their episode lengths and the transitions they took, ``counts[s, a, s']``.
     """
     S, A = mdp.n_states, mdp.n_actions
+    counts = np.zeros((S, A, S), dtype=np.int64)
     mu = np.where(mdp.terminal, 0.0, mdp.initial)
     mu = mu / mu.sum()
     Qs, steps = [], []
@@ -51,6 +53,7 @@ def reference_q_learning(mdp: FiniteMDP, *, runs, episodes, seed, alpha, epsilon
                 succ, probs = mdp.transition_row(s, a)
                 s2 = int(succ[min(np.searchsorted(np.cumsum(probs), u[2], side="right"),
                                   len(succ) - 1)])
+                counts[s, a, s2] += 1
                 r = mdp.R[s, a]
                 n_sa[s, a] += 1
                 lr = alpha.scale * alpha.rate ** float(e)
@@ -67,7 +70,7 @@ def reference_q_learning(mdp: FiniteMDP, *, runs, episodes, seed, alpha, epsilon
             ep_steps.append(t)
         Qs.append(Q)
         steps.append(ep_steps)
-    return np.array(Qs), np.array(steps)
+    return np.array(Qs), np.array(steps), counts
 
 
 def _final_gaps(result) -> np.ndarray:
@@ -269,10 +272,14 @@ def test_lockstep_matches_independent_per_agent_reference(alpha, epsilon):
     mdp = slippery_grid(side=3, slip=0.3, gamma=0.9)
     res = q_learning(mdp, Run(runs=3, episodes=15, seed=21, alpha=alpha, epsilon=epsilon,
                               max_steps_per_episode=30, eval_every=15))
-    Q, steps = reference_q_learning(mdp, runs=3, episodes=15, seed=21, alpha=alpha,
-                                    epsilon=epsilon, horizon=30)
+    Q, steps, counts = reference_q_learning(mdp, runs=3, episodes=15, seed=21, alpha=alpha,
+                                            epsilon=epsilon, horizon=30)
     assert np.array_equal(res.curve.matrix("steps"), steps)
     np.testing.assert_allclose(res.Q, Q, rtol=0, atol=1e-12)
+    S, A = mdp.n_states, mdp.n_actions  # the experience is every step the runs took
+    assert np.array_equal(res.experience.counts.toarray().reshape(A, S, S),
+                          counts.transpose(1, 0, 2))
+    assert res.experience.steps == steps.sum()
 
 
 def test_admissible_actions_only():

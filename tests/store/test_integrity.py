@@ -161,6 +161,7 @@ def test_an_old_schema_is_upgraded_with_row_hashes(where, populated):
         for table in ("artifacts", "environments", "tasks", "policies", "subgoal_sets",
                       "subgoals", "options", "partition_options", "partitions", "runs"):
             conn.execute(text(f"ALTER TABLE {table} DROP COLUMN row_sha"))
+        conn.execute(text("ALTER TABLE runs DROP COLUMN experience_sha"))  # schema 3's
         conn.execute(text("UPDATE adpart_schema SET version = 1"))
     engine.dispose()
     with pytest.raises(StoreError, match="run `adpart kb upgrade`"):
@@ -174,6 +175,31 @@ def test_an_old_schema_is_upgraded_with_row_hashes(where, populated):
         assert report.rows_checked >= 10
         assert kb.get("run", rec["run"].id) == rec["run"]
 
+
+
+def test_a_schema_2_knowledge_base_is_upgraded_with_run_experience(where, populated):
+    kb, rec = populated
+    kb.close()
+    engine = create_engine(where.db_url)
+    with engine.begin() as conn:  # make it a schema-2 knowledge base again
+        conn.execute(text("ALTER TABLE runs DROP COLUMN experience_sha"))
+        conn.execute(text("UPDATE adpart_schema SET version = 2"))
+    engine.dispose()
+    with pytest.raises(StoreError, match="run `adpart kb upgrade`"):
+        where.open()
+    result = CliRunner().invoke(kb_group, ["upgrade", *where.cli])
+    assert result.exit_code == 0, result.output
+    assert f"2 -> {SCHEMA_VERSION}" in result.output
+    with where.open() as kb:
+        report = kb.check()
+        assert report.ok, report.problems  # the runs' row hashes cover the new column
+        run = kb.get("run", rec["run"].id)
+        assert run.experience is None and run == rec["run"]
+        table = {"state": [0, 0], "action": [1, 1], "next_state": [2, 3], "count": [5, 1]}
+        task = kb.get("task", run.task_id)
+        again = kb.put_run(task, "q-learning", experience=table)
+        assert kb.load(again, "experience").column("count").to_pylist() == [5, 1]
+        assert kb.check().ok
 
 # ---------------------------------------------------------------------- concurrent first opens
 OPENER = """

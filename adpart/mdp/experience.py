@@ -1,0 +1,167 @@
+"""Experience: the primitive transitions an agent took, counted, and the model they estimate.
+
+Section 4.1 learns the options "off-line" from what the agent learned in earlier tasks, and 4.2
+performs phases 1-2 "prior to having knowledge of the specific task". Without the environment's
+true model the only dynamics an agent has are its own steps. :class:`Experience` holds them as
+counts ``N(s, a, s')`` in the layout of :class:`~adpart.mdp.model.FiniteMDP`'s transitions (an
+``(A*S, S)`` CSR, row ``a*S + s``), and :meth:`Experience.estimate` turns them into the
+maximum-likelihood model
+
+    P^(s' | s, a) = N(s, a, s') / N(s, a)            for every pair tried at least once.
+
+A pair never tried is **unknown**, and the estimate keeps it out: it is not admissible in the
+estimated model (its row is a self-loop, never read by a solver), so no option policy takes it
+and no option model contains it. A state where no action was ever tried has nothing known at
+all; every action stays admissible there as a self-loop, so that the model is a valid MDP and
+the state is one no option can leave - the layer then offers the primitive actions there
+(:mod:`adpart.workflows.partitioning`), and the learner finds out what they do.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+
+from adpart.errors import ModelError
+
+__all__ = ["Experience", "EXPERIENCE_COLUMNS"]
+
+#: The columns of an experience table (as the knowledge base stores it).
+EXPERIENCE_COLUMNS = ("state", "action", "next_state", "count")
+
+
+@dataclass(frozen=True, eq=False)
+class Experience:
+    """Counts of the transitions taken, ``counts[a*S + s, s'] = N(s, a, s')`` (module docstring).
+
+    Attributes:
+        counts: ``(A*S, S)`` CSR int64, action-major as :attr:`FiniteMDP.P`; no explicit zeros.
+        sources: what the counts came from (run references), for the record.
+    """
+
+    counts: sp.csr_array
+    sources: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        counts = sp.csr_array(self.counts, dtype=np.int64)
+        counts.sum_duplicates()
+        counts.eliminate_zeros()
+        counts.sort_indices()
+        rows, cols = counts.shape
+        if cols <= 0 or rows % cols:
+            raise ModelError(f"experience counts have shape {counts.shape}; they must be "
+                             "(n_actions * n_states, n_states)")
+        if counts.nnz and counts.data.min() < 0:
+            raise ModelError("experience counts must be >= 0")
+        object.__setattr__(self, "counts", counts)
+        object.__setattr__(self, "sources", tuple(self.sources))
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def empty(cls, n_states: int, n_actions: int) -> Experience:
+        return cls(sp.csr_array((n_actions * n_states, n_states), dtype=np.int64))
+
+    @classmethod
+    def from_positions(cls, P: sp.csr_array, counts: np.ndarray,
+                       sources: Iterable[str] = ()) -> Experience:
+        """Counts kept per CSR entry of the transitions ``P`` (``counts[..., k]`` for entry
+        ``k``; a leading runs axis is summed): how the lock-step kernels count the successor
+        they draw. ``P`` supplies the layout (which entry is which ``s'``), never a value."""
+        counts = np.asarray(counts, dtype=np.int64)
+        if counts.ndim == 2:
+            counts = counts.sum(axis=0)
+        if counts.shape != (P.nnz,):
+            raise ModelError(f"{counts.shape} counts for a transition matrix of {P.nnz} entries")
+        matrix = sp.csr_array((counts, P.indices.copy(), P.indptr.copy()), shape=P.shape)
+        return cls(matrix, tuple(sources))
+
+    @classmethod
+    def from_table(cls, table: Any, n_states: int, n_actions: int,
+                   sources: Iterable[str] = ()) -> Experience:
+        """From columns ``state, action, next_state, count`` (a mapping of arrays or a pyarrow
+        table), as :meth:`to_table` writes them."""
+        cols = {c: np.asarray(table[c] if isinstance(table, Mapping) else
+                              table.column(c).to_numpy(), dtype=np.int64)
+                for c in EXPERIENCE_COLUMNS}
+        s, a, s2, n = (cols[c] for c in EXPERIENCE_COLUMNS)
+        for name, values, bound in (("state", s, n_states), ("action", a, n_actions),
+                                    ("next_state", s2, n_states)):
+            if values.size and (values.min() < 0 or values.max() >= bound):
+                raise ModelError(f"experience column {name} has values outside [0, {bound})")
+        matrix = sp.csr_array((n, (a * n_states + s, s2)),
+                              shape=(n_actions * n_states, n_states))
+        return cls(matrix, tuple(sources))
+
+    @classmethod
+    def merge(cls, parts: Iterable[Experience]) -> Experience:
+        """All of ``parts``' steps together (same state and action sets)."""
+        parts = list(parts)
+        if not parts:
+            raise ModelError("no experience to merge")
+        shapes = {p.counts.shape for p in parts}
+        if len(shapes) != 1:
+            raise ModelError(f"experience of different state spaces {sorted(shapes)}")
+        total = parts[0].counts.copy()
+        for p in parts[1:]:
+            total = total + p.counts
+        return cls(total, tuple(s for p in parts for s in p.sources))
+
+    def to_table(self) -> dict[str, np.ndarray]:
+        """The nonzero counts as columns ``state, action, next_state, count`` (int64)."""
+        coo = self.counts.tocoo()
+        S = self.n_states
+        return {"state": (coo.row % S).astype(np.int64), "action": (coo.row // S).astype(np.int64),
+                "next_state": coo.col.astype(np.int64), "count": coo.data.astype(np.int64)}
+
+    # ------------------------------------------------------------------ what is known
+    @property
+    def n_states(self) -> int:
+        return int(self.counts.shape[1])
+
+    @property
+    def n_actions(self) -> int:
+        return int(self.counts.shape[0] // self.counts.shape[1])
+
+    @cached_property
+    def pair_counts(self) -> np.ndarray:
+        """``(S, A)`` ``N(s, a)``: how often each pair was tried."""
+        return np.asarray(self.counts.sum(axis=1)).reshape(self.n_actions, self.n_states).T
+
+    @property
+    def tried(self) -> np.ndarray:
+        """``(S, A)`` bool: the pairs tried at least once (the known ones)."""
+        return self.pair_counts > 0
+
+    @property
+    def steps(self) -> int:
+        """Transitions counted."""
+        return int(self.counts.data.sum())
+
+    def summary(self) -> dict[str, Any]:
+        tried = self.tried
+        return {"steps": self.steps, "pairs_tried": int(tried.sum()),
+                "pairs": int(tried.size), "states_visited": int(tried.any(axis=1).sum()),
+                "states": self.n_states, "sources": list(self.sources)}
+
+    # ------------------------------------------------------------------ the estimate
+    def estimate(self) -> tuple[sp.csr_array, np.ndarray]:
+        """The maximum-likelihood transitions ``(A*S, S)`` CSR float64 and the ``(S, A)``
+        admissible mask of the estimated model (module docstring: unknown pairs kept out)."""
+        S, A = self.n_states, self.n_actions
+        n_sa = self.pair_counts.T.reshape(-1).astype(np.float64)  # row a*S + s
+        counts = self.counts
+        row_of = np.repeat(np.arange(counts.shape[0]), np.diff(counts.indptr))
+        probs = counts.data / n_sa[row_of]
+        untried = np.flatnonzero(n_sa == 0)
+        rows = np.concatenate([row_of, untried])
+        cols = np.concatenate([counts.indices.astype(np.int64), untried % S])
+        data = np.concatenate([probs, np.ones(untried.size)])
+        P = sp.csr_array((data, (rows, cols)), shape=counts.shape)
+        tried = self.tried
+        admissible = tried | ~tried.any(axis=1, keepdims=True)  # nothing known: all self-loops
+        return P, admissible
