@@ -256,10 +256,11 @@ def ls(kb_location: KBLocation, kind_arg: str | None, kind_opt: str | None, env:
     if kind_arg and kind_opt and _kind(kind_arg) != _kind(kind_opt):
         raise KBError(f"KIND {kind_arg!r} and --kind {kind_opt!r} disagree; give one of them")
     name = kind_opt or kind_arg
+    damaged: list[str] = []
     with _open(kb_location, read_only=True) as base:
         try:
             table = base.records_table(_kind(name) if name else None, env=env, task=task,
-                                       where=_where_items(where), limit=limit)
+                                       where=_where_items(where), limit=limit, damaged=damaged)
         except AdpartError as exc:
             hint = ""
             if where and "parameter" in str(exc):
@@ -267,11 +268,19 @@ def ls(kb_location: KBLocation, kind_arg: str | None, kind_opt: str | None, env:
             raise KBError(f"{exc}{hint}") from exc
     if as_json:
         click.echo(strict_json(json_rows(table)))
-        return
-    if table.num_rows == 0:
+    elif table.num_rows == 0:
         click.echo("no records match" if (env or task or where) else "no records")
-        return
-    _print_table([h for h, _, _ in _LS_COLUMNS], _ls_rows(table), right={6})
+    else:
+        _print_table([h for h, _, _ in _LS_COLUMNS], _ls_rows(table), right={6})
+    _report_damage(damaged)
+
+
+def _report_damage(damaged: list[str]) -> None:
+    """Name each damaged record left out of a listing on stderr; exit 1 if there was any."""
+    for line in damaged:
+        click.echo(f"DAMAGED (left out): {line}", err=True)
+    if damaged:
+        raise SystemExit(1)
 
 
 def _short(value: Any) -> str:
@@ -556,9 +565,14 @@ def gc(kb_location: KBLocation, yes: bool, tmp_age: float, grace: float, orphans
         click.echo(f"stray file {rel} (not written by adpart; not touched)")
     for rel in report.skipped:
         click.echo(f"symlink {rel} (never followed; not touched)")
+    for line in report.failures:
+        click.echo(f"skipped: {line}")
     n = len(report.artifacts) + len(report.files) + (len(report.records) if orphans else 0)
     hint = "" if yes else "; pass --yes to delete"
-    click.echo(f"{verb} {n} item(s), {report.bytes} bytes{hint}")
+    skipped = f"; {len(report.failures)} skipped (listed above)" if report.failures else ""
+    click.echo(f"{verb} {n} item(s), {report.bytes} bytes{hint}{skipped}")
+    if report.failures:
+        raise SystemExit(1)
 
 
 @kb.command("rm")
@@ -573,11 +587,15 @@ def rm(kb_location: KBLocation, ref: str, yes: bool) -> None:
     artifacts it leaves unreferenced are removed by `adpart kb gc --yes`.
     """
     with _open(kb_location) as base:
-        record = _resolve(base, ref)
-        if record.KIND == "artifact":
+        match = _REF.match(ref)
+        if _ART.match(ref) or (match and _kind(match.group("kind")) == "artifact"):
             raise KBError("artifacts are removed by `adpart kb gc` once no record refers to "
                           "them; remove the records instead")
-        removed = base.remove(record.KIND, record.id, dry_run=not yes)
+        if not match:
+            _resolve(base, ref)  # the message for a malformed id
+        # by id, without reading the record first: a damaged record can be removed too
+        removed = base.remove(_kind(match.group("kind")), int(match.group("id")),
+                              dry_run=not yes)
     verb = "removed" if yes else "would remove"
     click.echo(f"{verb} {', '.join(removed)}" + ("" if yes else "; pass --yes to remove"))
 

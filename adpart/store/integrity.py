@@ -8,9 +8,14 @@ the ORM makes the hash independent of driver conversions: the audit re-reads the
 and must get the same bytes.
 
 The hash is set by an ``after_insert``/``after_update`` mapper event inside the writing
-transaction, so no committed row is ever without one. A partition's hash also covers its parent
-links (the ``partition_parents`` association, which has no row hash of its own): a changed link
-is named as a change of the child partition.
+transaction, so no committed row is ever without one; the same event puts the read-back values
+into the written object, so what a writer holds is what a reader will get. A partition's hash also
+covers its parent links (the ``partition_parents`` association, which has no row hash of its own):
+a changed link is named as a change of the child partition.
+
+Every read compares the hash too (:func:`row_problem`, called by the knowledge base's readers on
+each row they return, its subgoal and option-set rows included), so a changed value is refused on
+read, not only by the audit.
 """
 
 from __future__ import annotations
@@ -22,7 +27,7 @@ from collections.abc import Iterable, Mapping
 from datetime import datetime, timezone
 from typing import Any
 
-from sqlalchemy import Connection, Table, event, select, update
+from sqlalchemy import Connection, Table, event, inspect, select, update
 from sqlalchemy.orm import Mapper
 
 ROW_SHA = "row_sha"
@@ -54,6 +59,66 @@ def row_digest(table: Table, row: Mapping[str, Any], parents: Iterable[int] | No
     return hashlib.sha256(encoded.encode()).hexdigest()
 
 
+#: table name -> the record kind its rows are named by in messages
+KIND_OF_TABLE = {"environments": "environment", "tasks": "task", "policies": "policy",
+                 "subgoal_sets": "subgoal-set", "subgoals": "subgoal", "options": "option",
+                 "partitions": "partition", "partition_options": "partition-option",
+                 "runs": "run", "artifacts": "artifact"}
+
+
+def row_name(table: Table, row: Mapping[str, Any]) -> str:
+    """How a row is named in messages: ``run:3``, ``artifact:<16 hex>``, ``subgoal:4 (of ...)``."""
+    if table.name == "artifacts":
+        return f"artifact:{str(row['sha256'])[:16]}"
+    if table.name == "partition_options":
+        return f"partition:{row['partition_id']}'s option link to option:{row['option_id']}"
+    if table.name == "subgoals":
+        return f"subgoal:{row['id']} (of subgoal-set:{row['subgoal_set_id']})"
+    return f"{KIND_OF_TABLE.get(table.name, table.name)}:{row['id']}"
+
+
+def changed_message(name: str, table: str) -> str:
+    """The one message for a row whose content no longer matches its hash."""
+    return (f"{name} is damaged: its metadata row (table {table}) changed since it was written "
+            "(row hash mismatch); re-create the record (`adpart kb rm`, then run it again) or "
+            "restore from a backup")
+
+
+def unhashed_message(name: str, table: str) -> str:
+    return (f"{name} has no row hash (table {table}); run `adpart kb upgrade`, or re-create the "
+            "record")
+
+
+def _attribute_keys(table: Table, obj: Any) -> list[tuple[str, str]]:
+    keys = _KEYS.get(table.name)
+    if keys is None:
+        mapper = inspect(type(obj))
+        keys = [(col.name, key) for key, col in mapper.columns.items() if col.table is table]
+        _KEYS[table.name] = keys
+    return keys
+
+
+_KEYS: dict[str, list[tuple[str, str]]] = {}
+
+
+def row_problem(obj: Any) -> str | None:
+    """What is wrong with a loaded ORM row (its hash differs, or it has none), or None.
+
+    The row's values are taken as the ORM loaded them (the same column types the audit reads
+    with); a partition's parent links come from its loaded ``parents``.
+    """
+    table = type(obj).__table__
+    state = obj.__dict__
+    values = {name: state.get(key) for name, key in _attribute_keys(table, obj)}
+    stored = values.get(ROW_SHA)
+    if stored is None:
+        return unhashed_message(row_name(table, values), table.name)
+    parents = [p.id for p in obj.parents] if table.name == "partitions" else None
+    if row_digest(table, values, parents) != stored:
+        return changed_message(row_name(table, values), table.name)
+    return None
+
+
 def _key_clause(table: Table, mapper: Mapper, target: Any) -> Any:
     clause = None
     for column, value in zip(mapper.primary_key, mapper.primary_key_from_instance(target),
@@ -74,7 +139,12 @@ def _stamp(mapper: Mapper, connection: Connection, target: Any) -> None:
         parents = [p.id for p in target.parents]
     digest = row_digest(table, row, parents)
     connection.execute(update(table).where(where).values({ROW_SHA: digest}))
-    target.__dict__[ROW_SHA] = digest  # keep the identity map in step without another flush
+    # keep the identity map in step without another flush: the object holds the values as read
+    # back (a tuple given becomes the list stored), so a later read in the same transaction
+    # verifies against the same bytes the hash was made of
+    for name, key in _attribute_keys(table, target):
+        target.__dict__[key] = row[name]
+    target.__dict__[ROW_SHA] = digest
 
 
 def install(base: type) -> None:

@@ -60,6 +60,9 @@ from adpart.store.schema import SCHEMA_VERSION, read_version, upgrade_schema, ve
 from adpart.store.tables import Tables
 
 _BUSY_TIMEOUT_S = 60.0
+#: what a damaged database raises: the driver's errors, and text SQLite returns undecoded (a
+#: flipped bit in the schema makes even its error message invalid UTF-8)
+DB_ERRORS = (SQLAlchemyError, UnicodeDecodeError)
 R = TypeVar("R", bound=E.Record)
 
 
@@ -255,7 +258,7 @@ class KnowledgeBase(Queries, Tables, Maintenance):
             yield session
             if write:
                 session.commit()
-        except SQLAlchemyError as exc:
+        except DB_ERRORS as exc:
             session.rollback()
             orig = getattr(exc, "orig", None) or exc
             raise StoreError(f"knowledge base {self.label}: database error "
@@ -299,7 +302,7 @@ class KnowledgeBase(Queries, Tables, Maintenance):
                 if found is None:
                     upgrade_schema(conn, self.label)
                     return SCHEMA_VERSION
-        except SQLAlchemyError as exc:
+        except DB_ERRORS as exc:
             orig = getattr(exc, "orig", None) or exc
             raise StoreError(f"cannot open the knowledge base {self.label}: {orig}; check the "
                              "location exists and is writable (--kb / ADPART_KB)") from exc
@@ -311,7 +314,7 @@ class KnowledgeBase(Queries, Tables, Maintenance):
         try:
             with self.engine.connect() as conn:
                 found = read_version(conn, self.label)
-        except SQLAlchemyError as exc:
+        except DB_ERRORS as exc:
             orig = getattr(exc, "orig", None) or exc
             raise StoreError(f"cannot read the knowledge base {self.label}: {orig}; check the "
                              "location (--kb / ADPART_KB)") from exc
@@ -330,7 +333,7 @@ class KnowledgeBase(Queries, Tables, Maintenance):
                     _pg_lock(conn, _SCHEMA_LOCK, shared=False)
                     _pg_lock(conn, _STORE_LOCK, shared=False)
                 result = upgrade_schema(conn, self.label)
-        except SQLAlchemyError as exc:
+        except DB_ERRORS as exc:
             raise StoreError(f"upgrading {self.label} failed: {exc}; the database was left "
                              "unchanged") from exc
         self.schema_version = result[1]

@@ -22,7 +22,14 @@ from sqlalchemy.exc import SQLAlchemyError
 from sqlalchemy.orm import Session
 
 from adpart.store.errors import StoreError
-from adpart.store.integrity import ROW_SHA, row_digest
+from adpart.store.integrity import (
+    KIND_OF_TABLE,
+    ROW_SHA,
+    changed_message,
+    row_digest,
+    row_name,
+    unhashed_message,
+)
 from adpart.store.models import (
     ARTIFACT_COLUMNS,
     HASHED_TABLES,
@@ -32,6 +39,13 @@ from adpart.store.models import (
     SqlSubgoalSet,
     partition_parents,
 )
+from adpart.store.queries import UNREADABLE, recover, unreadable_message
+
+
+def _unreadable_database(label: str, exc: BaseException) -> str:
+    orig = getattr(exc, "orig", None) or exc
+    return (f"the database of {label} cannot be read ({type(orig).__name__}: "
+            f"{str(orig).splitlines()[0] if str(orig) else ''}); restore it from a backup")
 
 
 @dataclass(frozen=True)
@@ -73,58 +87,107 @@ class GcReport:
     records: list[str] = field(default_factory=list)
     strays: list[str] = field(default_factory=list)
     skipped: list[str] = field(default_factory=list)
+    #: what gc could not do and left in place, one line each (a file it was refused deleting,
+    #: a damaged row that hides what is referenced); the rest of the round was done
+    failures: list[str] = field(default_factory=list)
 
     @property
     def bytes(self) -> int:
         return sum(b for _, b in self.artifacts) + sum(b for _, b in self.files)
 
 
-def _referrers(session: Session) -> dict[str, list[str]]:
+def _column_rows(session: Any, table: Table, *columns: Any,
+                 keep: bool = False) -> tuple[list[Any], list[str]]:
+    """``(id, *columns)`` of every row of ``table``; a row whose values cannot be decoded is
+    named (record, table, column) instead of returned, and the others are still read."""
+    query = select(table.c.id, *columns).order_by(table.c.id)
+    try:
+        return list(session.execute(query).all()), []
+    except UNREADABLE as exc:
+        recover(session, exc, keep=keep)
+    rows: list[Any] = []
+    problems: list[str] = []
+    for (rid,) in session.execute(select(table.c.id).order_by(table.c.id)).all():
+        try:
+            rows.extend(session.execute(query.where(table.c.id == rid)).all())
+        except UNREADABLE as exc:
+            recover(session, exc, keep=keep)
+            problems.append(unreadable_message(session, table, rid, exc))
+    return rows, problems
+
+
+def _references(session: Any, keep: bool = False) -> tuple[dict[str, list[str]], list[str]]:
+    """sha256 -> the records referencing it (``"policy:3 (q)"``), and the rows whose references
+    cannot be read (then the map may miss what they reference)."""
     from adpart.store.queries import _SQL_OF
 
     kinds = {model: kind for kind, model in _SQL_OF.items()}
     out: dict[str, list[str]] = {}
+    problems: list[str] = []
     for model, columns in ARTIFACT_COLUMNS.items():
-        for column in columns:
-            col = getattr(model, column)
-            for rid, sha in session.execute(select(model.id, col).where(col.is_not(None))):
-                out.setdefault(sha, []).append(
-                    f"{kinds[model]}:{rid} ({column.removesuffix('_sha')})")
-    return out
+        rows, bad = _column_rows(session, model.__table__,
+                                 *(getattr(model, c) for c in columns), keep=keep)
+        problems.extend(bad)
+        for rid, *shas in rows:
+            for column, sha in zip(columns, shas, strict=True):
+                if sha is not None:
+                    out.setdefault(str(sha), []).append(
+                        f"{kinds[model]}:{rid} ({column.removesuffix('_sha')})")
+    return out, problems
 
 
-def _orphan_policies(session: Session) -> list[int]:
+def _referrers(session: Session) -> dict[str, list[str]]:
+    return _references(session)[0]
+
+
+def _orphan_policies(session: Any, keep: bool = False) -> tuple[list[int], list[str]]:
     """Policies that no run lists (``parameters["policies"]``) and no subgoal set was found from.
 
     adpart stores a policy only as part of a learning run (``record_learning``, one transaction
-    since schema 2), so such a policy is what a write killed between the two left behind.
+    since schema 2), so such a policy is what a write killed between the two left behind. When a
+    run's parameters or a subgoal set cannot be read, which policies they list is unknown: no
+    policy is called an orphan, and the second value names the rows at fault.
     """
+    runs, bad = _column_rows(session, SqlRun.__table__, SqlRun.parameters, keep=keep)
+    sets, bad_sets = _column_rows(session, SqlSubgoalSet.__table__, SqlSubgoalSet.policy_id,
+                                  keep=keep)
+    policies, bad_policies = _column_rows(session, SqlPolicy.__table__, keep=keep)
+    problems = bad + bad_sets + bad_policies
+    if problems:
+        return [], problems
     listed: set[int] = set()
-    for (params,) in session.execute(select(SqlRun.parameters)):
-        for pid in (params or {}).get("policies", []) or []:
+    for _, params in runs:
+        listing = params.get("policies", []) if isinstance(params, dict) else []
+        for pid in listing if isinstance(listing, list) else []:
             if isinstance(pid, int):
                 listed.add(pid)
-    used = {pid for (pid,) in session.execute(select(SqlSubgoalSet.policy_id)
-                                             .where(SqlSubgoalSet.policy_id.is_not(None)))}
-    return [pid for (pid,) in session.execute(select(SqlPolicy.id).order_by(SqlPolicy.id))
-            if pid not in listed and pid not in used]
+    used = {pid for _, pid in sets if pid is not None}
+    return [pid for (pid,) in policies if pid not in listed and pid not in used], []
 
 
-_KIND_OF_TABLE = {"environments": "environment", "tasks": "task", "policies": "policy",
-                  "subgoal_sets": "subgoal-set", "subgoals": "subgoal", "options": "option",
-                  "partitions": "partition", "partition_options": "partition-option",
-                  "runs": "run", "artifacts": "artifact"}
+def _remove_by_id(session: Session, table: Table, record_id: int) -> None:
+    """Delete a row that cannot be loaded, and the rows that are part of it. A damaged run's
+    policies cannot be read from it: they stay, as orphans ``kb gc --orphans`` removes."""
+    from sqlalchemy import delete as sql_delete
+
+    from adpart.store.queries import _PARTS
+
+    for part, key in _PARTS.get(table.name, ()):
+        session.execute(sql_delete(part).where(part.c[key] == record_id))
+    session.execute(sql_delete(table).where(table.c.id == record_id))
 
 
-def _row_name(table: Table, row: Any) -> str:
-    kind = _KIND_OF_TABLE.get(table.name, table.name)
-    if table.name == "artifacts":
-        return f"artifact:{str(row['sha256'])[:16]}"
-    if table.name == "partition_options":
-        return f"partition:{row['partition_id']}'s option link to option:{row['option_id']}"
-    if table.name == "subgoals":
-        return f"subgoal:{row['id']} (of subgoal-set:{row['subgoal_set_id']})"
-    return f"{kind}:{row['id']}"
+def _with_referrers(problem: str, refs: dict[str, list[str]]) -> str:
+    """A damaged artifact row's problem, with the records that reference the artifact."""
+    if not problem.startswith("artifact:"):
+        return problem
+    prefix = problem.split(" ", 1)[0].removeprefix("artifact:")
+    who = [r for sha, rs in refs.items() if sha.startswith(prefix) for r in rs]
+    return f"{problem} (referenced by {', '.join(who)})" if who else problem
+
+
+def _dedupe(lines: list[str]) -> list[str]:
+    return list(dict.fromkeys(lines))
 
 
 class Maintenance:
@@ -161,7 +224,7 @@ class Maintenance:
         try:
             with self.engine.connect() as conn:
                 lines = [str(r[0]) for r in conn.exec_driver_sql("PRAGMA integrity_check")]
-        except SQLAlchemyError as exc:
+        except (SQLAlchemyError, UnicodeDecodeError) as exc:
             orig = getattr(exc, "orig", None) or exc
             return [(f"the database file fails SQLite's integrity check ({orig}); restore "
                      "kb.sqlite from a backup")]
@@ -175,11 +238,13 @@ class Maintenance:
         """Every row of ``table``; a row that cannot be read is named instead of returned."""
         try:
             return list(conn.execute(select(table)).mappings().all()), []
-        except (SQLAlchemyError, ValueError) as exc:
+        except UNREADABLE as exc:
+            recover(conn, exc, keep=False)
             whole = exc
         try:  # find the rows at fault, one by one
             ids = [r[0] for r in conn.execute(select(*table.primary_key.columns))]
-        except SQLAlchemyError as exc:
+        except UNREADABLE as exc:
+            recover(conn, exc, keep=False)
             orig = getattr(exc, "orig", None) or exc
             return [], [(f"table {table.name} cannot be read ({orig}); the database is "
                          "damaged: restore it from a backup")]
@@ -188,11 +253,16 @@ class Maintenance:
         for rid in ids:
             try:
                 rows.extend(conn.execute(select(table).where(key == rid)).mappings().all())
-            except (SQLAlchemyError, ValueError) as exc:
-                orig = getattr(exc, "orig", None) or exc
-                bad.append(f"{_KIND_OF_TABLE.get(table.name, table.name)}:{rid} cannot be read "
-                           f"({type(orig).__name__}: {str(orig).splitlines()[0]}); its row is "
-                           "damaged: re-create the record (`adpart kb rm`, then run it again)")
+            except UNREADABLE as exc:
+                recover(conn, exc, keep=False)
+                if "id" in table.c:
+                    bad.append(unreadable_message(conn, table, rid, exc))
+                else:
+                    orig = getattr(exc, "orig", None) or exc
+                    bad.append(f"{KIND_OF_TABLE.get(table.name, table.name)}:{rid} cannot be "
+                               f"read ({type(orig).__name__}: {str(orig).splitlines()[0]}); its "
+                               "row is damaged: re-create the record (`adpart kb rm`, then run "
+                               "it again)")
         if not bad:
             bad.append(f"table {table.name} cannot be read ({whole})")
         return rows, bad
@@ -202,12 +272,13 @@ class Maintenance:
         problems: list[str] = []
         checked = 0
         with self.engine.connect() as conn:
+            links: dict[int, list[int]] = {}
             try:
-                links: dict[int, list[int]] = {}
                 for child, parent in conn.execute(select(partition_parents.c.child_id,
                                                          partition_parents.c.parent_id)):
                     links.setdefault(int(child), []).append(int(parent))
-            except SQLAlchemyError as exc:
+            except (*UNREADABLE, ValueError) as exc:
+                recover(conn, exc, keep=False)
                 orig = getattr(exc, "orig", None) or exc
                 problems.append(f"table partition_parents cannot be read ({orig}); restore the "
                                 "database from a backup")
@@ -216,31 +287,37 @@ class Maintenance:
                 problems.extend(bad)
                 for row in rows:
                     checked += 1
-                    parents = links.get(int(row["id"]), []) if table.name == "partitions" else None
+                    parents = None
+                    if table.name == "partitions":
+                        parents = links.get(row["id"], []) if isinstance(row["id"], int) else []
                     stored = row[ROW_SHA]
                     if stored is None:
-                        problems.append(f"{_row_name(table, row)} has no row hash; run "
-                                        "`adpart kb upgrade`, or re-create the record")
+                        problems.append(unhashed_message(row_name(table, row), table.name))
                     elif row_digest(table, row, parents) != stored:
-                        problems.append(
-                            f"{_row_name(table, row)} is damaged: its metadata row changed "
-                            "since it was written (row hash mismatch); re-create the record "
-                            "(`adpart kb rm`, then run it again) or restore from a backup")
+                        problems.append(changed_message(row_name(table, row), table.name))
         return checked, problems
 
     def check(self) -> CheckReport:
         """The full audit: the engine's integrity check, every row against its hash, every
         reference, every artifact's hashes and every file under the root."""
         problems = self._engine_integrity()
-        rows_checked, row_problems = self._row_problems()
+        try:
+            rows_checked, row_problems = self._row_problems()
+        except (*UNREADABLE, StoreError) as exc:  # the database itself cannot be read
+            return CheckReport(0, [*problems, _unreadable_database(self.label, exc)])
         problems += row_problems
         try:
             with self._session() as s:
-                refs = _referrers(s)
-                rows = [self._entity(r) for r in s.scalars(select(SqlArtifact)).all()]
-                orphan_records = [f"policy:{pid}" for pid in _orphan_policies(s)]
-        except StoreError as exc:
-            return CheckReport(0, [*problems, str(exc)], rows_checked=rows_checked)
+                refs, bad_refs = _references(s)
+                with self.tolerating_damage(problems):
+                    rows = self.records("artifact")
+                found, bad_lists = _orphan_policies(s)
+                orphan_records = [f"policy:{pid}" for pid in found]
+                problems += bad_refs + bad_lists
+        except (*UNREADABLE, StoreError) as exc:
+            return CheckReport(0, _dedupe([*problems, _unreadable_database(self.label, exc)]),
+                               rows_checked=rows_checked)
+        problems = [_with_referrers(p, refs) for p in _dedupe(problems)]
         known = {a.sha256 for a in rows}
         for sha, who in sorted(refs.items()):
             if sha not in known:
@@ -257,8 +334,8 @@ class Maintenance:
         scan = self.artifacts.scan()
         orphans = [rel for rel, _, _ in scan.files if rel not in uris]
         temps = [rel for rel, _, _ in scan.temporary]
-        return CheckReport(len(rows), problems, orphans, temps, orphan_records, scan.strays,
-                           scan.skipped, rows_checked)
+        return CheckReport(len(rows), _dedupe(problems), orphans, temps, orphan_records,
+                           scan.strays, scan.skipped, rows_checked)
 
     # ------------------------------------------------------------------ rm
     def remove(self, kind: str, record_id: int, *, dry_run: bool = False) -> list[str]:
@@ -275,7 +352,13 @@ class Maintenance:
         removed = [f"{kind}:{record_id}"]
         try:
             with self._session(write=True) as s:
-                row = s.get(model, int(record_id))
+                try:
+                    row = s.get(model, int(record_id))
+                except UNREADABLE as exc:  # a damaged row: removed by id, its parts with it
+                    recover(s, exc, keep=True)
+                    if not dry_run:
+                        _remove_by_id(s, model.__table__, int(record_id))
+                    return removed
                 if row is None:
                     raise StoreError(f"no {kind}:{record_id} in {self.label}; list them with "
                                      f"`adpart kb ls {kind}`")
@@ -318,29 +401,54 @@ class Maintenance:
         most files without rows (reported by ``check``, removed by the next gc), never a row
         without its file. Nothing outside the artifact root is touched: symlinks are never
         followed (``skipped``) and files adpart did not write are only reported (``strays``).
+
+        What gc cannot do it skips, names in ``failures`` and goes on with the rest of the
+        round: a file it is refused deleting stays for the next gc; a damaged row that hides
+        what is referenced (or which policies a run lists) means no artifact row (or orphan
+        record) is dropped in this round, since gc cannot tell what that row still needs.
         """
         from sqlalchemy import delete as sql_delete
 
-        records: list[str] = []
+        failures: list[str] = []
+        kept: set[str] = set()
+        # a row whose hash fails may hide a reference (a changed *_sha) or misname a file (a
+        # changed uri): then nothing is dropped on the strength of the rows
+        try:
+            _, damaged = self._row_problems()
+        except (*UNREADABLE, StoreError) as exc:
+            damaged = [_unreadable_database(self.label, exc)]
         with self._session(write=delete, exclusive=True) as s:
-            found = _orphan_policies(s)
+            found, bad_lists = _orphan_policies(s, keep=delete)
+            failures += [f"orphan records not looked for: {p}" for p in bad_lists]
             records = [f"policy:{pid}" for pid in found]
             if delete and orphans and found:
                 s.execute(sql_delete(SqlPolicy).where(SqlPolicy.id.in_(found)))
-            refs = _referrers(s)
-            rows = s.execute(select(SqlArtifact.sha256, SqlArtifact.bytes,
-                                    SqlArtifact.uri)).all()
-            dead = [(sha, int(size), uri) for sha, size, uri in rows if sha not in refs]
+            refs, bad_refs = _references(s, keep=delete)
+            rows, bad_rows = _column_rows(s, SqlArtifact.__table__, SqlArtifact.sha256,
+                                          SqlArtifact.bytes, SqlArtifact.uri, keep=delete)
+            unknown = _dedupe(damaged + bad_refs + bad_rows)
+            if unknown:  # what the unreadable rows reference is unknown: drop no artifact row
+                failures += [f"no artifact row dropped: {p}" for p in unknown]
+                dead = []
+            else:
+                dead = [(str(sha), int(size or 0), str(uri)) for _, sha, size, uri in rows
+                        if sha not in refs]
             if delete and dead:
                 s.execute(sql_delete(SqlArtifact).where(
                     SqlArtifact.sha256.in_([sha for sha, _, _ in dead])))
         dead_uris = {uri for _, _, uri in dead}
         with self._session(write=delete, exclusive=True) as s:
-            live = {uri for (uri,) in s.execute(select(SqlArtifact.uri))}
+            uris, bad_uris = _column_rows(s, SqlArtifact.__table__, SqlArtifact.uri, keep=delete)
+            live = {str(uri) for _, uri in uris}
             now = time.time()
             scan = self.artifacts.scan()
-            files = [(rel, size) for rel, size, mtime in scan.files
-                     if rel not in live and rel not in dead_uris and now - mtime > grace_s]
+            if unknown or bad_uris:  # a file may belong to a damaged row: keep them all
+                failures += [f"no file without a row deleted: {p}"
+                             for p in _dedupe(unknown + bad_uris)]
+                files = []
+            else:
+                files = [(rel, size) for rel, size, mtime in scan.files
+                         if rel not in live and rel not in dead_uris and now - mtime > grace_s]
             files += [(rel, size) for rel, size, mtime in scan.temporary
                       if now - mtime > temporary_age_s]
             if delete:
@@ -348,9 +456,10 @@ class Maintenance:
                     try:
                         self.artifacts.delete(rel)
                     except (StoreError, OSError) as exc:
-                        raise StoreError(
-                            f"gc stopped while deleting {rel}: {exc}; the rows were already "
-                            "dropped, so nothing is damaged: run `adpart kb gc --yes` again to "
-                            "remove the remaining files") from exc
+                        # the row is already gone, so nothing is damaged; the file stays (the
+                        # next gc tries again) and the round goes on with the others
+                        failures.append(f"kept {rel}: {exc}")
+                        kept.add(rel)
+            files = [(rel, size) for rel, size in files if rel not in kept]
         return GcReport([(sha, b) for sha, b, _ in dead], files, delete, records,
-                        scan.strays, scan.skipped)
+                        scan.strays, scan.skipped, failures)

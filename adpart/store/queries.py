@@ -2,22 +2,33 @@
 
 A mixin of :class:`adpart.store.kb.KnowledgeBase` (which writes): the methods use its session
 and artifact store. ORM rows become the frozen records of :mod:`adpart.store.entities` here.
+
+Every row a read returns is verified first: its row hash (:func:`~adpart.store.integrity.
+row_problem`) and those of the subgoal and option-set rows that make up the record. A row that
+fails, or that the database driver cannot even decode (a ``parameters`` that is not JSON, a
+``created_at`` that is not a time), is **damaged**: the read raises :class:`StoreError` naming
+the record, the table and, where one column is at fault, the column. Inside
+:meth:`Queries.tolerating_damage` the readers instead leave such records out and note each one,
+which is how ``adpart kb ls`` lists the rest of a damaged knowledge base.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from datetime import datetime, timezone
 from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
-from sqlalchemy import select
-from sqlalchemy.orm import selectinload
+from sqlalchemy import Table, select
+from sqlalchemy.exc import SQLAlchemyError
+from sqlalchemy.orm import Session, selectinload
 
 from adpart.store import entities as E
 from adpart.store.artifacts import ARRAY_FORMAT
 from adpart.store.errors import StoreError
+from adpart.store.integrity import KIND_OF_TABLE, row_problem
 from adpart.store.models import (
     Base,
     SqlArtifact,
@@ -27,8 +38,10 @@ from adpart.store.models import (
     SqlPartitionOption,
     SqlPolicy,
     SqlRun,
+    SqlSubgoal,
     SqlSubgoalSet,
     SqlTask,
+    partition_parents,
 )
 
 _SQL_OF: dict[str, type[Base]] = {
@@ -38,8 +51,70 @@ _SQL_OF: dict[str, type[Base]] = {
 }
 
 
+#: what a driver raises when a stored value cannot be decoded (bad JSON, bad time, bad text)
+UNREADABLE = (SQLAlchemyError, ValueError, TypeError, AttributeError, OverflowError)
+
+
 def _utc(moment: datetime) -> datetime:
-    return moment if moment.tzinfo is not None else moment.replace(tzinfo=timezone.utc)
+    if not isinstance(moment, datetime):
+        raise TypeError(f"created_at is {type(moment).__name__}, not a time")
+    if moment.tzinfo is None:
+        return moment.replace(tzinfo=timezone.utc)
+    return moment.astimezone(timezone.utc)
+
+
+def _first_line(exc: BaseException) -> str:
+    orig = getattr(exc, "orig", None) or exc
+    text = str(orig).splitlines()[0] if str(orig) else ""
+    return f"{type(orig).__name__}: {text[:200]}"
+
+
+def recover(session: Session, exc: BaseException, *, keep: bool) -> None:
+    """Make ``session`` usable again after a read that could not decode a row.
+
+    A value the driver cannot decode (SQLite text that is not JSON or not a time) leaves the
+    transaction intact. A database error does not on PostgreSQL: a read-only session is rolled
+    back; a transaction that must be kept (``keep``: a write in progress) cannot go on.
+    """
+    if not isinstance(exc, SQLAlchemyError) or session.get_bind().dialect.name == "sqlite":
+        return
+    if keep:
+        raise StoreError(f"a row cannot be read inside this write ({_first_line(exc)}); the "
+                         "write was abandoned: run `adpart kb check`") from exc
+    session.rollback()
+
+
+def _raise(message: str) -> None:
+    raise StoreError(message)
+
+
+def _fix(ref: str) -> str:
+    return (f"re-create the record (`adpart kb rm {ref} --yes`, then run it again) or restore "
+            "the database from a backup; `adpart kb check` lists all damage")
+
+
+#: the rows a record is made of besides its own: (table, column holding the record's id)
+_PARTS: dict[str, tuple[tuple[Table, str], ...]] = {
+    "subgoal_sets": ((SqlSubgoal.__table__, "subgoal_set_id"),),
+    "partitions": ((SqlPartitionOption.__table__, "partition_id"),
+                   (partition_parents, "child_id")),
+}
+
+
+def unreadable_message(session: Session, table: Table, record_id: Any,
+                       exc: BaseException) -> str:
+    """Name the column of row ``record_id`` of ``table`` (or of its part rows) that cannot be
+    decoded; ``exc`` is what reading the whole row raised."""
+    ref = f"{KIND_OF_TABLE.get(table.name, table.name)}:{record_id}"
+    for part, key in ((table, "id"), *_PARTS.get(table.name, ())):
+        for column in part.columns:
+            try:
+                session.execute(select(column).where(part.c[key] == record_id)).all()
+            except UNREADABLE as col_exc:
+                recover(session, col_exc, keep=False)
+                return (f"{ref} is damaged: {part.name}.{column.name} cannot be read "
+                        f"({_first_line(col_exc)}); {_fix(ref)}")
+    return f"{ref} is damaged: its row cannot be read ({_first_line(exc)}); {_fix(ref)}"
 
 
 def _id(value: E.Record | int | None) -> int | None:
@@ -94,6 +169,89 @@ class Queries:
                          row.curve_sha, row.experience_sha, dict(row.metrics or {}), p)
         raise TypeError(type(row).__name__)
 
+    #: verify the row hash of every row read (the benchmark turns it off to measure its cost)
+    _verify_rows: bool = True
+    _damage: list[str] | None = None
+
+    @contextmanager
+    def tolerating_damage(self, damaged: list[str]) -> Iterator[list[str]]:
+        """Inside this block readers leave damaged records out, appending a line naming each to
+        ``damaged`` (once), instead of raising :class:`StoreError`: a listing of what is
+        readable. ``get`` of a damaged record still raises."""
+        outer = self._damage
+        self._damage = damaged
+        try:
+            yield damaged
+        finally:
+            self._damage = outer
+
+    def _damaged(self, message: str) -> None:
+        """Report one damaged record: raise, or note it inside :meth:`tolerating_damage`."""
+        if self._damage is None:
+            raise StoreError(message)
+        if message not in self._damage:
+            self._damage.append(message)
+
+    def _verified(self, row: Base) -> Any:
+        """The record of a row read from the database, its row hashes checked first."""
+        if self._verify_rows:
+            parts: list[Base] = [row]
+            if isinstance(row, SqlSubgoalSet):
+                parts += row.subgoals
+            elif isinstance(row, SqlPartition):
+                parts += row.options
+            for part in parts:
+                problem = row_problem(part)
+                if problem is not None:
+                    if part is not row:
+                        problem = (f"{KIND_OF_TABLE[row.__tablename__]}:{row.id} is damaged "
+                                   f"(one of its rows): {problem}")
+                    raise StoreError(problem)
+        try:
+            return self._entity(row)
+        except UNREADABLE as exc:
+            ref = f"{KIND_OF_TABLE.get(row.__tablename__, row.__tablename__)}:{row.id}"
+            raise StoreError(f"{ref} is damaged: its row holds a value of the wrong kind "
+                             f"({_first_line(exc)}); {_fix(ref)}") from exc
+
+    def _read_records(self, session: Session, model: type[Base], query: Any, ids: Any, *,
+              strict: bool = False) -> list[Any]:
+        """The verified records of ``query`` (ORM rows of ``model``); ``ids`` selects the same
+        rows' ids, read when the whole result cannot be decoded, to read row by row.
+
+        A damaged row raises :class:`StoreError`, or inside :meth:`tolerating_damage` is noted
+        and left out; ``strict`` (a lookup of one record) always raises.
+        """
+        damaged = self._damaged if not strict else _raise
+        keep = session is self._tx
+        try:
+            rows = list(session.scalars(query).all())
+        except UNREADABLE as exc:
+            recover(session, exc, keep=keep)
+            rows = None
+        out = []
+        if rows is not None:
+            for row in rows:
+                try:
+                    out.append(self._verified(row))
+                except StoreError as exc:
+                    damaged(str(exc))
+            return out
+        for (record_id,) in session.execute(ids).all():
+            try:
+                row = session.scalars(select(model).where(model.id == record_id)
+                                      .options(*self._loaders(model))
+                                      .execution_options(populate_existing=True)).one()
+            except UNREADABLE as exc:
+                recover(session, exc, keep=keep)
+                damaged(unreadable_message(session, model.__table__, record_id, exc))
+                continue
+            try:
+                out.append(self._verified(row))
+            except StoreError as exc:
+                damaged(str(exc))
+        return out
+
     @staticmethod
     def _loaders(model: type[Base]) -> list[Any]:
         if model is SqlSubgoalSet:
@@ -106,27 +264,33 @@ class Queries:
     def get(self, kind: str, record_id: int) -> Any:
         """The record of ``kind`` (``"policy"``, ...) with id ``record_id``."""
         model = self._model(kind)
+        record_id = int(record_id)
         with self._session() as s:
-            row = s.scalars(select(model).where(model.id == int(record_id))
-                            .options(*self._loaders(model))).first()
+            try:
+                row = s.scalars(select(model).where(model.id == record_id)
+                                .options(*self._loaders(model))).first()
+            except UNREADABLE as exc:
+                recover(s, exc, keep=s is self._tx)
+                raise StoreError(unreadable_message(s, model.__table__, record_id, exc)) from exc
             if row is None:
                 raise StoreError(f"no {kind}:{record_id} in {self.label}; list them with "
                                  f"`adpart kb ls {kind}`")
-            return self._entity(row)
+            return self._verified(row)
 
     def artifact(self, sha_prefix: str) -> E.Artifact:
         """The artifact whose hash starts with ``sha_prefix`` (unique prefix required)."""
         if not sha_prefix or any(c not in "0123456789abcdef" for c in sha_prefix):
             raise StoreError(f"{sha_prefix!r} is not a hexadecimal artifact hash prefix")
+        where = SqlArtifact.sha256.startswith(sha_prefix, autoescape=True)
         with self._session() as s:
-            rows = s.scalars(select(SqlArtifact).where(
-                SqlArtifact.sha256.startswith(sha_prefix, autoescape=True)).limit(2)).all()
+            rows = self._read_records(s, SqlArtifact, select(SqlArtifact).where(where).limit(2),
+                              select(SqlArtifact.id).where(where).limit(2), strict=True)
         if not rows:
             raise StoreError(f"no artifact with hash {sha_prefix}...; list them with "
                              "`adpart kb ls artifact`")
         if len(rows) > 1:
             raise StoreError(f"artifact hash prefix {sha_prefix} is ambiguous; give more digits")
-        return self._entity(rows[0])
+        return rows[0]
 
     @staticmethod
     def _model(kind: str) -> type[Base]:
@@ -140,31 +304,38 @@ class Queries:
                 limit: int | None = None) -> list[Any]:
         """All records of ``kind`` (oldest first), optionally only those of one environment."""
         model = self._model(kind)
-        query = select(model).options(*self._loaders(model)).order_by(model.id)
-        env_id = _id(environment)
-        if env_id is not None:
-            if hasattr(model, "environment_id"):
-                query = query.where(model.environment_id == env_id)
-            elif hasattr(model, "task_id"):
-                query = query.join(SqlTask, SqlTask.id == model.task_id).where(
-                    SqlTask.environment_id == env_id)
-            elif kind == "environment":
-                query = query.where(model.id == env_id)
-        if limit is not None:
-            query = query.limit(limit)
+
+        def chosen(query: Any) -> Any:
+            env_id = _id(environment)
+            if env_id is not None:
+                if hasattr(model, "environment_id"):
+                    query = query.where(model.environment_id == env_id)
+                elif hasattr(model, "task_id"):
+                    query = query.join(SqlTask, SqlTask.id == model.task_id).where(
+                        SqlTask.environment_id == env_id)
+                elif kind == "environment":
+                    query = query.where(model.id == env_id)
+            query = query.order_by(model.id)
+            return query.limit(limit) if limit is not None else query
+
         with self._session() as s:
-            return [self._entity(r) for r in s.scalars(query).all()]
+            return self._read_records(s, model,
+                                      chosen(select(model).options(*self._loaders(model))),
+                                      chosen(select(model.id)))
 
     def find_environment(self, name_or_hash: str) -> E.Environment:
         """The environment with this name (most recent) or model hash."""
+        where = ((SqlEnvironment.name == name_or_hash)
+                 | (SqlEnvironment.model_hash == name_or_hash))
         with self._session() as s:
-            row = s.scalars(select(SqlEnvironment).where(
-                (SqlEnvironment.name == name_or_hash) | (SqlEnvironment.model_hash == name_or_hash)
-            ).order_by(SqlEnvironment.id.desc())).first()
-            if row is None:
+            rows = self._read_records(s, SqlEnvironment, select(SqlEnvironment).where(where)
+                              .order_by(SqlEnvironment.id.desc()).limit(1),
+                              select(SqlEnvironment.id).where(where)
+                              .order_by(SqlEnvironment.id.desc()).limit(1), strict=True)
+            if not rows:
                 raise StoreError(f"no environment named {name_or_hash!r} in {self.label}; list "
                                  "them with `adpart kb ls environment`")
-            return self._entity(row)
+            return rows[0]
 
     def options_for(self, environment: E.Environment | int) -> list[E.Option]:
         """Every option stored for an environment."""
@@ -174,29 +345,27 @@ class Queries:
                          includes_primitives: bool | None = None) -> list[E.Partition]:
         """Partitions built from exactly this option set (``exact``) or from a superset of it."""
         wanted = {_id(o) for o in options}
-        with self._session() as s:
-            query = select(SqlPartition).options(*self._loaders(SqlPartition)).order_by(
-                SqlPartition.id)
+        def chosen(query: Any) -> Any:
             if wanted:
                 query = query.where(SqlPartition.id.in_(
                     select(SqlPartitionOption.partition_id).where(
                         SqlPartitionOption.option_id.in_(wanted))))
             if includes_primitives is not None:
                 query = query.where(SqlPartition.includes_primitives == includes_primitives)
-            rows = s.scalars(query).all()
-            out = []
-            for row in rows:
-                have = {o.option_id for o in row.options}
-                if (have == wanted) if exact else wanted <= have:
-                    out.append(self._entity(row))
-            return out
+            return query.order_by(SqlPartition.id)
+
+        with self._session() as s:
+            records = self._read_records(s, SqlPartition, chosen(select(SqlPartition).options(
+                *self._loaders(SqlPartition))), chosen(select(SqlPartition.id)))
+        return [p for p in records
+                if ((set(p.option_ids) == wanted) if exact else wanted <= set(p.option_ids))]
 
     def runs_for(self, task: E.Task | int) -> list[E.Run]:
         """Every run of a task, oldest first."""
+        where = SqlRun.task_id == _id(task)
         with self._session() as s:
-            rows = s.scalars(select(SqlRun).where(SqlRun.task_id == _id(task))
-                             .order_by(SqlRun.id)).all()
-            return [self._entity(r) for r in rows]
+            return self._read_records(s, SqlRun, select(SqlRun).where(where).order_by(SqlRun.id),
+                              select(SqlRun.id).where(where).order_by(SqlRun.id))
 
     def learned_tasks(self, environment: E.Environment | int | None = None,
                       ) -> list[tuple[E.Task, list[E.Run]]]:
@@ -240,8 +409,11 @@ class Queries:
         sha = getattr(record, field_name)
         if sha is None:
             return None
-        art = self._artifact_row(sha)
         context = f"{record.ref} ({field_name})"
+        try:
+            art = self._artifact_row(sha)
+        except StoreError as exc:
+            raise StoreError(f"{context}: {exc}") from exc
         read = self.artifacts.get_array if fmt == "array" else self.artifacts.get_table
         return read(sha, art.uri, context=context, file_sha256=art.file_sha256)
 
@@ -262,9 +434,11 @@ class Queries:
         return read(art.sha256, art.uri, context=context, file_sha256=art.file_sha256)
 
     def _artifact_row(self, sha: str) -> E.Artifact:
+        where = SqlArtifact.sha256 == sha
         with self._session() as s:
-            row = s.scalars(select(SqlArtifact).where(SqlArtifact.sha256 == sha)).first()
-            if row is None:
+            rows = self._read_records(s, SqlArtifact, select(SqlArtifact).where(where),
+                              select(SqlArtifact.id).where(where), strict=True)
+            if not rows:
                 raise StoreError(f"artifact {sha[:12]} has no row in {self.label}; run "
                                  "`adpart kb check`")
-            return self._entity(row)
+            return rows[0]

@@ -28,7 +28,9 @@ from sqlalchemy import select
 
 from adpart.store import entities as E
 from adpart.store.errors import StoreError
+from adpart.store.integrity import ROW_SHA, changed_message, row_digest, row_name
 from adpart.store.models import SqlArtifact
+from adpart.store.queries import UNREADABLE
 
 #: the kinds listed when no kind is asked for (artifacts are listed only on request)
 LISTED_KINDS: tuple[str, ...] = tuple(k for k in E.RECORD_TYPES if k != "artifact")
@@ -273,8 +275,12 @@ class Tables:
 
     def select_records(self, kind: str | Sequence[str] | None = None, *, env: Any = None,
                        task: Any = None, where: Mapping[str, Any] | None = None,
-                       limit: int | None = None) -> list[E.Record]:
+                       limit: int | None = None, damaged: list[str] | None = None,
+                       ) -> list[E.Record]:
         """The records :meth:`records_table` shows, as frozen records (same filters)."""
+        if damaged is not None:
+            with self.tolerating_damage(damaged):
+                return self.select_records(kind, env=env, task=task, where=where, limit=limit)
         kinds = self._kinds(kind)
         if limit is not None and (not isinstance(limit, int) or limit < 1):
             raise StoreError(f"limit must be a positive whole number, not {limit!r}")
@@ -337,7 +343,7 @@ class Tables:
     # ------------------------------------------------------------------ tables
     def records_table(self, kind: str | Sequence[str] | None = None, *, env: Any = None,
                       task: Any = None, where: Mapping[str, Any] | None = None,
-                      limit: int | None = None) -> pa.Table:
+                      limit: int | None = None, damaged: list[str] | None = None) -> pa.Table:
         """Records as a table, one row each, oldest first within each kind.
 
         Args:
@@ -350,19 +356,24 @@ class Tables:
                 strings from the command line are read as JSON first: ``"1"`` matches 1). Names
                 are those of the ``params.*`` columns (:func:`flat_params`).
             limit: at most this many rows.
+            damaged: a list to collect damaged records in: each is left out and named there
+                (table, id and, where one is at fault, column). Without it the first damaged
+                record raises :class:`StoreError`.
 
         Columns: :data:`BASE_COLUMNS` (``size`` is the bytes of the record's artifacts,
         ``created`` its creation time in UTC), then ``params.NAME`` for each parameter and, for
         runs, ``metrics.NAME`` for each final metric.
         """
+        if damaged is not None:
+            with self.tolerating_damage(damaged):
+                return self.records_table(kind, env=env, task=task, where=where, limit=limit)
         records = self.select_records(kind, env=env, task=task, where=where, limit=limit)
         return self._records_to_table(records)
 
     def _records_to_table(self, records: list[E.Record]) -> pa.Table:
         envs = {e.id: e for e in self.records("environment")}
         tasks = {t.id: t for t in self.records("task")}
-        with self._session() as s:
-            sizes = dict(s.execute(select(SqlArtifact.sha256, SqlArtifact.bytes)).all())
+        sizes = self._artifact_sizes()
         rows: list[dict[str, Any]] = []
         param_keys: dict[str, None] = {}
         metric_keys: dict[str, None] = {}
@@ -375,8 +386,10 @@ class Tables:
             if isinstance(record, E.Artifact):
                 size, created = record.bytes, record.created_at
             else:
-                size = sum(int(sizes.get(getattr(record, f)) or 0)
-                           for f in type(record).ARTIFACTS if getattr(record, f))
+                shas = [getattr(record, f) for f in type(record).ARTIFACTS if getattr(record, f)]
+                # unknown (None) when one of its artifact rows is damaged
+                size = (sum(int(sizes[sha]) for sha in shas)
+                        if all(sha in sizes for sha in shas) else None)
                 created = record.provenance.created_at
             rows.append({
                 "ref": record.ref, "kind": record.KIND, "id": record.id,
@@ -394,6 +407,27 @@ class Tables:
         for key in metric_keys:
             columns[f"metrics.{key}"] = _column([r["metrics"].get(key) for r in rows])
         return pa.table(columns)
+
+    def _artifact_sizes(self) -> dict[str, int]:
+        """sha256 -> bytes of every artifact row whose row hash holds (the ``size`` column).
+
+        Read as plain rows (no ORM objects: a listing touches every artifact row); a damaged
+        row is reported like any other and its size left out.
+        """
+        table = SqlArtifact.__table__
+        try:
+            with self._session() as s:
+                rows = list(s.execute(select(table)).mappings().all())
+        except (StoreError, *UNREADABLE):  # a row the driver cannot decode: one by one
+            with self.tolerating_damage(self._damage if self._damage is not None else []):
+                return {a.sha256: a.bytes for a in self.records("artifact")}
+        sizes: dict[str, int] = {}
+        for row in rows:
+            if self._verify_rows and row_digest(table, row) != row[ROW_SHA]:
+                self._damaged(changed_message(row_name(table, row), table.name))
+                continue
+            sizes[row["sha256"]] = row["bytes"]
+        return sizes
 
     def curves_table(self, runs: Any = None, *, env: Any = None, task: Any = None,
                      where: Mapping[str, Any] | None = None, limit: int | None = None,

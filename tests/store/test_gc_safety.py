@@ -160,8 +160,9 @@ def test_a_crash_mid_gc_leaves_nothing_half_done(kb, monkeypatch):
         raise OSError("simulated crash while deleting")
 
     monkeypatch.setattr(type(kb.artifacts), "delete", crash)
-    with pytest.raises(StoreError, match="simulated crash"):
-        kb.gc(delete=True)
+    report = kb.gc(delete=True)  # every delete is tried; each refusal is reported, not raised
+    assert len(report.failures) == len(calls) == 2  # the round went on after the first
+    assert all("simulated crash" in f for f in report.failures)
     monkeypatch.undo()
     assert calls  # the rows were dropped and committed first, the files survive as orphans
     assert kb.counts()["artifact"] == 1

@@ -75,6 +75,10 @@ def test_another_valid_artifact_behind_a_hand_edited_row_is_refused(stored):
         kb.load(policy, "q")
     with pytest.raises(StoreError, match=rf"run:{run.id} \(curve\).*damaged"):
         kb.load(run, "curve")
+    kb._verify_rows = False  # behind the row hash, the content hash refuses the other file
+    with pytest.raises(StoreError, match=rf"policy:{policy.id} \(q\)\) is damaged"):
+        kb.load(policy, "q")
+    kb._verify_rows = True
     problems = kb.check().problems
     assert any(f"policy:{policy.id} (q)" in p for p in problems)
     assert any(f"run:{run.id} (curve)" in p for p in problems)
@@ -85,6 +89,9 @@ def test_a_wrong_recorded_file_hash_is_refused(stored):
     with kb.engine.begin() as conn:
         conn.execute(text("UPDATE artifacts SET file_sha256 = :f WHERE sha256 = :s"),
                      {"f": "0" * 64, "s": policy.q})
+    with pytest.raises(StoreError, match=r"policy:1 \(q\): .*row hash mismatch"):
+        kb.load(policy, "q")  # the row hash refuses the edited row first
+    kb._verify_rows = False
     with pytest.raises(StoreError, match="bytes changed since it was written"):
         kb.load(policy, "q")
     assert not kb.check().ok
