@@ -34,9 +34,20 @@ ROW_SHA = "row_sha"
 
 
 def _plain(value: Any) -> Any:
+    kind = type(value)
+    if kind is str or kind is int or value is None or kind is bool:  # most values: as they are
+        return value
+    if kind is float:
+        return {"float": repr(value) if math.isfinite(value) else str(value)}
+    if kind is dict:
+        return {str(k): _plain(v) for k, v in value.items()}
     if isinstance(value, datetime):
-        moment = value if value.tzinfo is not None else value.replace(tzinfo=timezone.utc)
-        return {"datetime": moment.astimezone(timezone.utc).isoformat()}
+        zone = value.tzinfo
+        if zone is None:  # the same text as replace(tzinfo=timezone.utc).isoformat()
+            return {"datetime": value.isoformat() + "+00:00"}
+        if zone is timezone.utc:
+            return {"datetime": value.isoformat()}
+        return {"datetime": value.astimezone(timezone.utc).isoformat()}
     if isinstance(value, float):
         return {"float": repr(value) if math.isfinite(value) else str(value)}
     if isinstance(value, bool | int | str) or value is None:
@@ -48,15 +59,21 @@ def _plain(value: Any) -> Any:
     return {"other": str(value)}
 
 
+_HASHED_COLUMNS: dict[str, list[str]] = {}
+#: the canonical encoding: ``json.dumps(..., sort_keys=True, separators=(",", ":"))``, its encoder
+#: made once (every read hashes the rows it returns)
+_encode = json.JSONEncoder(sort_keys=True, separators=(",", ":")).encode
+
+
 def row_digest(table: Table, row: Mapping[str, Any], parents: Iterable[int] | None = None) -> str:
     """SHA-256 of ``row`` (column name -> value as read back), all columns but ``row_sha``."""
-    payload = {"table": table.name,
-               "columns": {c.name: _plain(row[c.name]) for c in table.columns
-                           if c.name != ROW_SHA}}
+    names = _HASHED_COLUMNS.get(table.name)
+    if names is None:
+        names = _HASHED_COLUMNS[table.name] = [c.name for c in table.columns if c.name != ROW_SHA]
+    payload = {"table": table.name, "columns": {n: _plain(row[n]) for n in names}}
     if parents is not None:
         payload["parents"] = sorted(int(p) for p in parents)
-    encoded = json.dumps(payload, sort_keys=True, separators=(",", ":"))
-    return hashlib.sha256(encoded.encode()).hexdigest()
+    return hashlib.sha256(_encode(payload).encode()).hexdigest()
 
 
 #: table name -> the record kind its rows are named by in messages
@@ -95,10 +112,12 @@ def _attribute_keys(table: Table, obj: Any) -> list[tuple[str, str]]:
         mapper = inspect(type(obj))
         keys = [(col.name, key) for key, col in mapper.columns.items() if col.table is table]
         _KEYS[table.name] = keys
+        _SAME_NAMES[table.name] = all(name == key for name, key in keys)
     return keys
 
 
 _KEYS: dict[str, list[tuple[str, str]]] = {}
+_SAME_NAMES: dict[str, bool] = {}
 
 
 def row_problem(obj: Any) -> str | None:
@@ -109,7 +128,11 @@ def row_problem(obj: Any) -> str | None:
     """
     table = type(obj).__table__
     state = obj.__dict__
-    values = {name: state.get(key) for name, key in _attribute_keys(table, obj)}
+    keys = _attribute_keys(table, obj)
+    if _SAME_NAMES.get(table.name) and all(name in state for name, _ in keys):
+        values = state  # attributes named as their columns (every adpart table): no copy
+    else:
+        values = {name: state.get(key) for name, key in keys}
     stored = values.get(ROW_SHA)
     if stored is None:
         return unhashed_message(row_name(table, values), table.name)

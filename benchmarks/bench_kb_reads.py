@@ -1,0 +1,122 @@
+"""The cost of verifying every row a knowledge-base read returns, measured in the same run.
+
+Every read compares each row it returns with its row hash (docs/reliability.md, "Reads verify
+what they return"). This benchmark fills a SQLite knowledge base with 10^4 records (5,000
+policies with a Q table and 5,000 runs with a curve, each its own artifact) and times, with
+verification and without it (the reference: the same reads with the row hashes not compared):
+
+- ``kb ls``: the command itself in this process (``records_table`` of every record, the table
+  printed), and ``records_table()`` alone;
+- ``get + load``: 500 policies read by id and their Q tables loaded (file hash on the bytes, as
+  always);
+- ``load``: the same 500 Q tables from records already in hand (the artifact row is verified).
+
+Both sides alternate within each repeat and the best time of each is kept, so a machine shared
+with other work loads both alike. The target is a ratio of at most 1.10.
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+from click.testing import CliRunner
+
+from adpart.cli.kb import kb as kb_group
+from adpart.store import KnowledgeBase
+from adpart.store.queries import Queries
+
+N_RECORDS, N_LOADS, REPEATS = 10_000, 500, 5
+
+
+def _best(fns: dict[str, Callable[[], object]], repeats: int) -> dict[str, float]:
+    """Best wall time of each function, running them in turn ``repeats`` times."""
+    best = dict.fromkeys(fns, float("inf"))
+    for _ in range(repeats):
+        for name, fn in fns.items():
+            start = time.perf_counter()
+            fn()
+            best[name] = min(best[name], time.perf_counter() - start)
+    return best
+
+
+def _verifying(on: bool, fn: Callable[[], object]) -> Callable[[], object]:
+    def run() -> object:
+        Queries._verify_rows = on
+        try:
+            return fn()
+        finally:
+            Queries._verify_rows = True
+
+    return run
+
+
+def _fill(kb: KnowledgeBase, n: int) -> list:
+    env = kb.put_environment("bench", model_hash="b" * 64, n_states=50, n_actions=4)
+    task = kb.put_task(env, "bench", spec={"goal": [49]}, gamma=0.95)
+    policies = []
+    with kb.transaction():
+        for i in range(n // 2):
+            q = np.full((50, 4), float(i))
+            policy = kb.put_policy(task, "q-learning", q=q, seed=i, episodes=100,
+                                   parameters={"alpha": "0.5", "epsilon": "0.1"})
+            kb.put_run(task, "q-learning", seed=i, curve={"episode": np.arange(10) + i},
+                       metrics={"final_value_gap": {"mean": 0.01 * i}},
+                       parameters={"policies": [policy.id], "alpha": "0.5"})
+            policies.append(policy)
+    return policies
+
+
+def main(n_records: int = N_RECORDS, n_loads: int = N_LOADS,
+         repeats: int = REPEATS) -> dict[str, float]:
+    """Run the benchmark, print the figures and return them (seconds and ratios)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        where = Path(tmp) / "kb"
+        start = time.perf_counter()
+        with KnowledgeBase.open(where) as kb:
+            policies = _fill(kb, n_records)
+        fill_s = time.perf_counter() - start
+        runner = CliRunner()
+
+        def kb_ls() -> None:
+            result = runner.invoke(kb_group, ["ls", "--kb", str(where)])
+            assert result.exit_code == 0, result.output
+
+        with KnowledgeBase.open(where, read_only=True) as kb:
+            chosen = policies[:: max(1, len(policies) // n_loads)][:n_loads]
+
+            def table() -> None:
+                assert kb.records_table().num_rows == n_records + 2  # and the env and task
+
+            def get_load() -> None:
+                for p in chosen:
+                    kb.load(kb.get("policy", p.id), "q")
+
+            def load() -> None:
+                for p in chosen:
+                    kb.load(p, "q")
+
+            figures: dict[str, float] = {}
+            for name, fn, times in (("kb_ls", kb_ls, repeats), ("records_table", table, repeats),
+                                    ("get_load", get_load, repeats), ("load", load, repeats)):
+                best = _best({"verified": _verifying(True, fn),
+                              "unverified": _verifying(False, fn)}, times)
+                figures[f"{name}_verified_s"] = best["verified"]
+                figures[f"{name}_unverified_s"] = best["unverified"]
+                figures[f"{name}_ratio"] = best["verified"] / best["unverified"]
+    print(f"bench_kb_reads: {n_records} records (SQLite, filled in {fill_s:.1f} s), "
+          f"{len(chosen)} loads, best of {repeats}")
+    labels = {"kb_ls": "kb ls (whole command)", "records_table": "records_table()",
+              "get_load": f"get + load x{len(chosen)}", "load": f"load x{len(chosen)}"}
+    for key, label in labels.items():
+        print(f"  {label:24} verified {figures[f'{key}_verified_s']:.3f} s   unverified "
+              f"{figures[f'{key}_unverified_s']:.3f} s   ratio {figures[f'{key}_ratio']:.3f} "
+              "(target <= 1.10)")
+    return figures
+
+
+if __name__ == "__main__":
+    main()
