@@ -183,9 +183,9 @@ def kb_location_options(func):  # type: ignore[no-untyped-def]
     """``--kb`` and ``--kb-artifacts``, resolved lazily by the command (nothing created early)."""
     func = click.option(
         "--kb-artifacts",
-        envvar="ADPART_KB_ARTIFACTS",
         metavar="URI",
-        help="Artifact root for a database URL (any pyarrow filesystem URI)",
+        help="Artifact root for a database URL (any pyarrow filesystem URI) [env "
+        "ADPART_KB_ARTIFACTS, which a --kb directory ignores: it keeps its own artifacts/]",
     )(func)
     return click.option(
         "--kb",

@@ -30,6 +30,7 @@ import json
 import os
 import re
 import stat
+import time
 import uuid
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
@@ -54,6 +55,8 @@ _WRITE_ATTEMPTS = 5
 _NAME = re.compile(r"^[0-9a-f]{2}/[0-9a-f]{64}\.parquet$")
 _TMP_NAME = re.compile(r"^[0-9a-f]{2}/\.tmp-[0-9a-f]+\.parquet$")
 _THREADED_HASH_BYTES = 1 << 20  # below this a second thread costs more than it saves
+#: the file at the top of an artifact root naming the knowledge base that owns it
+OWNER_FILE = "adpart-owner.json"
 
 
 @dataclass(frozen=True)
@@ -234,13 +237,105 @@ class ArtifactStore:
                 self.fs, base = pafs.FileSystem.from_uri(root)
             else:
                 self.fs, base = pafs.LocalFileSystem(), os.path.abspath(os.path.expanduser(root))
-            if create:
-                self.fs.create_dir(base, recursive=True)
         except (pa.ArrowException, OSError, ValueError) as exc:
             raise StoreError(f"cannot use artifact root {root!r}: {exc}; choose a writable "
                              "directory or filesystem URI") from exc
         self.root = root
         self.base = base.rstrip("/")
+        if create:
+            self.create()
+
+    def create(self) -> None:
+        """Make the root directory (a no-op when it exists)."""
+        try:
+            self.fs.create_dir(self.base, recursive=True)
+        except (pa.ArrowException, OSError, ValueError) as exc:
+            raise StoreError(f"cannot use artifact root {self.root!r}: {exc}; choose a writable "
+                             "directory or filesystem URI") from exc
+
+    def check_creatable(self) -> None:
+        """Refuse, before anything is made, a local root that could not be created or written:
+        its nearest existing ancestor must be a writable directory."""
+        if not self.local:
+            return
+        path = self.base
+        while not os.path.lexists(path):
+            parent = os.path.dirname(path)
+            if parent == path:
+                break
+            path = parent
+        if not os.path.isdir(path) or not os.access(path, os.W_OK | os.X_OK):
+            what = "is not a directory" if not os.path.isdir(path) else "is not writable"
+            raise StoreError(f"cannot use artifact root {self.root!r}: {path} {what}; choose a "
+                             "writable directory or filesystem URI")
+
+    # ------------------------------------------------------------------ ownership
+    def owner(self) -> dict[str, Any] | None:
+        """The owner record of the root (``kb_id``, ``database``, ...), or None if it has none.
+
+        A file that is not an owner record is an error: the root cannot be told apart from
+        another program's directory.
+        """
+        path = f"{self.base}/{OWNER_FILE}"
+        try:
+            if self.fs.get_file_info(path).type != pafs.FileType.File:
+                return None
+            with self.fs.open_input_stream(path) as source:
+                data = json.loads(source.read().decode())
+        except (pa.ArrowException, OSError, ValueError) as exc:
+            raise StoreError(f"artifact root {self.root!r}: its owner file {OWNER_FILE} cannot "
+                             f"be read ({exc}); restore it, or give this knowledge base another "
+                             "root with --kb-artifacts / ADPART_KB_ARTIFACTS") from exc
+        if not isinstance(data, dict) or not isinstance(data.get("kb_id"), str):
+            raise StoreError(f"artifact root {self.root!r}: {OWNER_FILE} is not an adpart owner "
+                             "record; give this knowledge base another root with --kb-artifacts "
+                             "/ ADPART_KB_ARTIFACTS")
+        return data
+
+    def refuse_other_owner(self, kb_id: str | None, label: str,
+                           owner: dict[str, Any] | None = None) -> None:
+        """Raise if the root is owned by a knowledge base other than ``kb_id`` (None: a
+        knowledge base about to be created, which owns no root yet)."""
+        owner = self.owner() if owner is None else owner
+        if owner is None or owner["kb_id"] == kb_id:
+            return
+        raise StoreError(
+            f"the artifact root {self.root} belongs to another knowledge base "
+            f"({owner.get('database', 'unknown database')}, id {owner['kb_id']}), not to "
+            f"{label}; two knowledge bases sharing a root would delete each other's artifacts in "
+            "`adpart kb gc`: give this one its own root with --kb-artifacts / ADPART_KB_ARTIFACTS"
+        )
+
+    def claim(self, kb_id: str, label: str) -> None:
+        """Make the root (if needed) and record ``kb_id`` as its owner, unless it has one.
+
+        On a local root the owner file appears whole or not at all and only once (a complete
+        temporary file is hard-linked to its name, which fails if it exists); then the record
+        found is checked, so a second knowledge base racing for a fresh root is refused too.
+        """
+        self.create()
+        record = json.dumps({"kb_id": kb_id, "database": label, "written_by": "adpart",
+                             "created_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())},
+                            indent=2).encode()
+        final = f"{self.base}/{OWNER_FILE}"
+        try:
+            if self.local:
+                tmp = f"{self.base}/.owner-{uuid.uuid4().hex}"
+                with open(tmp, "wb") as out:
+                    out.write(record)
+                try:
+                    os.link(tmp, final)
+                except FileExistsError:
+                    pass
+                finally:
+                    os.unlink(tmp)
+            elif self.fs.get_file_info(final).type != pafs.FileType.File:
+                with self.fs.open_output_stream(final) as out:
+                    out.write(record)
+        except (pa.ArrowException, OSError) as exc:
+            raise StoreError(f"cannot write the owner file of artifact root {self.root!r}: "
+                             f"{exc}; check the root is writable") from exc
+        self.refuse_other_owner(kb_id, label)
 
     # ------------------------------------------------------------------ paths
     def path(self, uri: str) -> str:
@@ -452,6 +547,8 @@ class ArtifactStore:
         strays: list[str] = []
         skipped: list[str] = []
         for rel, size, mtime, is_link in self._walk():
+            if rel == OWNER_FILE and not is_link:
+                continue  # the root's owner record: adpart's, never listed or deleted
             if is_link:
                 skipped.append(rel)
             elif _NAME.match(rel):

@@ -56,7 +56,15 @@ from adpart.store.models import (
     SqlTask,
 )
 from adpart.store.queries import Queries, _id
-from adpart.store.schema import SCHEMA_VERSION, read_version, upgrade_schema, verify_schema
+from adpart.store.schema import (
+    SCHEMA_VERSION,
+    identity_of,
+    read_identity,
+    read_version,
+    upgrade_schema,
+    verify_schema,
+    verify_tables,
+)
 from adpart.store.tables import Tables
 
 _BUSY_TIMEOUT_S = 60.0
@@ -80,6 +88,12 @@ def _json(value: Any, what: str) -> str:
     except (TypeError, ValueError) as exc:
         raise StoreError(f"the {what} must be JSON-serialisable (numbers, strings, lists, dicts; "
                          f"no NaN): {exc}") from exc
+
+
+def _first(error: BaseException) -> str:
+    """The first line of a driver's message (SQLAlchemy appends the SQL and a link)."""
+    text = str(error)
+    return text.splitlines()[0] if text else type(error).__name__
 
 
 #: the name of the PostgreSQL advisory lock that orders writers and gc (per schema, so per KB)
@@ -172,7 +186,9 @@ class KnowledgeBase(Queries, Tables, Maintenance):
         self._write = sessionmaker(self.engine.execution_options(adpart_write=True),
                                    expire_on_commit=False)
         try:
-            self.artifacts = ArtifactStore(artifact_uri, create=not read_only)
+            # nothing is made before the database answers and the root is known to be free
+            # for this knowledge base (_init_schema): then the root is made and claimed
+            self.artifacts = ArtifactStore(artifact_uri, create=False)
             self.artifact_uri = artifact_uri
             self.schema_version = self._init_schema(verify)
         except BaseException:
@@ -291,6 +307,13 @@ class KnowledgeBase(Queries, Tables, Maintenance):
                 self._tx = None
 
     def _init_schema(self, verify: bool) -> int:
+        """Check (and on first use create) the schema and claim the artifact root.
+
+        In one locked transaction: the schema version is read and verified, the tables checked
+        against it, and this knowledge base's identity read (or made); the root's owner record
+        must name no other knowledge base. Only then are the schema (for a new knowledge base),
+        the root directory and its owner file made, so a refused open creates nothing.
+        """
         if self.read_only:
             return self._read_schema(verify)
         try:
@@ -299,30 +322,52 @@ class KnowledgeBase(Queries, Tables, Maintenance):
                     # concurrent first opens: one creates the schema, the others wait and see it
                     _pg_lock(conn, _SCHEMA_LOCK, shared=False)
                 found = read_version(conn, self.label)
-                if found is None:
+                owner = self.artifacts.owner()
+                if found is None:  # a new knowledge base takes only a root nobody owns
+                    self.artifacts.refuse_other_owner(None, self.label, owner)
+                    self.artifacts.check_creatable()
                     upgrade_schema(conn, self.label)
-                    return SCHEMA_VERSION
+                    version, kb_id = SCHEMA_VERSION, read_identity(conn)
+                else:
+                    version = found[0]
+                    if verify:
+                        verify_schema(found[0], found[1], self.label)
+                    kb_id = None
+                    if version == SCHEMA_VERSION:
+                        verify_tables(conn, self.label)
+                        kb_id = identity_of(conn)
+                        self.artifacts.refuse_other_owner(kb_id, self.label, owner)
+                        self.artifacts.check_creatable()
         except DB_ERRORS as exc:
             orig = getattr(exc, "orig", None) or exc
-            raise StoreError(f"cannot open the knowledge base {self.label}: {orig}; check the "
-                             "location exists and is writable (--kb / ADPART_KB)") from exc
-        if verify:
-            verify_schema(found[0], found[1], self.label)
-        return found[0]
+            raise StoreError(f"cannot open the knowledge base {self.label}: {_first(orig)}; "
+                             "check the location exists and is writable (--kb / ADPART_KB)"
+                             ) from exc
+        if kb_id is not None:
+            self.artifacts.claim(kb_id, self.label)
+        self.kb_id = kb_id
+        return version
 
     def _read_schema(self, verify: bool) -> int:
         try:
             with self.engine.connect() as conn:
                 found = read_version(conn, self.label)
+                if found is None:
+                    raise StoreError(f"{self.label} holds no knowledge base (an empty database; "
+                                     f"reading commands never create one): {MAKE_ONE}")
+                if verify:
+                    verify_schema(found[0], found[1], self.label)
+                kb_id = None
+                if found[0] == SCHEMA_VERSION:
+                    verify_tables(conn, self.label)
+                    kb_id = read_identity(conn)
         except DB_ERRORS as exc:
             orig = getattr(exc, "orig", None) or exc
-            raise StoreError(f"cannot read the knowledge base {self.label}: {orig}; check the "
-                             "location (--kb / ADPART_KB)") from exc
-        if found is None:
-            raise StoreError(f"{self.label} holds no knowledge base (an empty database; reading "
-                             f"commands never create one): {MAKE_ONE}")
-        if verify:
-            verify_schema(found[0], found[1], self.label)
+            raise StoreError(f"cannot read the knowledge base {self.label}: {_first(orig)}; "
+                             "check the location (--kb / ADPART_KB)") from exc
+        if kb_id is not None:  # reading another knowledge base's root would misreport it
+            self.artifacts.refuse_other_owner(kb_id, self.label)
+        self.kb_id = kb_id
         return found[0]
 
     def upgrade(self) -> tuple[int, int]:
@@ -333,9 +378,17 @@ class KnowledgeBase(Queries, Tables, Maintenance):
                     _pg_lock(conn, _SCHEMA_LOCK, shared=False)
                     _pg_lock(conn, _STORE_LOCK, shared=False)
                 result = upgrade_schema(conn, self.label)
+                verify_tables(conn, self.label)
+                kb_id = identity_of(conn)
+                self.artifacts.refuse_other_owner(kb_id, self.label)
         except DB_ERRORS as exc:
-            raise StoreError(f"upgrading {self.label} failed: {exc}; the database was left "
-                             "unchanged") from exc
+            orig = getattr(exc, "orig", None) or exc
+            raise StoreError(f"upgrading {self.label} failed ({type(orig).__name__}: "
+                             f"{_first(orig)}): its tables do not match the schema version it "
+                             "records, which was changed by hand or damaged; the database was "
+                             "left unchanged: restore it from a backup") from exc
+        self.artifacts.claim(kb_id, self.label)
+        self.kb_id = kb_id
         self.schema_version = result[1]
         return result
 

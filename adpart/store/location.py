@@ -6,6 +6,11 @@ directory holds ``kb.sqlite`` and ``artifacts/`` and is created on first use. A 
 (``sqlite:///...``, ``postgresql+psycopg://...``) takes its artifact root from the explicit
 argument (``--kb-artifacts``) or ``$ADPART_KB_ARTIFACTS``; a ``sqlite:///`` file defaults to an
 ``artifacts/`` directory beside it.
+
+A directory always keeps its own ``artifacts/``: ``$ADPART_KB_ARTIFACTS`` (meant for database
+URLs) is ignored for it, so the directory reads the same whether or not the variable is set, and
+an explicit ``--kb-artifacts`` elsewhere is refused. Every artifact root belongs to one knowledge
+base (its owner file, :meth:`~adpart.store.artifacts.ArtifactStore.claim`).
 """
 
 from __future__ import annotations
@@ -78,13 +83,17 @@ class KBLocation:
         """
         make_dir = _make_dir if create else _must_exist
         where = str(location) if location is not None else default_location()
-        artifacts = artifacts or os.environ.get("ADPART_KB_ARTIFACTS") or None
+        given = artifacts or None
         if _URL.match(where) and not where.startswith("file://"):
+            artifacts = given or os.environ.get("ADPART_KB_ARTIFACTS") or None
             try:
                 url = make_url(where)
-            except ArgumentError as exc:
-                raise StoreError(f"{where!r} is not a database URL or a directory; pass a "
-                                 "directory or e.g. sqlite:////path/kb.sqlite") from exc
+                url.get_backend_name()
+                url.render_as_string(hide_password=True)
+            except (ArgumentError, ValueError) as exc:
+                raise StoreError(f"{where!r} is not a database URL or a directory ({exc}); pass "
+                                 "--kb a directory or a URL such as sqlite:////path/kb.sqlite "
+                                 "or postgresql+psycopg://user@host/db") from exc
             label = url.render_as_string(hide_password=True)
             if artifacts is None:
                 on_disk = url.database not in (None, "", ":memory:")
@@ -97,10 +106,14 @@ class KBLocation:
                                      "--kb-artifacts URI or set ADPART_KB_ARTIFACTS")
             return cls(where, artifacts, label)
         directory = Path(where.removeprefix("file://")).expanduser().resolve()
+        own = directory / ARTIFACT_DIR
+        if given is not None and not ("://" not in given
+                                      and Path(given).expanduser().resolve() == own):
+            raise StoreError(f"--kb-artifacts {given} is for a database URL: the knowledge base "
+                             f"directory {directory} keeps its artifacts in {own}; drop "
+                             "--kb-artifacts, or pass --kb a database URL")
         make_dir(directory, "knowledge base directory")
         if not create and not (directory / DB_FILE).is_file():
             raise StoreError(f"{directory} holds no knowledge base (no {DB_FILE}; reading "
                              f"commands never create one): {MAKE_ONE}")
-        if artifacts is None:
-            artifacts = str(directory / ARTIFACT_DIR)
-        return cls(f"sqlite:///{directory / DB_FILE}", artifacts, str(directory))
+        return cls(f"sqlite:///{directory / DB_FILE}", str(own), str(directory))

@@ -65,6 +65,17 @@ class SqlSchema(Base):
     written_by: Mapped[str] = mapped_column(String(64))
 
 
+class SqlIdentity(Base):
+    """One row: this knowledge base's identity, written when it is created (or, for one made
+    before identities, at its first writable open). Its artifact root records the same id in
+    its owner file, so a second knowledge base given that root is refused."""
+
+    __tablename__ = "adpart_identity"
+    id: Mapped[int] = mapped_column(primary_key=True)
+    kb_id: Mapped[str] = mapped_column(String(36))
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
+
+
 class SqlArtifact(Base):
     __tablename__ = "artifacts"
     id: Mapped[int] = mapped_column(primary_key=True)

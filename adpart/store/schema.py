@@ -9,14 +9,16 @@ adpart schema row (not a knowledge base).
 
 from __future__ import annotations
 
+import uuid
 from collections.abc import Callable
+from datetime import datetime, timezone
 
-from sqlalchemy import Connection, inspect, select, text, update
+from sqlalchemy import Connection, func, inspect, select, text, update
 
 from adpart import __version__
 from adpart.store.errors import StoreError
 from adpart.store.integrity import ROW_SHA, row_digest
-from adpart.store.models import HASHED_TABLES, Base, SqlSchema, partition_parents
+from adpart.store.models import HASHED_TABLES, Base, SqlIdentity, SqlSchema, partition_parents
 
 #: the schema version this adpart reads and writes
 #: (2: every metadata row carries ``row_sha``, its content hash, checked by ``adpart kb check``;
@@ -71,7 +73,14 @@ def read_version(conn: Connection, location: str) -> tuple[int, str] | None:
             "record: it is not an adpart knowledge base (unknown schema); point --kb / ADPART_KB "
             "at an empty or adpart location"
         )
-    row = conn.execute(select(SqlSchema.version, SqlSchema.written_by)).first()
+    rows = conn.execute(select(SqlSchema.version, SqlSchema.written_by).limit(2)).all()
+    if len(rows) > 1:
+        raise StoreError(
+            f"{location} has {conn.scalar(select(func.count()).select_from(SqlSchema))} adpart "
+            "schema rows where there is exactly one: the database was edited by hand or is "
+            "damaged; restore it from a backup (or point --kb / ADPART_KB elsewhere)"
+        )
+    row = rows[0] if rows else None
     if row is None or not isinstance(row[0], int) or row[0] < 1:
         raise StoreError(
             f"{location} has an unknown adpart schema version ({row[0] if row else 'none'}); it "
@@ -95,11 +104,57 @@ def verify_schema(version: int, written_by: str, location: str) -> None:
         )
 
 
+def verify_tables(conn: Connection, location: str) -> None:
+    """Refuse a current-version database whose tables lack a column this adpart writes (e.g.
+    ``row_sha`` dropped): it would open and then fail at the first write or read."""
+    found = inspect(conn)
+    tables = set(found.get_table_names())
+    columns = {name: cols for (_, name), cols in found.get_multi_columns().items()}
+    for table in Base.metadata.sorted_tables:
+        if table.name == SqlIdentity.__tablename__:
+            continue  # added at the first writable open when missing (identity_of)
+        if table.name not in tables:
+            raise StoreError(f"knowledge base {location} has no table {table.name}, which schema "
+                             f"version {SCHEMA_VERSION} has: it is damaged or was edited by "
+                             "hand; restore it from a backup")
+        have = {c["name"] for c in columns.get(table.name, [])}
+        missing = [c.name for c in table.columns if c.name not in have]
+        if missing:
+            raise StoreError(f"knowledge base {location}: table {table.name} has no column "
+                             f"{', '.join(missing)}, which schema version {SCHEMA_VERSION} has: "
+                             "it is damaged or was edited by hand; restore it from a backup")
+
+
+def read_identity(conn: Connection) -> str | None:
+    """This knowledge base's id, or None when it has none yet (made before identities)."""
+    if SqlIdentity.__tablename__ not in inspect(conn).get_table_names():
+        return None
+    ids = conn.execute(select(SqlIdentity.kb_id).limit(2)).scalars().all()
+    if len(ids) > 1:
+        raise StoreError("the knowledge base has two identity rows where there is one: it was "
+                         "edited by hand or is damaged; restore it from a backup")
+    return str(ids[0]) if ids else None
+
+
+def identity_of(conn: Connection) -> str:
+    """This knowledge base's id, made (table and row) if it has none yet; needs the write lock."""
+    found = read_identity(conn)
+    if found is not None:
+        return found
+    SqlIdentity.__table__.create(conn, checkfirst=True)
+    kb_id = str(uuid.uuid4())
+    conn.execute(SqlIdentity.__table__.insert().values(id=1, kb_id=kb_id,
+                                                       created_at=datetime.now(timezone.utc)))
+    return kb_id
+
+
 def create_schema(conn: Connection) -> None:
-    """Create every table of the current schema in an empty database and record its version."""
+    """Create every table of the current schema in an empty database and record its version
+    and a fresh identity."""
     Base.metadata.create_all(conn)
     conn.execute(SqlSchema.__table__.insert().values(id=1, version=SCHEMA_VERSION,
                                                      written_by=__version__))
+    identity_of(conn)
 
 
 def upgrade_schema(conn: Connection, location: str) -> tuple[int, int]:

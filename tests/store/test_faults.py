@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import signal
+import sqlite3
 import subprocess
 import sys
 import textwrap
@@ -193,7 +194,9 @@ def test_unwritable_location_gives_a_clear_error(tmp_path):
     assert result.exit_code == 2  # a reading command creates nothing: it says there is none
     assert "no knowledge base directory" in result.output and "Traceback" not in result.output
     with pytest.raises(StoreError, match="artifact root"):
-        KnowledgeBase.open(tmp_path / "kb2", artifacts=str(blocker / "art"))
+        KnowledgeBase.open(f"sqlite:///{tmp_path / 'kb2.sqlite'}", artifacts=str(blocker / "art"))
+    with sqlite3.connect(tmp_path / "kb2.sqlite") as conn:  # refused before any table is made
+        assert conn.execute("SELECT count(*) FROM sqlite_master").fetchone()[0] == 0
 
 
 INJECTION = "x'; DROP TABLE runs; --"
