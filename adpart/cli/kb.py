@@ -438,6 +438,9 @@ def export(kb_location: KBLocation, ref: str, out: Path, field_name: str | None)
     suffix = out.suffix.lower()
     if suffix not in (".parquet", ".csv", ".json"):
         raise click.BadParameter("the file must end in .parquet, .csv or .json", param_hint="--out")
+    if out.is_symlink():  # an export replaces its file; it never writes through a link
+        raise KBError(f"--out {out} is a symbolic link (to {out.readlink()}); an export does not "
+                      "write through it: give the path of a regular file, or remove the link")
     with _open(kb_location, read_only=True) as base:
         record = _resolve(base, ref)
         if record.KIND == "artifact":

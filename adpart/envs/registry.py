@@ -1,6 +1,12 @@
 """Lookup of environments by name: the built-in domains and ``gym:<id>`` Gymnasium environments.
 
 Built-in domains are imported lazily (``"module:Class"``), so listing them costs nothing.
+
+Trust model: ``gym:MODULE:Id-v0`` imports the Python module ``MODULE`` (running its code) so that
+it can register ``Id-v0``, as ``gymnasium.make`` does. A name typed on the command line or passed
+by a program is trusted like any Python the user runs. A name read from a file (a sweep config)
+is not: such a file may import only the modules it lists in ``allow_imports``
+(:func:`gym_module` finds the module a name would import).
 """
 
 from __future__ import annotations
@@ -75,6 +81,16 @@ def parse_gym_name(name: str) -> tuple[str, dict[str, object]]:
             )
         kwargs[key.strip()] = _gym_value(value)
     return env_id, kwargs
+
+
+def gym_module(name: str) -> str | None:
+    """The Python module ``gym:MODULE:Id-v0`` would import, or None (no import: a built-in
+    domain or an already registered Gymnasium id)."""
+    if not name.startswith(GYM_PREFIX):
+        return None
+    env_id = name.removeprefix(GYM_PREFIX).partition("[")[0]
+    module, colon, _ = env_id.partition(":")
+    return module if colon else None
 
 
 def get_domain(name: str) -> Domain:

@@ -54,9 +54,9 @@ class Run:
     """Episodes per run."""
     seed: int | None = setting(0, kind="int", min=0, max=MAX_SEED, none="fresh")
     """Root seed of default_rng(seed).spawn(runs); fresh: drawn from OS entropy, recorded."""
-    eval_every: int = setting(10, min=1)
+    eval_every: int = setting(10, min=1, max=10_000_000)
     """Score the greedy policies exactly every N episodes."""
-    max_steps_per_episode: int = setting(1000, min=1, option="max-steps")
+    max_steps_per_episode: int = setting(1000, min=1, max=1_000_000_000, option="max-steps")
     """Primitive-step limit of one episode; a cut episode bootstraps through the cut."""
     alpha: Schedule = setting("1/n^0.8", kind="str", parse=_probability_schedule("alpha"))
     """Step-size schedule: 0.1 | 1/n^0.8 | exp:0.5,0.99 (its visit count is n(s, a))."""

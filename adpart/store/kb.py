@@ -21,6 +21,7 @@ This module opens the database and writes records; reads and queries are the
 from __future__ import annotations
 
 import json
+import math
 import os
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
@@ -80,6 +81,49 @@ def canonical_json_hash(value: Any) -> str:
     import hashlib
 
     return hashlib.sha256(_json(value, "spec").encode()).hexdigest()
+
+
+_INT64 = (-(2**63), 2**63 - 1)
+_MAX_TEXT = 255  # the width of the name columns
+
+
+def _text(value: Any, field: str, *, longest: int = _MAX_TEXT, empty: bool = False) -> str:
+    """A name as stored: a string of at most ``longest`` characters, without NUL characters."""
+    if not isinstance(value, str):
+        raise StoreError(f"{field} must be a string, got {type(value).__name__}")
+    if not value and not empty:
+        raise StoreError(f"{field} must not be empty")
+    if len(value) > longest:
+        raise StoreError(f"{field} has {len(value)} characters; at most {longest} are stored")
+    if "\x00" in value:
+        raise StoreError(f"{field} contains a NUL character; names are text without NUL")
+    return value
+
+
+def _whole(value: Any, field: str, low: int = _INT64[0], high: int = _INT64[1],
+           *, optional: bool = False) -> int | None:
+    """A count, seed or size as stored: a whole number in ``[low, high]`` (64-bit columns)."""
+    if value is None and optional:
+        return None
+    if isinstance(value, bool) or not isinstance(value, int | np.integer):
+        raise StoreError(f"{field} must be a whole number, got {value!r}")
+    if not low <= int(value) <= high:
+        raise StoreError(f"{field} = {int(value)} is outside [{low}, {high}]")
+    return int(value)
+
+
+def _discount(value: Any, field: str, *, optional: bool = False) -> float | None:
+    """A discount factor: a finite number in [0, 1]."""
+    if value is None and optional:
+        return None
+    try:
+        gamma = float(value)
+    except (TypeError, ValueError):
+        raise StoreError(f"{field} must be a number in [0, 1], got {value!r}") from None
+    if not math.isfinite(gamma) or not 0.0 <= gamma <= 1.0:
+        raise StoreError(f"{field} = {value!r} must be a finite number in [0, 1] (a discount "
+                         "factor; nan and inf are refused)")
+    return gamma
 
 
 def _json(value: Any, what: str) -> str:
@@ -161,14 +205,18 @@ class KnowledgeBase(Queries, Tables, Maintenance):
     - ``put_environment`` / ``environment_for_mdp`` (get-or-put by model hash), ``put_task``
       (get-or-put by spec hash), ``put_policy``, ``put_subgoal_set``, ``put_option``,
       ``put_partition``, ``put_run``: write a record, return its frozen dataclass;
-    - ``get(kind, id)``, ``get_ref("policy:3")``, ``records(kind, environment=...)``;
+    - ``get(kind, id)``, ``artifact(sha_prefix)``, ``records(kind, environment=...)``,
+      ``find_environment(name_or_hash)``;
     - ``load(record, field)``: an artifact's payload, verified against its hash;
     - queries: ``options_for``, ``partitions_using``, ``runs_for``, ``learned_tasks``, ``lineage``;
     - tables (``pyarrow.Table``, ``.to_pandas()``): ``records_table``, ``curves_table``,
       ``partition_table``;
     - maintenance: ``info``, ``check``, ``gc``, ``upgrade``.
 
-    Every database error surfaces as :class:`StoreError`.
+    Every read verifies the row hash of each row it returns; a damaged row is a
+    :class:`StoreError` naming the record, its table and (where one is at fault) the column.
+    Every database error, and every value a put refuses (a name with NUL characters, a gamma
+    outside [0, 1], a count below 1), surfaces as :class:`StoreError` too.
     """
 
     def __init__(self, db_url: str, artifact_uri: str, *, label: str | None = None,
@@ -404,6 +452,8 @@ class KnowledgeBase(Queries, Tables, Maintenance):
     # ------------------------------------------------------------------ provenance and artifacts
     @staticmethod
     def _prov(plugin: str, plugin_version: str, parameters: Mapping[str, Any] | None) -> dict:
+        _text(plugin, "plugin", empty=True)
+        _text(plugin_version, "plugin_version", longest=64, empty=True)
         params = dict(parameters or {})
         _json(params, "parameters")
         return {"adpart_version": __version__, "plugin": plugin, "plugin_version": plugin_version,
@@ -480,6 +530,10 @@ class KnowledgeBase(Queries, Tables, Maintenance):
                         plugin_version: str = "", parameters: Mapping[str, Any] | None = None,
                         ) -> E.Environment:
         """Get-or-put an environment keyed by its model hash (e.g. ``FiniteMDP.content_hash``)."""
+        _text(name, "put_environment: name")
+        _text(model_hash, "put_environment: model_hash", longest=64)
+        n_states = _whole(n_states, "put_environment: n_states", 1)
+        n_actions = _whole(n_actions, "put_environment: n_actions", 1, 2**31 - 1)
         spec = dict(spec or {})
         _json(spec, "environment spec")
         with self._session(write=True) as s:
@@ -500,6 +554,8 @@ class KnowledgeBase(Queries, Tables, Maintenance):
                  gamma: float, plugin: str = "", plugin_version: str = "",
                  parameters: Mapping[str, Any] | None = None) -> E.Task:
         """Get-or-put a task keyed by (environment, hash of canonical JSON of spec and gamma)."""
+        _text(name, "put_task: name")
+        gamma = _discount(gamma, "put_task: gamma")
         spec = dict(spec)
         spec_hash = canonical_json_hash({"spec": spec, "gamma": float(gamma)})
         env_id = _id(environment)
@@ -523,6 +579,10 @@ class KnowledgeBase(Queries, Tables, Maintenance):
         primitive actions, then ``option:7``, ...); ``pi`` then indexes those columns. The names
         are kept in the record's parameters as ``q_columns``.
         """
+        _text(learner, "put_policy: learner")
+        seed = _whole(seed, "put_policy: seed", optional=True)
+        episodes = _whole(episodes, "put_policy: episodes", 0, optional=True)
+        steps = _whole(steps, "put_policy: steps", 0, optional=True)
         task_id = _id(task)
         S, A = self._task_shape(task_id)
         if q_columns is not None:
@@ -544,6 +604,7 @@ class KnowledgeBase(Queries, Tables, Maintenance):
                         plugin: str = "", plugin_version: str = "",
                         parameters: Mapping[str, Any] | None = None) -> E.SubgoalSet:
         """Store the subgoal states a detector found (and its per-state scores (S,) float64)."""
+        _text(detector, "put_subgoal_set: detector")
         env_id = _id(environment)
         S, _ = self._env_shape(env_id)
         ids = np.unique(np.asarray(states, dtype=np.int64).reshape(-1))
@@ -571,6 +632,8 @@ class KnowledgeBase(Queries, Tables, Maintenance):
         scipy.sparse matrix stored as a COO table (row, col, value) sorted row-major.
         ``subgoal`` is a subgoal id (``SubgoalSet.subgoal_ids``).
         """
+        _text(name, "put_option: name")
+        gamma = _discount(gamma, "put_option: gamma", optional=True)
         env_id = _id(environment)
         S, A = self._env_shape(env_id)
         pol = np.asarray(policy)
@@ -663,6 +726,8 @@ class KnowledgeBase(Queries, Tables, Maintenance):
         """Store a learning run: ``curve`` a table (episodes, steps, value gap, ...), metrics,
         and ``experience``, a table of the transitions its runs took (``state, action,
         next_state, count``), when the learner recorded them."""
+        _text(learner, "put_run: learner")
+        seed = _whole(seed, "put_run: seed", optional=True)
         metrics = dict(metrics or {})
         _json(metrics, "metrics")
         task_id = _id(task)

@@ -42,10 +42,12 @@ from typing import Any
 
 import numpy as np
 
+from adpart.envs.registry import gym_module
 from adpart.errors import AdpartError, TaskError, UnknownNameError
 from adpart.execution import Executor, SerialExecutor
 from adpart.learning.curves import LearningCurve
-from adpart.learning.settings import Run
+from adpart.learning.settings import MAX_SEED, Run
+from adpart.params import setting_fields
 from adpart.plugins import PluginError, get_registry
 from adpart.workflows.learning import LearnOutcome, LearnRequest, record_learning, run_learning
 from adpart.workflows.resolve import resolve_domain
@@ -60,7 +62,11 @@ else:  # pragma: no cover - Python 3.10
 CELL_PARAMETER = "sweep_cell"
 
 _INT_KEYS = {"runs": 1, "episodes": 1, "eval_every": 1, "runs_per_batch": 0}
-_KEYS = ("name", "learner", *_INT_KEYS, "seeds", "environments", "params")
+#: the most seeds and cells one sweep may list: each cell is a learning run stored in the
+#: knowledge base, and the plan is built in memory before the first runs
+MAX_SEEDS = 100_000
+MAX_CELLS = 1_000_000
+_KEYS = ("name", "learner", *_INT_KEYS, "seeds", "environments", "params", "allow_imports")
 _DEFAULTS: dict[str, Any] = {"learner": "q-learning", "runs": 10, "episodes": 300,
                              "eval_every": 10, "runs_per_batch": 0}
 
@@ -84,6 +90,10 @@ class EnvironmentSpec:
 
 #: The run settings' defaults (one declaration: :class:`Run`).
 _RUN = Run()
+#: the largest value of each integer key: the bound :class:`Run` declares for its field
+_INT_MAX = {sf.name: int(sf.bounds.max) for sf in setting_fields(Run)
+            if sf.name in ("runs", "episodes", "eval_every")}
+_INT_MAX["runs_per_batch"] = _INT_MAX["runs"]
 
 
 @dataclass(frozen=True)
@@ -148,10 +158,13 @@ def parse_config(data: Mapping[str, Any], *, source: str = "<config>") -> SweepC
             raise fail(key, f"must be a non-empty string, got {raw[key]!r}")
     for key, low in _INT_KEYS.items():
         v = values[key]
-        if isinstance(v, bool) or not isinstance(v, int) or v < low:
-            raise fail(key, f"must be an integer >= {low}, got {v!r}")
+        high = _INT_MAX[key]
+        if isinstance(v, bool) or not isinstance(v, int) or not low <= v <= high:
+            raise fail(key, f"must be an integer in [{low}, {high}], got {v!r}")
+    environments = _parse_environments(raw["environments"], fail)
+    _check_imports(environments, raw.get("allow_imports", []), fail)
     return SweepConfig(
-        environments=_parse_environments(raw["environments"], fail),
+        environments=environments,
         seeds=_parse_seeds(raw["seeds"], fail),
         params=_parse_params(raw.get("params", {}), fail),
         learner=values["learner"],
@@ -164,16 +177,36 @@ def parse_config(data: Mapping[str, Any], *, source: str = "<config>") -> SweepC
     )
 
 
+def _check_imports(envs: Sequence[EnvironmentSpec], allowed: Any,
+                   fail: Callable[[str, str], SweepConfigError]) -> None:
+    """A config file imports no Python module it does not list in ``allow_imports``.
+
+    ``gym:MODULE:Id-v0`` runs ``MODULE``'s code; a name on the command line is the user's own,
+    but a file may come from elsewhere, so its imports must be named where they can be seen.
+    """
+    if not isinstance(allowed, list) or not all(isinstance(m, str) and m for m in allowed):
+        raise fail("allow_imports", f"must be a list of module names, got {allowed!r}")
+    for i, env in enumerate(envs):
+        module = gym_module(env.name)
+        if module is not None and module not in allowed:
+            raise fail(f"environments[{i}]",
+                       f"{env.name!r} imports the Python module {module!r}, running its code; "
+                       f"a config file imports only the modules it lists: add "
+                       f"allow_imports = [\"{module}\"] if you trust it")
+
+
 def _parse_seeds(seeds: Any, fail: Callable[[str, str], SweepConfigError]) -> tuple[int, ...]:
     if isinstance(seeds, int) and not isinstance(seeds, bool):
-        if seeds < 1:
-            raise fail("seeds", f"as a count must be >= 1, got {seeds}")
+        if not 1 <= seeds <= MAX_SEEDS:
+            raise fail("seeds", f"as a count must be in [1, {MAX_SEEDS}], got {seeds}")
         return tuple(range(seeds))
     if not isinstance(seeds, list) or not seeds:
         raise fail("seeds", f"must be a non-empty list of integers or a count, got {seeds!r}")
+    if len(seeds) > MAX_SEEDS:
+        raise fail("seeds", f"lists {len(seeds)} seeds; at most {MAX_SEEDS}")
     for i, s in enumerate(seeds):
-        if isinstance(s, bool) or not isinstance(s, int) or s < 0:
-            raise fail(f"seeds[{i}]", f"must be an integer >= 0, got {s!r}")
+        if isinstance(s, bool) or not isinstance(s, int) or not 0 <= s <= MAX_SEED:
+            raise fail(f"seeds[{i}]", f"must be an integer in [0, {MAX_SEED}], got {s!r}")
     return tuple(seeds)
 
 
@@ -262,6 +295,14 @@ def plan_cells(config: SweepConfig) -> list[Cell]:
     """
     registry = get_registry()
     src = config.source
+    size = len(config.seeds) * sum(len(e.tasks or (None,)) for e in config.environments)
+    for values in config.params.values():
+        size *= len(values)
+    if size > MAX_CELLS:
+        raise SweepConfigError(
+            f"sweep config {src}: the grid has {size} cells (environments x tasks x params x "
+            f"seeds); at most {MAX_CELLS}: split it into several sweeps or shorten `seeds` / "
+            "`params`")
     try:
         spec = registry.get("learner", config.learner)
     except UnknownNameError as exc:
