@@ -450,6 +450,8 @@ def export(kb_location: KBLocation, ref: str, out: Path, field_name: str | None)
             present = [f for f in fields if getattr(record, f) is not None]
             if field_name is None and len(present) == 1:  # the record's only artifact
                 field_name = present[0]
+            elif field_name is None and record.KIND == "run" and "curve" in present:
+                field_name = "curve"  # a run's own artifact (its experience: --field)
             if field_name not in fields:
                 raise KBError(
                     f"{record.ref} has artifact fields {', '.join(fields) or 'none'}; "

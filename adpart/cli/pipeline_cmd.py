@@ -21,6 +21,7 @@ from adpart.cli.common import (
     settings_options,
 )
 from adpart.errors import AdpartError
+from adpart.learning.knowledge import REGIMES
 from adpart.options.subgoal_options import InitiationSettings
 from adpart.partition.settings import PartitionSettings
 from adpart.store.location import KBLocation
@@ -44,7 +45,7 @@ def _check_plugin_params(kind: str, name: str, params: dict[str, Any], option: s
 
 def check_pipeline_options(config: Any) -> None:
     """Every value of a pipeline's config checked up front (plugins, parameters, tasks)."""
-    from adpart.workflows.pipeline import check_tasks
+    from adpart.workflows.pipeline import check_regime, check_tasks
 
     try:
         check_tasks(config.env, config.tasks)
@@ -55,6 +56,10 @@ def check_pipeline_options(config: Any) -> None:
     _check_plugin_params("learner", config.flat_learner, config.flat_params, "--flat-opt")
     _check_plugin_params("learner", "hierarchical", config.hierarchical_params, "--hier-opt")
     check_criterion(config.criterion, config.criterion_params, config.partition)
+    try:
+        check_regime(config)
+    except AdpartError as exc:
+        raise CLIError(str(exc)) from None
     if config.hierarchy is not None:
         _check_plugin_params("hierarchy-estimator", config.hierarchy, config.hierarchy_params,
                              "--hierarchy-opt")
@@ -145,10 +150,14 @@ def _say(quiet: bool):  # type: ignore[no-untyped-def]
     metavar="KEY=VALUE",
     help="A hierarchical-learner parameter, e.g. --hier-opt mode=inconsistency.",
 )
+@click.option("--regime", type=click.Choice(REGIMES), default=REGIMES[0], show_default=True,
+              help="What the off-line steps read: the model estimated from the first task's "
+                   "runs, or the true model (the seed's figures).")
 @click.option("--baseline/--no-baseline", default=True, show_default=True,
               help="Also learn each later task flat, for comparison.")
 @click.option("--model-baseline/--no-model-baseline", default=True, show_default=True,
-              help="Also learn them with known-dynamics (the true dynamics, rewards observed).")
+              help="Also learn them model-based with the layer learner's dynamics (true or "
+                   "estimated), rewards observed.")
 @click.option(
     "--hierarchy",
     metavar="NAME",
@@ -186,6 +195,7 @@ def pipeline_cmd(
     flat_opt: tuple[str, ...],
     no_fallback: bool,
     hier_opt: tuple[str, ...],
+    regime: str,
     baseline: bool,
     model_baseline: bool,
     hierarchy: str | None,
@@ -228,6 +238,7 @@ def pipeline_cmd(
         hierarchy_params=key_values(hierarchy_opt, "--hierarchy-opt"),
         flat_learner=flat_learner,
         fallback=not no_fallback,
+        regime=regime,
     )
     check_pipeline_options(config)
     out = out or Path("adpart-pipeline") / folder_name(env)
@@ -244,7 +255,7 @@ def pipeline_cmd(
         return
     for stage in report.stages:
         click.echo(
-            f"{stage.stage:<20} {stage.task or '':<20} {stage.result:<28} "
+            f"{stage.stage:<24} {stage.task or '':<20} {stage.result:<28} "
             f"{'reused' if stage.reused else f'{stage.seconds:.2f} s'}"
         )
         if stage.detail.get("reason"):

@@ -145,7 +145,7 @@ def _taxi_pipeline(config: ExperimentConfig, s: dict[str, Any]) -> tuple[Any, di
     pc = PipelineConfig(env="taxi-fickle", tasks=("deliver", "deliver"), detector="count-mc",
                         detector_params={"on_loop": "truncate"}, runs=s["runs"],
                         episodes=s["pipe"], first_episodes=s["pipe_first"], seed=config.seed,
-                        eval_every=s["eval_every"], baseline=False,
+                        eval_every=s["eval_every"], baseline=False, regime="true-model",
                         flat_params={"alpha": ALPHA, "epsilon": EPSILON},
                         # chapter 6's partitioned learner: the layer with refinement alone, as
                         # on Parr's maze (the pipeline's default adds the reward states' options)

@@ -155,6 +155,7 @@ def task_sequence(config: ExperimentConfig) -> ExperimentReport:
         seed=config.seed, eval_every=s["eval_every"],
         flat_params=s["flat"], hierarchical_params=s["hierarchical"],
         hierarchy="expected-learning-time", fallback=False,  # the layers are what is compared
+        regime="true-model",  # Algorithm 3 builds on the true option models (section 5.2)
     )
     with working_kb(config.kb, "task-sequence") as kb:
         pipe = run_pipeline(kb, pcfg, progress=config.progress)

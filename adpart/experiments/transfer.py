@@ -161,6 +161,7 @@ def pipeline_layer(config: ExperimentConfig, setup: TransferSetup, report: Exper
         hierarchical_params={**learner, "mode": "inconsistency", "delta": DELTA,
                              "partition-epsilon": EPSILON},
         gap_fraction=GAP_FRACTION, fallback=False,  # the experiment compares the layer with flat
+        regime="true-model",  # the seed's transfer figures: every off-line step on the true model
     )
     # the knowledge base of config, else config.out/kb (kept, so a rerun resumes)
     with working_kb(config.kb or Path(config.out) / "kb", "transfer") as kb:

@@ -180,11 +180,12 @@ class LockStepState(ScheduledAgents):
 
     Per agent (K leading axis), the table: ``Q`` (K, S, A) with ``-inf`` on inadmissible pairs;
     ``n_sa`` (K, S, A) and ``n_s`` (K, S) visit counts; ``n_next`` (K, nnz) the agent's
-    experience, how often each transition (CSR entry ``a*S + s -> s'``) was taken; the agents: ``state``; ``episode``
-    (completed episodes); ``target`` (episodes to complete before returning); ``t_ep``, ``ret``,
-    ``dret``, ``gpow`` (steps, undiscounted and discounted return, ``gamma**t`` of the current
-    episode); ``alpha_ep`` / ``eps_ep`` (``scale * rate**episode`` of each schedule); ``U``
-    (K, B, 4) uniforms and ``cursor`` (K,) the next unused row.
+    experience, how often each transition (CSR entry ``a*S + s -> s'``) was taken; the agents:
+    ``state``; ``episode`` (completed episodes); ``target`` (episodes to complete before
+    returning); ``t_ep``, ``ret``, ``dret``, ``gpow`` (steps, undiscounted and discounted
+    return, ``gamma**t`` of the current episode); ``alpha_ep`` / ``eps_ep`` (``scale *
+    rate**episode`` of each schedule); ``U`` (K, B, 4) uniforms and ``cursor`` (K,) the next
+    unused row.
 
     Outputs (K, N): ``out_steps``, ``out_ret``, ``out_dret`` per completed episode. Evaluated
     greedy policies: ``policy`` (K, S), any signed integer dtype, lowest-index argmax of each row

@@ -149,7 +149,7 @@ from adpart.learning.hierarchical_settings import (
     TESTING_MODES,
     HierarchicalSettings,
 )
-from adpart.learning.knowledge import OPTION_POLICIES, Knowledge, world
+from adpart.learning.knowledge import Knowledge, world
 from adpart.learning.result import LearnResult
 from adpart.learning.settings import Run, fresh_seed, require_mdp
 from adpart.learning.smdp_q import (
@@ -311,9 +311,18 @@ def _with_empty_columns(partition: Partition, n: int) -> Partition:
         np.pad(partition.admissible, ((0, 0), (0, n)), constant_values=False))
 
 
-def _pad_partition(partition: Partition, n_prim: int, n_total: int, model: SMDPModel
-                   ) -> Partition:
-    """The partition over the learner's columns (primitives first), checked against the model."""
+def _pad_partition(partition: Partition, n_prim: int, n_total: int, model: SMDPModel,
+                   terminal: np.ndarray) -> Partition:
+    """The partition over the learner's columns (primitives first), checked against the model.
+
+    A terminal state of the task may share a block whose options it cannot start: no decision is
+    taken there (an episode ends on arrival), so a layer built before the task was known - the
+    learned-model regime's phases 1-2 - need not have set the task's goal apart. For the same
+    reason such a layer may hold the *earlier* task's terminal states in a block that offers
+    every option (phases 1-2 make them one absorbing block): a live state whose block offers a
+    column it cannot start becomes a block of its own, offering those of the block's columns it
+    can start, or everything it can start (at least the primitive actions) if none, and the
+    learner finds out the rest."""
     if not isinstance(partition, Partition):
         raise TaskError(f"partition must be an adpart Partition, got {type(partition).__name__}")
     if partition.n_states != model.n_states:
@@ -330,7 +339,18 @@ def _pad_partition(partition: Partition, n_prim: int, n_total: int, model: SMDPM
             f"the partition offers {partition.n_options} options; expected {n_total - n_prim} "
             f"(the given options) or {n_total} (primitive actions first, then the options)"
         )
-    allowed = block_all(partition.labels, partition.n_blocks, model.admissible)
+    offers = partition.admissible[partition.labels]
+    stranded = ~terminal & (offers & ~model.admissible).any(axis=1)
+    if stranded.any():  # the earlier task's absorbing block, on a later task
+        codes = np.where(stranded, np.arange(1, partition.n_states + 1), 0)
+        split = partition.refine_by(codes)
+        adm = split.admissible.copy()
+        for s in np.flatnonzero(stranded):
+            kept = offers[s] & model.admissible[s]
+            adm[split.labels[s]] = kept if kept.any() else model.admissible[s]
+        partition = split.with_admissible(adm)
+    allowed = block_all(partition.labels, partition.n_blocks,
+                        model.admissible | terminal[:, None])
     bad = np.argwhere(partition.admissible & ~allowed)
     if bad.size:
         b, o = bad[0]
@@ -367,7 +387,7 @@ def starting_layer(mdp: FiniteMDP, options: Sequence[Option], partition: Partiti
     else:
         full, smdp = option_set(mdp, options, include_primitives=True, models=models)
         part0 = _with_empty_columns(partition, len(extra))
-    part0 = _pad_partition(part0, A, len(full), smdp)
+    part0 = _pad_partition(part0, A, len(full), smdp, mdp.terminal)
     if extra and partition is not None:  # the given layer, offered the reward-state options
         part0 = _offer(part0, np.arange(len(full) - len(extra), len(full)), smdp.admissible)
     if settings.mode == "action-refinement":  # 4.3.2: reward blocks get every primitive
@@ -382,16 +402,25 @@ def starting_layer(mdp: FiniteMDP, options: Sequence[Option], partition: Partiti
 # --------------------------------------------------------------------------- the learner
 
 
-def hierarchical_knowledge(settings: HierarchicalSettings) -> Knowledge:
+def hierarchical_knowledge(settings: HierarchicalSettings, *, belief: bool = False
+                           ) -> Knowledge:
     """What the hierarchical learner reads of the task it learns, by its settings (the
     :mod:`adpart.learning.knowledge` record; the options' and the layer's own come on top).
 
-    In every mode it reads the true dynamics - the exact option models refine the layer (eqs.
-    4.6-4.7) - and the task's rewards and terminals: the reward floor ``r_min`` bounds the
-    grounded values and the refinement model's absorbing block is the task's terminal set.
+    Without a ``belief`` it reads the true dynamics in every mode - the exact option models
+    refine the layer (eqs. 4.6-4.7) - and the task's rewards and terminals: the reward floor
+    ``r_min`` bounds the grounded values and the refinement model's absorbing block is the
+    task's terminal set. With one (the learned-model regime) it reads only that model: option
+    models on the estimated dynamics, the earlier tasks' step reward as the floor, no terminal
+    state until it enters one, and the threshold it is given.
     """
-    uses = ["option models for refinement", "reward floor r_min", "terminal states",
-            *OPTION_POLICIES.uses]
+    if belief:
+        uses = ["option models on the estimated dynamics for refinement",
+                "the earlier tasks' step reward as the reward floor"]
+        if settings.directed:
+            uses.append("R-max on the counts")
+        return Knowledge("estimated", "observed", tuple(uses))
+    uses = ["option models for refinement", "reward floor r_min", "terminal states"]
     if settings.reward_options:
         uses.append("options to the task's reward states, solved on the true model")
     if settings.testing:
@@ -404,6 +433,33 @@ def hierarchical_knowledge(settings: HierarchicalSettings) -> Knowledge:
     return Knowledge("true-model", "known", tuple(uses))
 
 
+def belief_problem(settings: HierarchicalSettings) -> str | None:
+    """Why the learner cannot learn on a belief model with ``settings`` (None: it can)."""
+    if settings.mode != "inconsistency":
+        return (f"mode {settings.mode} reads the task's rewards, which a learner on a belief "
+                "model does not know; use mode inconsistency (--mode inconsistency)")
+    if settings.directed:
+        return ("R-max exploration (--explore-known) plans with the task's reward function; on "
+                "a belief model the rewards are only observed: give --explore-known 0")
+    return None
+
+
+def _checked_belief(belief: FiniteMDP, mdp: FiniteMDP, settings: HierarchicalSettings
+                    ) -> FiniteMDP:
+    """``belief``, if the learner can learn ``mdp`` on it with ``settings``."""
+    require_mdp("hierarchical_learning (belief)", belief)
+    if (belief.n_states, belief.n_actions) != (mdp.n_states, mdp.n_actions):
+        raise TaskError(f"the belief model has {belief.n_states} states and {belief.n_actions} "
+                        f"actions; the task has {mdp.n_states} and {mdp.n_actions}")
+    problem = belief_problem(settings)
+    if problem is not None:
+        raise TaskError(problem)
+    if settings.testing and settings.test.threshold is None:
+        raise TaskError("the default inconsistency threshold reads V* of the task; a learner on "
+                        "a belief model needs a given threshold (--threshold L)")
+    return belief
+
+
 def hierarchical_learning(
     mdp: FiniteMDP,
     options: Sequence[Option],
@@ -411,6 +467,7 @@ def hierarchical_learning(
     settings: HierarchicalSettings | None = None,
     run: Run | None = None,
     models: Sequence[OptionModel] | None = None,
+    belief: FiniteMDP | None = None,
 ) -> HierarchicalResult:
     """Learn ``mdp`` on a decision layer over ``options`` (section 4.3; module docstring).
 
@@ -429,7 +486,15 @@ def hierarchical_learning(
             with R-max exploration: a block the agent never visited must not look better to
             the greedy policy than those it learned), kernel and progress
             (:class:`~adpart.learning.settings.Run`). Default: ``Run()``.
-        models: exact models of ``options`` (computed when omitted).
+        models: exact models of ``options`` on ``mdp`` (computed when omitted; with a
+            ``belief`` they serve the scoring only).
+        belief: the model the learner may read instead of ``mdp``'s (the learned-model regime:
+            dynamics estimated from earlier runs' experience, the earlier tasks' step reward, no
+            terminal state; :func:`adpart.workflows.experience.belief_model`). Every model the
+            learner plans or refines on is then built on it; ``mdp`` is only sampled and scored
+            against (inside :func:`~adpart.learning.knowledge.world`). Needs the
+            ``inconsistency`` mode (the others read the task's rewards) and a given
+            ``threshold`` (the default reads ``V*``).
 
     Returns:
         A :class:`HierarchicalResult`.
@@ -443,24 +508,29 @@ def hierarchical_learning(
     K, N, S, H = run.runs, run.episodes, mdp.n_states, run.max_steps_per_episode
     seed = fresh_seed(run.seed)
     kernel_name, step_kernel = kernel_function(run.kernel)
-    part0, full, smdp, extra = starting_layer(mdp, options, partition, settings, models)
+    known = mdp if belief is None else _checked_belief(belief, mdp, settings)
+    part0, full, smdp, extra = starting_layer(known, options, partition, settings,
+                                              models if belief is None else None)
     with world():  # the start distribution and V* are the environment's, for scoring
         mu = start_distribution(mdp)
         v_star = optimal_start_value(mdp, mu, run.reference_values)
+        # the world's own model of the columns scores the greedy policies
+        world_smdp = smdp if belief is None else option_set(
+            mdp, full[mdp.n_actions:], include_primitives=True, models=models)[1]
     L = (default_threshold(v_star, scale=test.threshold_scale) if test.threshold is None
          else float(test.threshold))
-    lower = flat_lower_bound(mdp, H)
+    lower = flat_lower_bound(known, H)
     q0 = run.q_init if run.q_init is not None else lower if settings.directed else 0.0
     check = settings.testing
-    reference = ReferenceValues(settings.test_reference, test.split_offered, mdp, smdp, lower)
+    reference = ReferenceValues(settings.test_reference, test.split_offered, known, smdp, lower)
     refine = LayerRefiner(refinement.refine, refinement.delta, refinement.partition_epsilon,
-                          refinement_model(mdp, smdp), lower, child_values)
+                          refinement_model(known, smdp), lower, child_values)
     arrays = InconsistencyArrays(
         threshold=L if check else np.inf, min_visits=test.min_visits,
         prim_opt=np.arange(mdp.n_actions), floor=lower, lcb_z=test.lcb_z,
         flat_explore=settings.flat_explore,
         prim_eps=PRIMITIVE_EXPLORATION[settings.exploration.primitive_exploration] if check
-        else 0, r_min=reward_floor(mdp),
+        else 0, r_min=reward_floor(known),
         **(reference.initial(part0) if check else
            {"block_values": None, "state_values": None, "offered_values": None}),
         explore_known=settings.exploration.explore_known,
@@ -482,10 +552,10 @@ def hierarchical_learning(
         events.append(event)
 
     def score() -> np.ndarray:
-        Qs = lifted_values(settings.layer_values, st, parts, smdp, mdp, lower)
+        Qs = lifted_values(settings.layer_values, st, parts, smdp, known, lower)
         policies = greedy_policy(Qs.reshape(K * S, -1)).reshape(K, S)
         with world():
-            return start_values(smdp, policies, mu)
+            return start_values(world_smdp, policies, mu)
 
     eval_value = drive(st, step_kernel, seed, episodes=N, eval_every=run.eval_every,
                        score=score, progress=run.progress, on_fire=on_fire if check else None)
@@ -496,7 +566,7 @@ def hierarchical_learning(
         "delta": float(delta), "epsilon": None if epsilon is None else float(epsilon),
         "threshold": L, "threshold_rule": "given" if test.threshold is not None else
         f"{test.threshold_scale} x |V*(start)|",
-        "theorem_4_5_bound": theorem_bound(mdp, epsilon=epsilon, delta=delta),
+        "theorem_4_5_bound": theorem_bound(known, epsilon=epsilon, delta=delta),
         "lcb_z": float(test.lcb_z), "flat_explore": settings.flat_explore,
         "test_reference": reference.name, "refine": refinement.refine,
         "primitive_exploration": settings.exploration.primitive_exploration if check
@@ -509,7 +579,8 @@ def hierarchical_learning(
         "kernel": kernel_name, "intra_option": settings.intra_option, "options": list(names),
         "extra_subgoals": [o.subgoal for o in extra], "initial_blocks": B0,
         "reference": "given" if run.reference_values is not None else "solved",
-        "knowledge": hierarchical_knowledge(settings).to_dict(),
+        "knowledge": hierarchical_knowledge(settings, belief=belief is not None).to_dict(),
+        "belief": None if belief is None else belief.name,
     }
     curve = LearningCurve.from_matrices(
         steps=st.out_steps, decisions=st.out_dec, returns=st.out_ret,
@@ -520,7 +591,7 @@ def hierarchical_learning(
     )
     grounded = st.Ql.copy() if st.Ql.shape[1] == S else None  # a placeholder when not testing
     return HierarchicalResult(
-        Q=lifted_values(settings.layer_values, st, parts, smdp, mdp, lower),
+        Q=lifted_values(settings.layer_values, st, parts, smdp, known, lower),
         block_Q=[st.Q[k, :parts[k].n_blocks].copy() for k in range(K)],
         partitions=parts, Q_flat=st.Qf.copy(), Q_grounded=grounded,
         curve=curve, blocks=st.out_blocks.copy(),

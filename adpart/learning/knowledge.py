@@ -4,9 +4,11 @@ A comparison of two learners is fair only when each was given the same knowledge
 learner declares it (:class:`Knowledge`) and the record is stored with every run and printed
 beside every comparison:
 
-* **dynamics** - ``none`` (the learner only samples the environment), or ``true-model`` (it reads
-  the exact transition model ``P``: to solve option policies or option models, to build or refine
-  a layer, to compute a reference value);
+* **dynamics** - ``none`` (the learner only samples the environment), ``estimated`` (it reads a
+  model estimated from the transitions earlier runs took, named in ``uses``: the learned-model
+  regime, :mod:`adpart.mdp.experience`), or ``true-model`` (it reads the exact transition model
+  ``P``: to solve option policies or option models, to build or refine a layer, to compute a
+  reference value);
 * **rewards** - ``observed`` (the learner sees a reward only when it takes the step that pays
   it, and a terminal state only when it enters it), or ``known`` (it reads the task's reward
   function ``R`` or its terminal set before or while learning: options to its reward states, a
@@ -33,13 +35,16 @@ from typing import Any
 
 from adpart.errors import AdpartError
 
-__all__ = ["DYNAMICS", "FLAT", "OPTION_POLICIES", "PLANNER", "REWARDS", "Knowledge",
-           "KnowledgeError", "combine", "guard", "world"]
+__all__ = ["DYNAMICS", "FLAT", "OPTION_POLICIES", "PLANNER", "REGIMES", "REWARDS", "Knowledge",
+           "KnowledgeError", "combine", "estimated_option_policies", "guard", "world"]
 
 #: What a learner may know of the dynamics, least first.
-DYNAMICS = ("none", "true-model")
+DYNAMICS = ("none", "estimated", "true-model")
 #: What a learner may know of the rewards, least first.
 REWARDS = ("observed", "known")
+#: What the off-line steps of the transfer chain read: the model estimated from the earlier
+#: tasks' experience, or the true model (``adpart pipeline --regime``).
+REGIMES = ("learned-model", "true-model")
 
 
 class KnowledgeError(AdpartError):
@@ -62,7 +67,8 @@ class Knowledge:
         object.__setattr__(self, "uses", tuple(dict.fromkeys(self.uses)))
 
     def allows(self, kind: str) -> bool:
-        """Whether reading ``kind`` (``"dynamics"`` or ``"rewards"``) is within the regime."""
+        """Whether reading ``kind`` (``"dynamics"`` or ``"rewards"``) of the task's own model is
+        within the regime (an estimated model is another model, never the task's)."""
         return (self.dynamics == "true-model") if kind == "dynamics" else self.rewards == "known"
 
     @property
@@ -85,6 +91,15 @@ FLAT = Knowledge()
 #: solved on the environment's true dynamics (to its subgoal, with a pseudo-reward: 4.1).
 OPTION_POLICIES = Knowledge("true-model", "observed",
                             ("option policies solved on the true dynamics",))
+
+
+def estimated_option_policies(sources: str) -> Knowledge:
+    """What a learner over options knows when they were solved on the model estimated from
+    the experience of ``sources`` (run references)."""
+    return Knowledge("estimated", "observed",
+                     (f"option policies solved on the model estimated from {sources}",))
+
+
 #: A planner on the task's exact model (value iteration): it needs no episode at all.
 PLANNER = Knowledge("true-model", "known", ("value iteration on the exact model",))
 

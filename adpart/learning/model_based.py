@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from adpart.errors import ModelError
 from adpart.learning._kernels import njit_lazily, resolve_kernel
 from adpart.learning.curves import (
     LearningCurve,
@@ -37,11 +38,12 @@ from adpart.learning.curves import (
 from adpart.learning.knowledge import Knowledge, world
 from adpart.learning.result import LearnResult
 from adpart.learning.settings import Run, fresh_seed, require_mdp
-from adpart.mdp._sampling import successor
+from adpart.mdp._sampling import first_above
 from adpart.mdp.evaluation import greedy_policy
+from adpart.mdp.experience import Experience
 from adpart.mdp.model import FiniteMDP
 
-__all__ = ["KNOWN_DYNAMICS", "known_dynamics_learning"]
+__all__ = ["KNOWN_DYNAMICS", "estimated_dynamics_learning", "known_dynamics_learning"]
 
 #: What the learner knows: the true dynamics, the rewards only as observed.
 KNOWN_DYNAMICS = Knowledge("true-model", "observed",
@@ -84,11 +86,13 @@ def _plan(indptr, indices, data, R_hat, terminal, admissible, Q, gamma, S, A):
 
 
 def _episode(s, Q, admissible, keys, indptr, indices, env_R, env_terminal, r_sum, n_sa, n_s,
-             terminal, eps, e, H, gamma, U):
+             terminal, counts, eps, e, H, gamma, U):
     """One episode from ``s`` (the rule of the module docstring): epsilon-greedy on ``Q`` (ties
     at random), the environment's step (successor by ``keys``, reward ``env_R``, end at
-    ``env_terminal``) observed into the reward model. Three uniforms a step: explore?, which
-    action, successor. Returns ``(steps, return, discounted return, model changed)``."""
+    ``env_terminal``) observed into the reward model and counted in ``counts`` (one entry per
+    CSR entry of the transitions). Three uniforms a step: explore?, which action, successor.
+    Returns ``(steps, return, discounted return, model changed)``; the model changed when a
+    pair's mean reward moved, a pair was counted for the first time, or a terminal was found."""
     S, A = Q.shape
     scale, rate, omega, floor = eps
     steps = 0
@@ -133,7 +137,10 @@ def _episode(s, Q, admissible, keys, indptr, indices, env_R, env_terminal, r_sum
                         break
                     pick -= 1
         row = a * S + s
-        s2 = successor(row, U[steps, 2], keys, indptr, indices)
+        hi = indptr[row + 1]
+        pos = min(first_above(keys, row + U[steps, 2], indptr[row], hi), hi - 1)
+        s2 = indices[pos]
+        counts[pos] += 1.0
         r = env_R[s, a]
         before = r_sum[s, a] / n_sa[s, a] if n_sa[s, a] > 0 else np.nan
         n_s[s] += 1
@@ -174,24 +181,92 @@ def known_dynamics_learning(mdp: FiniteMDP, run: Run | None = None) -> LearnResu
     Randomness: run ``k`` draws from ``default_rng(seed).spawn(K)[k]`` one uniform for each
     episode's start and ``3 H`` for its steps (used in order, three a step).
     """
-    run = Run() if run is None else run
     require_mdp("known_dynamics_learning", mdp)
+    return _certainty_equivalent(mdp, Run() if run is None else run, None, KNOWN_DYNAMICS,
+                                 "known-dynamics")
+
+
+def estimated_dynamics_learning(mdp: FiniteMDP, run: Run | None = None,
+                                prior: Experience | None = None) -> LearnResult:
+    """Learn ``mdp`` with ``run.runs`` certainty-equivalent agents on a *counts* model: the
+    knowledge-matched baseline of a layer learner in the learned-model regime.
+
+    The same agent as :func:`known_dynamics_learning` (module docstring), except that what it
+    plans on is ``P^(s'|s, a) = N(s, a, s') / N(s, a)`` over the transitions of ``prior`` (the
+    earlier runs whose experience the layer was built from) and its own steps, counted as it
+    takes them; a pair neither has tried has no successor in the plan, so it is worth its
+    optimistic reward alone (the largest reward observed, 0 before any), and planning leads to
+    it. The plan is redone after every episode that moved the reward model (a pair's first
+    try included) or found a terminal state, on the counts of that moment.
+
+    Args:
+        mdp: the task; sampled for steps, rewards and episode ends only.
+        run: the run settings, as for :func:`known_dynamics_learning`.
+        prior: the earlier experience (:class:`~adpart.mdp.experience.Experience`); None: the
+            agent starts knowing nothing of the dynamics.
+    """
+    require_mdp("estimated_dynamics_learning", mdp)
+    run = Run() if run is None else run
+    sources = ", ".join(prior.sources) if prior is not None and prior.sources else None
+    knowledge = Knowledge("estimated", "observed", (
+        "value iteration on the counts model of "
+        + (f"{sources} and its own steps" if sources else "its own steps")
+        + " with the observed rewards",))
+    return _certainty_equivalent(mdp, run, prior, knowledge, "estimated-dynamics")
+
+
+def _prior_counts(mdp: FiniteMDP, prior: Experience | None) -> np.ndarray:
+    """``prior``'s counts on the CSR entries of ``mdp``'s transitions (the layout the kernel
+    counts in; a transition the environment cannot make is refused)."""
+    P = mdp.P
+    out = np.zeros(P.nnz)
+    if prior is None or prior.counts.nnz == 0:
+        return out
+    if prior.counts.shape != P.shape:
+        raise ModelError(f"the prior experience is of {prior.n_states} states and "
+                         f"{prior.n_actions} actions; the task has {mdp.n_states} and "
+                         f"{mdp.n_actions}")
+    coo = prior.counts.tocoo()
+    starts, ends = P.indptr[coo.row], P.indptr[coo.row + 1]
+    pos = np.array([start + np.searchsorted(P.indices[start:end], col)
+                    for start, end, col in zip(starts, ends, coo.col, strict=True)],
+                   dtype=np.int64)
+    ok = (pos < ends) & (P.indices[np.minimum(pos, P.nnz - 1)] == coo.col)
+    if not ok.all():
+        raise ModelError("the prior experience holds a transition this environment cannot "
+                         "make; it was gathered on another environment")
+    np.add.at(out, pos, coo.data.astype(np.float64))
+    return out
+
+
+def _frequencies(counts: np.ndarray, row_of: np.ndarray, n_rows: int) -> np.ndarray:
+    """``N(s, a, s') / N(s, a)`` per CSR entry (0 in rows never counted)."""
+    total = np.bincount(row_of, weights=counts, minlength=n_rows)
+    return np.divide(counts, total[row_of], out=np.zeros_like(counts), where=total[row_of] > 0)
+
+
+def _certainty_equivalent(mdp: FiniteMDP, run: Run, prior: Experience | None,
+                          knowledge: Knowledge, learner: str) -> LearnResult:
+    """The driver both learners share: ``prior`` None and ``learner == "known-dynamics"`` plans
+    on the true ``P``; otherwise on the counts (``prior``'s and the run's own)."""
     K, N, M, H = run.runs, run.episodes, run.eval_every, run.max_steps_per_episode
     seed = fresh_seed(run.seed)
-    name = resolve_kernel(run.kernel, "known-dynamics")
+    name = resolve_kernel(run.kernel, learner)
     plan, episode = _KERNELS[name]
     S, A, gamma = mdp.n_states, mdp.n_actions, float(mdp.gamma)
-    P = mdp.P.tocsr()  # what it knows: the dynamics (rows a * S + s)
-    indptr, indices = P.indptr.astype(np.int64), P.indices.astype(np.int64)
-    data = P.data.astype(np.float64)
+    known = learner == "known-dynamics"
     admissible = np.ascontiguousarray(mdp.admissible, dtype=bool)
     with world():  # the environment: its start distribution, simulator and V* for scoring
         mu = start_distribution(mdp)
         v_star = optimal_start_value(mdp, mu, run.reference_values)
-        keys = np.asarray(mdp.sampler_arrays[0], dtype=np.float64)
+        keys, indptr, indices = mdp.sampler_arrays  # the simulator and the counts' layout
         env_R = np.ascontiguousarray(mdp.R, dtype=np.float64)
         env_terminal = np.ascontiguousarray(mdp.terminal, dtype=bool)
         score = StartValues(mdp, mu, K)
+        counts0 = None if known else _prior_counts(mdp, prior)
+        row_of = np.repeat(np.arange(A * S), np.diff(indptr))
+    if known:
+        data = mdp.P.data.astype(np.float64)  # what it knows: the dynamics (rows a * S + s)
     start_cdf = np.cumsum(mu)
     eps = run.epsilon.params()
     boundaries = sorted({*range(M, N + 1, M), N})
@@ -199,10 +274,16 @@ def known_dynamics_learning(mdp: FiniteMDP, run: Run | None = None) -> LearnResu
     eval_value = np.full((K, N), np.nan)
     Qs = np.zeros((K, S, A))
     model = [_RewardModel(S, A) for _ in range(K)]
+    counts = [np.zeros(indices.size) if known else counts0.copy() for _ in range(K)]
+
+    def replan(k: int) -> None:
+        frequencies = data if known else _frequencies(counts[k], row_of, A * S)
+        plan(indptr, indices, frequencies, model[k].R_hat(), model[k].terminal, admissible,
+             Qs[k], gamma, S, A)
+
     for k in range(K):
         Qs[k][~admissible] = -np.inf
-        plan(indptr, indices, data, model[k].R_hat(), model[k].terminal, admissible, Qs[k],
-             gamma, S, A)
+        replan(k)
     rngs = np.random.default_rng(seed).spawn(K)
     done = 0
     for boundary in boundaries:
@@ -213,10 +294,9 @@ def known_dynamics_learning(mdp: FiniteMDP, run: Run | None = None) -> LearnResu
                 U = rng.random((H, 3))
                 steps, ret, dret, changed = episode(
                     s, Q, admissible, keys, indptr, indices, env_R, env_terminal, m.r_sum,
-                    m.n_sa, m.n_s, m.terminal, eps, e, H, gamma, U)
+                    m.n_sa, m.n_s, m.terminal, counts[k], eps, e, H, gamma, U)
                 if changed:  # only a changed reward model or a new terminal moves the plan
-                    plan(indptr, indices, data, m.R_hat(), m.terminal, admissible, Q, gamma,
-                         S, A)
+                    replan(k)
                 out["steps"][k, e], out["returns"][k, e] = steps, ret
                 out["discounted"][k, e] = dret
         done = boundary
@@ -229,13 +309,15 @@ def known_dynamics_learning(mdp: FiniteMDP, run: Run | None = None) -> LearnResu
         "runs": K, "episodes": N, "seed": seed, "epsilon": run.epsilon.to_dict(),
         "max_steps_per_episode": H, "eval_every": M, "kernel": name,
         "reference": "given" if run.reference_values is not None else "solved",
-        "knowledge": KNOWN_DYNAMICS.to_dict(),
+        "knowledge": knowledge.to_dict(),
     }
+    if not known:
+        parameters["prior_steps"] = 0 if prior is None else prior.steps
     curve = LearningCurve.from_matrices(
         steps=out["steps"].astype(np.int64), decisions=out["steps"].astype(np.int64),
         returns=out["returns"], discounted_returns=out["discounted"], eval_value=eval_value,
         value_gap=v_star - eval_value,
-        metadata={"learner": "known-dynamics", "mdp": mdp.name, "mdp_hash": mdp.content_hash,
+        metadata={"learner": learner, "mdp": mdp.name, "mdp_hash": mdp.content_hash,
                   "gamma": mdp.gamma, "v_star_start": v_star, **parameters},
     )
     return LearnResult(Q=Qs, curve=curve, seed=seed, v_star_start=v_star,

@@ -77,7 +77,7 @@ class QLearningResult(LearnResult):
     """
 
     visits: np.ndarray
-    experience: Experience
+    experience: Experience | None = None
 
 
 def _policy_dtype(n_actions: int) -> np.dtype:

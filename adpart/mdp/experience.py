@@ -9,12 +9,15 @@ maximum-likelihood model
 
     P^(s' | s, a) = N(s, a, s') / N(s, a)            for every pair tried at least once.
 
-A pair never tried is **unknown**, and the estimate keeps it out: it is not admissible in the
-estimated model (its row is a self-loop, never read by a solver), so no option policy takes it
-and no option model contains it. A state where no action was ever tried has nothing known at
-all; every action stays admissible there as a self-loop, so that the model is a valid MDP and
-the state is one no option can leave - the layer then offers the primitive actions there
-(:mod:`adpart.workflows.partitioning`), and the learner finds out what they do.
+A pair never tried is **unknown**, and the estimate assumes the least of it: a self-loop (the
+action leaves the agent where it is). That keeps it out of every option: a self-loop never
+brings an option closer to its subgoal (it is worth ``gamma V(s) < V(s)`` wherever the subgoal
+can be reached), so no option policy takes it and no option model runs through it; the
+learner that plans on the estimate may still try it, and a state where nothing was ever tried
+is one no option can start in, where the layer offers the primitive actions
+(:mod:`adpart.workflows.partitioning`). A learned policy that takes an unknown pair (its
+initial value can beat the tried ones) loops there in the estimate, which the subgoal
+detectors handle as they handle any loop of a policy.
 """
 
 from __future__ import annotations
@@ -29,7 +32,7 @@ import scipy.sparse as sp
 
 from adpart.errors import ModelError
 
-__all__ = ["Experience", "EXPERIENCE_COLUMNS"]
+__all__ = ["EXPERIENCE_COLUMNS", "Experience"]
 
 #: The columns of an experience table (as the knowledge base stores it).
 EXPERIENCE_COLUMNS = ("state", "action", "next_state", "count")
@@ -149,10 +152,10 @@ class Experience:
                 "states": self.n_states, "sources": list(self.sources)}
 
     # ------------------------------------------------------------------ the estimate
-    def estimate(self) -> tuple[sp.csr_array, np.ndarray]:
-        """The maximum-likelihood transitions ``(A*S, S)`` CSR float64 and the ``(S, A)``
-        admissible mask of the estimated model (module docstring: unknown pairs kept out)."""
-        S, A = self.n_states, self.n_actions
+    def estimate(self) -> sp.csr_array:
+        """The maximum-likelihood transitions, ``(A*S, S)`` CSR float64, each unknown pair a
+        self-loop (module docstring)."""
+        S = self.n_states
         n_sa = self.pair_counts.T.reshape(-1).astype(np.float64)  # row a*S + s
         counts = self.counts
         row_of = np.repeat(np.arange(counts.shape[0]), np.diff(counts.indptr))
@@ -161,7 +164,4 @@ class Experience:
         rows = np.concatenate([row_of, untried])
         cols = np.concatenate([counts.indices.astype(np.int64), untried % S])
         data = np.concatenate([probs, np.ones(untried.size)])
-        P = sp.csr_array((data, (rows, cols)), shape=counts.shape)
-        tried = self.tried
-        admissible = tried | ~tried.any(axis=1, keepdims=True)  # nothing known: all self-loops
-        return P, admissible
+        return sp.csr_array((data, (rows, cols)), shape=counts.shape)

@@ -33,8 +33,10 @@ __all__ = [
     "SubgoalDetector",
 ]
 
-#: What a learner may be given besides the MDP, when it declares it in ``accepts``.
-LEARNER_CONTEXT = frozenset({"options", "partition"})
+#: What a learner may be given besides the MDP, when it declares it in ``accepts``: options, a
+#: partition over them, and in the learned-model regime (``--model ENV@experience:run:N``) the
+#: ``belief`` model it may read (a FiniteMDP) or the earlier runs' ``experience`` (counts).
+LEARNER_CONTEXT = frozenset({"options", "partition", "belief", "experience"})
 
 
 @runtime_checkable

@@ -12,6 +12,7 @@ from adpart.errors import TaskError
 from adpart.plugins import get_registry
 from adpart.subgoals.result import SubgoalResult
 from adpart.workflows.options import environment_and_mdp
+from adpart.workflows.partitioning import environment_record
 from adpart.workflows.store import KnowledgeStore
 
 
@@ -32,8 +33,13 @@ def discover_subgoals(
     detector: str = "count-exhaustive",
     params: dict[str, Any] | None = None,
     seed: int = 0,
+    environment: str | None = None,
 ) -> Discovery:
     """Run ``detector`` on ``policy``'s greedy actions in its task's MDP; store the subgoal set.
+
+    ``environment`` names the model the detector reads instead of the policy's own environment
+    (the same states and actions: a model estimated from experience,
+    :mod:`adpart.workflows.experience`); the subgoal set is stored under it.
 
     A subgoal set already stored for the same policy, detector, parameters and seed is returned
     instead of being recomputed (``reused=True``). The record keeps the parameters the detector
@@ -49,7 +55,11 @@ def discover_subgoals(
             "primitive actions (learn the task with a flat learner first)"
         )
     task = kb.get("task", policy.task_id)
-    env, _, mdp = environment_and_mdp(kb, task.environment_id, task.id)
+    if environment is None:
+        env, _, mdp = environment_and_mdp(kb, task.environment_id, task.id)
+    else:
+        domain, env = environment_record(kb, environment)
+        mdp = domain.mdp(task.name)
     wanted = {**resolved, "seed": seed}
     for existing in kb.records("subgoal-set", environment=env):
         prov = existing.provenance.parameters

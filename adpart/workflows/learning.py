@@ -20,8 +20,10 @@ from adpart.errors import PluginError, TaskError
 from adpart.execution import Executor, SerialExecutor
 from adpart.learning.curves import LearningCurve
 from adpart.learning.settings import Run
+from adpart.mdp.experience import Experience
 from adpart.plugins import get_registry
-from adpart.workflows.resolve import resolve_domain
+from adpart.workflows.refs import parse_ref
+from adpart.workflows.resolve import base_environment, resolve_domain
 from adpart.workflows.run_knowledge import run_knowledge
 from adpart.workflows.store import KnowledgeStore
 
@@ -47,6 +49,9 @@ class LearnRequest:
             (read from the knowledge base).
         partition: for the hierarchical learner, ``partition:N`` - the decision layer; its option
             set is used when ``options`` is not given.
+        model: for the hierarchical learner, the model of the dynamics it may read instead of
+            the task's: an environment estimated from experience, ``ENV@experience:run:N``
+            (the learned-model regime, :func:`adpart.workflows.experience.belief_model`).
     """
 
     env: str
@@ -60,6 +65,16 @@ class LearnRequest:
     runs_per_batch: int = 0
     options: str | None = None
     partition: str | None = None
+    model: str | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        """The request as plain data; ``model`` only when given (a request on the true model is
+        the same data as before the field existed, so stored runs and sweep cells still match).
+        """
+        data = asdict(self)
+        if data["model"] is None:
+            del data["model"]
+        return data
 
     def batches(self) -> list[tuple[int, int]]:
         """``(runs, seed)`` of every batch."""
@@ -94,6 +109,8 @@ class LearnOutcome:
     option_ids: tuple[int, ...] = ()
     final_layers: tuple[tuple[np.ndarray, np.ndarray], ...] = ()
     """Per run, the decision layer a layer learner ended on: ``(labels, block actions)``."""
+    experience: Experience | None = None
+    """The transitions all runs took, when the learner counted them (stored with the run)."""
 
     def q_columns(self, action_names: Sequence[str]) -> list[str] | None:
         """Names of Q's columns when they are not just the primitive actions (option learners).
@@ -145,6 +162,9 @@ def _learn_batch(job: dict[str, Any]) -> dict[str, Any]:
         extra["options"] = job["options"]
     if job.get("partition") is not None:
         extra["partition"] = job["partition"]
+    for given in ("belief", "experience"):  # what a --model gives the learner
+        if job.get(given) is not None:
+            extra[given] = job[given]
     result = learner.learn(
         mdp,
         runs=job["runs"],
@@ -156,8 +176,10 @@ def _learn_batch(job: dict[str, Any]) -> dict[str, Any]:
     )
     runs = 1 if getattr(learner, "single_run", False) else job["runs"]
     check_learn_result(result, job["learner"], runs=runs, n_states=mdp.n_states)
+    experience = getattr(result, "experience", None)
     return {
         "Q": result.Q,
+        "experience": None if experience is None else experience.to_table(),
         "curve": result.curve.to_dict(),
         "metadata": dict(result.curve.metadata),
         "v_star_start": result.v_star_start,
@@ -169,12 +191,18 @@ def _learn_batch(job: dict[str, Any]) -> dict[str, Any]:
 def _check_accepts(spec: Any, request: LearnRequest) -> None:
     """Refuse options or a partition for a learner that does not declare them (``accepts``)."""
     accepts = frozenset(getattr(spec.factory, "accepts", ()))
-    for what, given in (("options", request.options), ("partition", request.partition)):
+    model_inputs = accepts & {"belief", "experience"}  # what a --model gives a learner
+    for what, option, given in (("options", "options", request.options),
+                                ("partition", "partition", request.partition),
+                                ("belief", "model", request.model)):
+        if what == "belief" and model_inputs:
+            continue
         if given is not None and what not in accepts:
             users = sorted(s.name for s in get_registry().all("learner")
-                           if what in getattr(s.factory, "accepts", ()))
+                           if what in (takes := frozenset(getattr(s.factory, "accepts", ())))
+                           or (what == "belief" and takes & {"experience"}))
             raise PluginError(
-                f"learner {spec.name!r} does not learn over {what}; drop --{what} or pick "
+                f"learner {spec.name!r} does not learn over {what}; drop --{option} or pick "
                 f"--learner {' or '.join(users) or '(none installed)'}"
             )
 
@@ -221,6 +249,20 @@ def run_learning(
     batches = request.batches()
     layer = _decision_layer(kb, request)
     option_ids = tuple(layer.pop("option_ids", ()))
+    if request.model is not None:
+        from adpart.workflows.experience import belief_model, resolve_model
+
+        if kb is None:
+            raise TaskError("--model is estimated from runs in the knowledge base; give --kb")
+        estimated = resolve_model(kb, request.model)
+        if base_environment(estimated.name) != request.env:
+            raise TaskError(f"--model {request.model} is a model of "
+                            f"{base_environment(estimated.name)!r}, not of {request.env!r}")
+        if "experience" in getattr(spec.factory, "accepts", ()):
+            layer["experience"] = estimated.experience
+        else:
+            source = kb.get("run", parse_ref(estimated.experience.sources[0], "run"))
+            layer["belief"] = belief_model(estimated, mdp, kb.get("task", source.task_id).name)
     jobs = [
         {
             "env": request.env,
@@ -255,7 +297,17 @@ def run_learning(
         model_hash=mdp.content_hash,
         option_ids=option_ids,
         final_layers=tuple(layer for r in results for layer in r.get("layers", ())),
+        experience=_merge_experience(results, mdp.n_states, mdp.n_actions),
     )
+
+
+def _merge_experience(results: list[dict[str, Any]], n_states: int, n_actions: int
+                      ) -> Experience | None:
+    """All batches' experience together, or None when the learner counts none."""
+    tables = [r.get("experience") for r in results]
+    if any(t is None for t in tables):
+        return None
+    return Experience.merge(Experience.from_table(t, n_states, n_actions) for t in tables)
 
 
 def _decision_layer(kb: KnowledgeStore | None, request: LearnRequest) -> dict[str, Any]:
@@ -406,13 +458,15 @@ def _record_learning(kb: KnowledgeStore, outcome: LearnOutcome) -> dict[str, Any
         metrics["final_blocks"] = list(outcome.curve.metadata["final_blocks"])
     if "initial_blocks" in outcome.curve.metadata:
         metrics["initial_blocks"] = int(outcome.curve.metadata["initial_blocks"])
+    if outcome.experience is not None:
+        metrics["experience"] = {k: v for k, v in outcome.experience.summary().items()
+                                 if k != "sources"}
     partition_id = None
     if request.partition is not None:
-        from adpart.workflows.refs import parse_ref
-
         partition_id = parse_ref(request.partition, "partition")
     start = kb.get("partition", partition_id) if partition_id is not None else None
-    knowledge = run_knowledge(outcome.curve.metadata.get("knowledge"), outcome.option_ids, start)
+    knowledge = run_knowledge(outcome.curve.metadata.get("knowledge"), outcome.option_ids, start,
+                              _estimated_from(kb, outcome.option_ids))
     if knowledge is not None:
         metrics["knowledge"] = knowledge.to_dict()
     final = _put_final_layers(kb, environment, task_rec, outcome, partition_id)
@@ -423,6 +477,7 @@ def _record_learning(kb: KnowledgeStore, outcome: LearnOutcome) -> dict[str, Any
         request.learner,
         partition=partition_id,
         curve=outcome.curve.to_arrow(),
+        experience=None if outcome.experience is None else outcome.experience.to_table(),
         metrics=metrics,
         seed=request.seed,
         plugin_version=outcome.learner_version,
@@ -441,6 +496,18 @@ def _record_learning(kb: KnowledgeStore, outcome: LearnOutcome) -> dict[str, Any
     }
 
 
+def _estimated_from(kb: KnowledgeStore, option_ids: Sequence[int]) -> str | None:
+    """The runs whose experience estimated the model the options were built on (None: they
+    were built on the true model)."""
+    from adpart.workflows.resolve import EXPERIENCE_MARK
+
+    for oid in option_ids:
+        name = kb.get("environment", kb.get("option", oid).environment_id).name
+        if EXPERIENCE_MARK in name:
+            return name.split(EXPERIENCE_MARK, 1)[1]
+    return None
+
+
 def _put_final_layers(kb: KnowledgeStore, environment: Any, task: Any, outcome: LearnOutcome,
                       start: int | None) -> list[int]:
     """Store the distinct layers the runs ended on (kind ``learned``, the starting layer their
@@ -450,6 +517,12 @@ def _put_final_layers(kb: KnowledgeStore, environment: Any, task: Any, outcome: 
         return []
     n_cols = outcome.n_actions + len(outcome.option_ids)
     meta = outcome.curve.metadata
+    named: dict[str, Any] = {}
+    if outcome.option_ids:  # the layer is over the options, of their environment (a model
+        # estimated from experience, in the learned-model regime: then the task is named only)
+        own = kb.get("environment", kb.get("option", outcome.option_ids[0]).environment_id)
+        if own.id != environment.id:
+            environment, task, named = own, None, {"task_id": task.id}
     delta = float(meta.get("delta") or 0.0)
     epsilon = meta.get("epsilon")
     stored: dict[bytes, int] = {}
@@ -466,7 +539,7 @@ def _put_final_layers(kb: KnowledgeStore, environment: Any, task: Any, outcome: 
                 parents=[start] if start is not None else [], task=task,
                 plugin=outcome.request.learner, plugin_version=outcome.learner_version,
                 parameters={"refined_by": outcome.request.learner,
-                            "blocks": int(labels.max()) + 1},
+                            "blocks": int(labels.max()) + 1, **named},
             )
             stored[key] = rec.id
         ids.append(stored[key])
@@ -484,7 +557,7 @@ def canonical_request(request: LearnRequest) -> dict[str, Any]:
     spec = get_registry().get("learner", request.learner)
     task = resolve_domain(request.env).task(request.task).name
     canonical = replace(request, task=task, params=spec.resolve_params(request.params))
-    return json.loads(json.dumps(asdict(canonical), allow_nan=False))
+    return json.loads(json.dumps(canonical.to_dict(), allow_nan=False))
 
 
 def find_learning(kb: KnowledgeStore, request: LearnRequest) -> dict[str, Any] | None:

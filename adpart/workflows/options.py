@@ -20,7 +20,7 @@ from adpart.mdp.model import FiniteMDP
 from adpart.options.models import OptionModel, option_models
 from adpart.options.option import Option
 from adpart.options.subgoal_options import InitiationSettings, subgoal_options
-from adpart.workflows.resolve import resolve_domain
+from adpart.workflows.resolve import base_environment, resolve_domain
 from adpart.workflows.store import KnowledgeStore
 
 
@@ -212,7 +212,7 @@ def resolve_option_set(kb: KnowledgeStore, text: str, environment_name: str) -> 
             raise TaskError(f"--options {text!r} names no option; write e.g. option:1,option:2")
     for rec in records:
         env = kb.get("environment", rec.environment_id)
-        if env.name != environment_name:
+        if base_environment(env.name) != environment_name and env.name != environment_name:
             raise TaskError(
                 f"{rec.ref} belongs to environment {env.name!r}, not {environment_name!r}"
             )

@@ -53,7 +53,7 @@ from adpart.partition.layer import decision_view, layer_counts, resolve_baseline
 from adpart.partition.multiphase import Criterion
 from adpart.partition.settings import PartitionSettings
 from adpart.workflows.options import OptionSet, resolve_option_set
-from adpart.workflows.resolve import resolve_domain
+from adpart.workflows.resolve import EXPERIENCE_MARK, register_domain, resolve_domain
 from adpart.workflows.store import KnowledgeStore
 
 PLUGIN = "adpart.partition"
@@ -216,6 +216,8 @@ def environment_record(kb: KnowledgeStore, env_name: str) -> tuple[Any, Any]:
         n_actions=dyn.n_actions,
         spec={"name": env_name, "source": domain.source, "actions": list(dyn.action_names)},
     )
+    if env.name != env_name and EXPERIENCE_MARK in env.name:  # the same estimate, named by
+        register_domain(env.name, domain)  # the runs that first gave it: resolvable by both
     return domain, env
 
 

@@ -48,11 +48,12 @@ from adpart.errors import TaskError
 from adpart.learning.comparison import best_observed_run, task_row, time_ratio
 from adpart.learning.curves import LearningCurve
 from adpart.learning.hierarchical_settings import HierarchicalSettings
-from adpart.learning.knowledge import PLANNER, Knowledge
+from adpart.learning.knowledge import PLANNER, REGIMES, Knowledge
 from adpart.learning.settings import Run
 from adpart.options.subgoal_options import InitiationSettings
 from adpart.partition.settings import PartitionSettings
 from adpart.workflows.discovery import discover_subgoals
+from adpart.workflows.experience import estimated_environment
 from adpart.workflows.hierarchy import Layer, hierarchy_layer
 from adpart.workflows.learning import (
     LearnRequest,
@@ -65,6 +66,7 @@ from adpart.workflows.options import options_for_subgoals
 from adpart.workflows.partitioning import DEFAULT_CRITERION, partition_environment
 from adpart.workflows.pipeline_figures import write_figures
 from adpart.workflows.refs import parse_ref
+from adpart.workflows.resolve import resolve_domain
 from adpart.workflows.store import KnowledgeStore
 
 #: The run settings' defaults, the pipeline's too (one declaration: :class:`Run`).
@@ -90,9 +92,11 @@ class PipelineConfig:
         seed, eval_every: root seed; exact scoring every this many episodes.
         flat_params, hierarchical_params: learner parameters (as on the command line).
         baseline: also learn each later task flat (no transfer) for the comparison.
-        model_baseline: also learn each later task that is learned on a layer with the
-            ``known-dynamics`` learner, which knows the true dynamics and observes the rewards
-            (:mod:`adpart.learning.model_based`).
+        model_baseline: also learn each later task that is learned on a layer with the flat
+            model-based learner that knows the layer learner's dynamics and observes the
+            rewards (:mod:`adpart.learning.model_based`): ``known-dynamics`` (the true model)
+            in the true-model regime, ``estimated-dynamics`` (the same counts) in the
+            learned-model regime.
         gap_fraction: a run has "learned" a task once its greedy policy's value gap stays below
             this fraction of ``|V*|`` at the start distribution (reported as episodes-to-bound).
         hierarchy: a ``hierarchy-estimator`` plugin (``expected-learning-time``,
@@ -102,6 +106,12 @@ class PipelineConfig:
         flat_learner: the learner plugin of the first task, the baseline and the fallback.
         fallback: ask the knowledge base before each later task whether abstraction pays
             (module docstring); False always learns on the layer.
+        regime: what the off-line steps read (:data:`REGIMES`): ``learned-model`` builds the
+            subgoals, the options and phases 1-2 on the model estimated from the first task's
+            runs (:mod:`adpart.workflows.experience`), with no phase 3 from the later task's
+            rewards, and calibrates the inconsistency threshold from the first task's learned
+            values; ``true-model`` builds them on the true model of each later task (the
+            seed's figures).
     """
 
     env: str
@@ -126,8 +136,14 @@ class PipelineConfig:
     hierarchy_params: dict[str, Any] = field(default_factory=dict)
     flat_learner: str = "q-learning"
     fallback: bool = True
+    regime: str = REGIMES[0]
 
     def __post_init__(self) -> None:
+        if self.regime not in REGIMES:
+            raise TaskError(f"--regime {self.regime!r} is not one of {', '.join(REGIMES)}")
+        if self.regime == "learned-model" and self.hierarchy is not None:
+            raise TaskError("--hierarchy builds its layers on the true model (Algorithm 3 over "
+                            "the option models); give --regime true-model with it")
         Run(runs=self.runs, episodes=self.episodes, seed=self.seed, eval_every=self.eval_every)
         Run(episodes=self.first_episodes)  # the same checks, before any work
         if len(self.tasks) < 2:
@@ -226,8 +242,6 @@ def planner_row(env: str, task: str) -> dict[str, Any]:
     """The learner that knows what a layer learner on the true model knows: value iteration
     on the task's exact model. It needs no episode; its cost is its compute time."""
     from adpart.mdp.solvers import solve
-    from adpart.workflows.resolve import resolve_domain
-
     mdp = resolve_domain(env).mdp(task)
     start = time.perf_counter()
     solve(mdp)
@@ -243,9 +257,16 @@ def planner_row(env: str, task: str) -> dict[str, Any]:
 
 def _task_layer(kb: KnowledgeStore, config: PipelineConfig, subgoal_ref: str, task: str,
                 learned: list[int], option_ids: list[int], report: PipelineReport,
-                say: Callable[[str], object]) -> Layer:
+                say: Callable[[str], object], model_env: str | None = None) -> Layer:
     """The layer ``task`` starts from: the multi-phase partition, or with ``config.hierarchy``
-    the layer that estimator builds from the tasks ``learned`` before it (stage ``hierarchy``)."""
+    the layer that estimator builds from the tasks ``learned`` before it (stage ``hierarchy``).
+    With ``model_env`` (the learned-model regime) phases 1-2 on that estimated model, without
+    the task (no phase 3)."""
+    if model_env is not None:
+        say(f"partitioning {model_env} over the options, phases 1-2 (delta "
+            f"{config.partition.delta}, criterion {config.criterion}): {task}'s rewards are "
+            "not read")
+        return _partition_layer(kb, config, subgoal_ref, None, report, model_env, task)
     if config.hierarchy is None:
         say(f"partitioning for {task} (delta {config.partition.delta}, epsilon "
             f"{config.partition.reward_epsilon}, criterion {config.criterion})")
@@ -261,12 +282,14 @@ def _task_layer(kb: KnowledgeStore, config: PipelineConfig, subgoal_ref: str, ta
     return layer
 
 
-def _partition_layer(kb: KnowledgeStore, config: PipelineConfig, subgoal_ref: str, task: str,
-                     report: PipelineReport) -> Layer:
-    """The multi-phase partition over the subgoal options for ``task`` (phases 1-3)."""
+def _partition_layer(kb: KnowledgeStore, config: PipelineConfig, subgoal_ref: str,
+                     task: str | None, report: PipelineReport, env: str | None = None,
+                     for_task: str | None = None) -> Layer:
+    """The multi-phase partition of ``env`` (default: the pipeline's) over the subgoal options,
+    for ``task`` (phases 1-3) or for none (phases 1-2); the stage is ``for_task``'s."""
     part = partition_environment(
-        kb, config.env, subgoal_ref, config.partition, task=task, criterion=config.criterion,
-        criterion_params=config.criterion_params,
+        kb, env or config.env, subgoal_ref, config.partition, task=task,
+        criterion=config.criterion, criterion_params=config.criterion_params,
     )
     summary = part.summary()
     reused = (all(p.reused for p in part.phase1) and part.phase2.reused
@@ -274,7 +297,7 @@ def _partition_layer(kb: KnowledgeStore, config: PipelineConfig, subgoal_ref: st
     report.stages.append(
         Stage(
             "partition",
-            task,
+            task or for_task,
             part.final_record.ref,
             reused,
             sum(part.seconds.values()),
@@ -299,8 +322,6 @@ def episode_defaults(env: str) -> dict[str, Any]:
     * ``max-steps = max(1000, 2 |S|)``: the learners' 1,000-step cap is shorter than one sweep of
       a 2,900-state building, and a cut episode teaches little.
     """
-    from adpart.workflows.resolve import resolve_domain
-
     dyn = resolve_domain(env).dynamics()
     deterministic = bool(np.all(np.diff(dyn.P.indptr) <= 1))
     return {"alpha": "1" if deterministic else "1/n^0.8",
@@ -340,12 +361,70 @@ def predict_fallback(kb: KnowledgeStore, env: str, task_ids: list[int], params: 
             "flat_estimate": res.flat_estimate, "blocks": res.n_blocks}
 
 
+#: The inconsistency threshold as a fraction of the first task's learned start value (the
+#: hierarchical learner's own default fraction of |V*(start)|, on values the agent learned).
+THRESHOLD_SCALE = 0.025
+
+
+def learned_threshold(kb: KnowledgeStore, policy: Any, env: str, task: str) -> float:
+    """``L = THRESHOLD_SCALE * |sum_s mu(s) max_a Q_1(s, a)|``: the scale of the values the
+    agent learned in the first task (``policy``'s stored Q), where the learner's default reads
+    ``|V*(start)|`` of the task it learns."""
+    q = np.asarray(kb.load(policy, "q"), dtype=np.float64)
+    best = np.nanmax(np.where(np.isnan(q), -np.inf, q), axis=1)
+    mu = resolve_domain(env).task(task).initial  # where episodes start: observed in every run
+    live = np.isfinite(best) & (mu > 0)
+    value = float(mu[live] @ best[live] / mu[live].sum()) if live.any() else 0.0
+    return THRESHOLD_SCALE * abs(value)
+
+
+def agent_verdict(first_curve: LearningCurve, first: str, task: str) -> dict[str, Any]:
+    """The learned-model regime's fallback, decided from what the agent saw: a first task none
+    of whose episodes ever ended in a terminal state (every one ran to the step limit) gave the
+    agent no goal, so nothing it learned is evidence for a layer and ``task`` is learned flat.
+    (The expected-learning-time estimate of section 4.4 reads the true option models and the
+    runs' scores against V*; this regime does not use it.)"""
+    cap = int(first_curve.metadata.get("max_steps_per_episode") or 0)
+    steps = np.asarray(first_curve["steps"])
+    ended = int(np.count_nonzero(steps < cap)) if cap else int(steps.size)
+    if ended == 0:
+        return {"fallback": True, "episodes_ending_in_a_terminal": 0,
+                "reason": f"no episode of {first} ever ended in a terminal state (each ran to "
+                          f"the {cap}-step limit): the agent found no goal, so {task} is "
+                          "learned flat"}
+    return {"fallback": False, "episodes_ending_in_a_terminal": ended,
+            "reason": f"{ended} episodes of {first} ended in a terminal state: {task} is learned "
+                      "on the layer built from that experience (the expected-learning-time "
+                      "estimate of 4.4 reads the true option models; this regime does not use "
+                      "it)"}
+
+
+def check_regime(config: PipelineConfig) -> None:
+    """Refuse, before any work, a layer learner that could not learn in the config's regime
+    (the learned-model regime's learner reads a belief model, not the task's rewards)."""
+    if config.regime != "learned-model":
+        return
+    from adpart.learning.hierarchical import belief_problem
+    from adpart.plugins import get_registry
+
+    flat = get_registry().get("learner", config.flat_learner)
+    if not getattr(flat.factory, "records_experience", False):
+        raise TaskError(
+            f"--flat-learner {config.flat_learner} does not record the transitions its runs take "
+            "(records_experience), and the learned-model regime estimates the dynamics from "
+            "them: give --regime true-model, or a flat learner that records them (q-learning)")
+    learner = get_registry().get("learner", "hierarchical").create(
+        dict(config.hierarchical_params))
+    problem = belief_problem(learner.settings)
+    if problem is not None:
+        raise TaskError(f"--hier-opt: {problem}; or give --regime true-model, which reads the "
+                        "new task's model")
+
+
 def check_tasks(env: str, tasks: tuple[str, ...]) -> None:
     """Resolve every task of the sequence before any work is done: an unknown task name or a
     goal that matches no state raises here, naming it, not after the earlier tasks were learned
     and stored."""
-    from adpart.workflows.resolve import resolve_domain
-
     domain = resolve_domain(env)
     for task in tasks:
         domain.task(task)
@@ -360,6 +439,7 @@ def run_pipeline(
 ) -> PipelineReport:
     """Run (or resume) the pipeline for ``config``; figures go to ``out`` when given."""
     check_tasks(config.env, config.tasks)
+    check_regime(config)
     say = progress or (lambda message: None)
     report = PipelineReport(config)
     first, *later = config.tasks
@@ -400,9 +480,22 @@ def run_pipeline(
 
     best = best_observed_run(first_curve)  # by its returns: V* is for scoring only
     policy = kb.get("policy", parse_ref(first_ids["policies"][best], "policy"))
-    say(f"discovering subgoals in {policy.ref} with {config.detector}")
+    model_env = None
+    if config.regime == "learned-model":
+        start = time.perf_counter()
+        model_env = estimated_environment(kb, config.env, [first_ids["run"]])
+        known = resolve_domain(model_env).experience.summary()
+        say(f"estimating the dynamics from {first_ids['run']}'s experience: {known['steps']} "
+            f"steps, {known['pairs_tried']} of {known['pairs']} state-action pairs tried")
+        report.stages.append(Stage("estimate", first, model_env, False,
+                                   time.perf_counter() - start, known))
+        # the inconsistency threshold from the first task's learned values, not from V*
+        hierarchical.setdefault("threshold", learned_threshold(kb, policy, config.env, first))
+    say(f"discovering subgoals in {policy.ref} with {config.detector}"
+        + (f" on {model_env}" if model_env else ""))
     found = discover_subgoals(
-        kb, policy, detector=config.detector, params=config.detector_params, seed=config.seed
+        kb, policy, detector=config.detector, params=config.detector_params, seed=config.seed,
+        environment=model_env,
     )
     report.stages.append(
         Stage(
@@ -458,7 +551,22 @@ def run_pipeline(
     # on learned tasks T_i = (pi_i, P_i, Q_i); an unlearned task's Q predicts nothing)
     evidence = list(learned) if report.rows[0]["runs_within_bound"] > 0 else []
     for task in later:
-        if config.fallback:
+        if config.fallback and model_env is not None:
+            verdict = agent_verdict(first_curve, first, task)
+            report.stages.append(Stage("fallback" if verdict["fallback"] else "predict", task,
+                                       "flat" if verdict["fallback"] else "layer", False, 0.0,
+                                       verdict))
+            if verdict["fallback"]:
+                say(verdict["reason"])
+                flat_run = learn_flat(task, config.episodes)
+                report.curves[task] = {"flat (fallback)": flat_run.curve}
+                report.rows.append(_row(task, "flat-fallback", flat_run, config.gap_fraction,
+                                        {"fallback": verdict["reason"]}))
+                if config.baseline:
+                    report.curves[task]["flat (no transfer)"] = flat_run.curve
+                    report.rows.append(_row(task, "flat", flat_run, config.gap_fraction, {}))
+                continue
+        elif config.fallback:
             start = time.perf_counter()
             params = dict(config.hierarchy_params) if config.hierarchy == (
                 "expected-learning-time") else {}
@@ -498,7 +606,7 @@ def run_pipeline(
                 continue
         # own_layer without subgoals learns on the layer of the reward-state options alone
         layer = None if no_subgoals else _task_layer(kb, config, found.record.ref, task, learned,
-                                                     option_ids, report, say)
+                                                     option_ids, report, say, model_env)
         say(f"learning {task} on the layer of the options and {task}'s reward states "
             f"({hierarchical['mode']})" if own_layer or layer is None else
             f"learning {task} on {layer.blocks} blocks (hierarchical)")
@@ -513,6 +621,7 @@ def run_pipeline(
             eval_every=config.eval_every,
             partition=None if own_layer or layer is None else layer.ref,
             options=(",".join(f"option:{i}" for i in option_ids) or None) if own_layer else None,
+            model=model_env,
         )
         hier_run = _learn(kb, hier_req, report, "learn-hierarchical")
         hier_curve = hier_run.curve
@@ -550,17 +659,22 @@ def run_pipeline(
             report.rows.append(_row(task, "flat", base, config.gap_fraction, {}))
             if report.rows[-1]["runs_within_bound"] > 0 and task_id not in evidence:
                 evidence.append(task_id)
-        if config.model_baseline:
-            say(f"learning {task} with the true dynamics (known-dynamics) for comparison")
+        if config.model_baseline:  # the flat learner that knows the layer learner's dynamics
+            based = "known-dynamics" if model_env is None else "estimated-dynamics"
+            knows = ("the true dynamics" if model_env is None
+                     else f"the counts of {first_ids['run']}")
+            say(f"learning {task} with {knows} ({based}) for comparison")
             model_req = LearnRequest(
-                env=config.env, task=task, learner="known-dynamics",
-                params=learner_defaults("known-dynamics", defaults), runs=config.runs,
-                episodes=config.episodes, seed=config.seed, eval_every=config.eval_every)
-            model = _learn(kb, model_req, report, "learn-known-dynamics")
-            report.curves[task]["known dynamics (flat)"] = model.curve
-            report.rows[hier_row]["ratio_to_known_dynamics"] = time_ratio(
+                env=config.env, task=task, learner=based,
+                params=learner_defaults(based, defaults), runs=config.runs,
+                episodes=config.episodes, seed=config.seed, eval_every=config.eval_every,
+                model=model_env)
+            model = _learn(kb, model_req, report, f"learn-{based}")
+            report.curves[task][f"{based} (flat, model-based)"] = model.curve
+            report.rows[hier_row]["model_based"] = based
+            report.rows[hier_row]["ratio_to_model_based"] = time_ratio(
                 hier_curve, model.curve, config.gap_fraction, config.seed)
-            report.rows.append(_row(task, "known-dynamics", model, config.gap_fraction, {}))
+            report.rows.append(_row(task, based, model, config.gap_fraction, {}))
         report.rows.append(planner_row(config.env, task))
         if task_id not in learned:
             learned.append(task_id)

@@ -13,8 +13,9 @@ __all__ = ["comparison_lines"]
 def comparison_lines(rows: list[dict[str, Any]]) -> list[str]:
     """The comparison: a line per learner and task, what each knew, and the survival figures
     of every layer learner against flat (Kaplan-Meier medians; censored runs stay censored)."""
+    width = max([13, *(len(r["learner"]) for r in rows)])
     header = (
-        f"{'task':<22} {'learner':<13} {'blocks':>6} {'within':>7} {'KM episodes':>16} "
+        f"{'task':<22} {'learner':<{width}} {'blocks':>6} {'within':>7} {'KM episodes':>16} "
         f"{'KM steps':>18}"
     )
     lines = [header, "-" * len(header)]
@@ -26,7 +27,7 @@ def comparison_lines(rows: list[dict[str, Any]]) -> list[str]:
         else:
             ep, st = (_km(km.get(u)) for u in ("episodes", "steps"))
         lines.append(
-            f"{r['task'][:22]:<22} {r['learner']:<13} {blocks:>6} "
+            f"{r['task'][:22]:<22} {r['learner']:<{width}} {blocks:>6} "
             f"{r['runs_within_bound']:>3}/{r['runs']:<3} {ep:>16} {st:>18}"
         )
     lines.append("")
@@ -41,9 +42,9 @@ def comparison_lines(rows: list[dict[str, Any]]) -> list[str]:
         if "ratio_to_flat" in r:
             q = r["ratio_to_flat"]
             lines.append(f"{r['task']}: {survival_sentence(r['learner'], 'flat', q)}")
-            if "ratio_to_known_dynamics" in r:
+            if "ratio_to_model_based" in r:
                 lines.append(f"{r['task']}: " + survival_sentence(
-                    r["learner"], "known-dynamics", r["ratio_to_known_dynamics"]))
+                    r["learner"], r["model_based"], r["ratio_to_model_based"]))
             if "chain_cost" in r:
                 c = r["chain_cost"]
                 lines.append(

@@ -96,8 +96,8 @@ class KnowledgeStore(Protocol):
                 metrics: Mapping[str, Any] | None = None,
                 partition: E.Partition | int | None = None,
                 seed: int | None = None, plugin_version: str = "",
-                parameters: Mapping[str, Any] | None = None) -> E.Run:
-        """Store one learning run with its curve."""
+                parameters: Mapping[str, Any] | None = None, experience: Any = None) -> E.Run:
+        """Store one learning run with its curve (and the transitions it took, a table)."""
         ...
 
     def put_subgoal_set(self, environment: E.Environment | int, detector: str, states: Any, *,

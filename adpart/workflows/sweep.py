@@ -265,7 +265,9 @@ def _parse_params(
 # ---------------------------------------------------------------------------------- cells
 def cell_key(request: LearnRequest | Mapping[str, Any]) -> str:
     """SHA-256 of the request's canonical JSON (sorted keys, no spaces): the cell's identity."""
-    data = asdict(request) if isinstance(request, LearnRequest) else dict(request)
+    data = request.to_dict() if isinstance(request, LearnRequest) else dict(request)
+    if "model" in data and data["model"] is None:  # as LearnRequest.to_dict writes it
+        del data["model"]
     text = json.dumps(data, sort_keys=True, separators=(",", ":"), allow_nan=False)
     return hashlib.sha256(text.encode()).hexdigest()
 

@@ -18,7 +18,7 @@ PIPELINE = [
     "--runs", "2", "--episodes", "100", "--first-episodes", "500", "--reward-epsilon", "1",
     "--flat-opt", "alpha=1", "--flat-opt", "epsilon=0.5",
     "--hier-opt", "alpha=1", "--hier-opt", "epsilon=0.3",
-    "--hierarchy", "expected-learning-time", "--no-fallback",
+    "--hierarchy", "expected-learning-time", "--no-fallback", "--regime", "true-model",
 ]
 
 

@@ -57,37 +57,49 @@ def test_pipeline_runs_stores_everything_and_a_second_run_recomputes_nothing(tmp
     stages = [s["stage"] for s in summary["stages"]]
     assert stages == [
         "learn-flat",
+        "estimate",
         "discover",
         "options",
         "partition",
         "learn-hierarchical",
         "learn-flat",
-        "learn-known-dynamics",
+        "learn-estimated-dynamics",
     ]
-    assert summary["stages"][1]["detail"]["subgoals"] == [23]  # the doorway
+    # the default regime: every off-line step on the model the first task's runs estimate
+    model_env = summary["stages"][1]["result"]
+    assert model_env.startswith("two-rooms@experience:run:")
+    assert summary["stages"][1]["detail"]["steps"] > 0
+    assert summary["stages"][2]["detail"]["subgoals"] == [23]  # the doorway
     assert not any(s["reused"] for s in summary["stages"])
     rows = {(r["task"], r["learner"]): r for r in summary["tasks"]}
     hier = rows[("goal:x=9,y=5", "hierarchical")]
-    # the default chain (4.3.3): the learner starts on the layer step 4 stored, and says what it
-    # knew - the true model, and the new task's rewards through the layer's phase 3
+    # the default chain (4.3.3): the learner starts on the layer step 4 stored (phases 1-2, no
+    # phase 3), and says what it knew: the estimated dynamics, the rewards only as observed
     layer = next(s for s in summary["stages"] if s["stage"] == "partition")
     assert hier["mode"] == "inconsistency" and hier["partition"] == layer["result"]
-    assert hier["initial_blocks"] == layer["detail"]["final_blocks"]
-    assert "dynamics true-model, rewards known" in hier["knowledge"]
-    assert "phase-3 split by the task's rewards" in hier["knowledge"]
+    assert hier["initial_blocks"] >= layer["detail"]["final_blocks"]
+    assert hier["knowledge"].startswith("dynamics estimated, rewards observed")
+    assert "phase-3" not in hier["knowledge"] and "V*" not in hier["knowledge"]
     assert rows[("goal:x=9,y=5", "flat")]["knowledge"] == "dynamics none, rewards observed"
-    model = rows[("goal:x=9,y=5", "known-dynamics")]  # the flat learner with the same dynamics
-    assert model["knowledge"].startswith("dynamics true-model, rewards observed")
-    assert "ratio_to_known_dynamics" in hier
+    # the flat model-based learner with the same counts: the knowledge-matched baseline
+    model = rows[("goal:x=9,y=5", "estimated-dynamics")]
+    assert model["knowledge"].startswith("dynamics estimated, rewards observed")
+    assert "run:1 and its own steps" in model["knowledge"]
+    assert hier["model_based"] == "estimated-dynamics" and "ratio_to_model_based" in hier
     planner = rows[("goal:x=9,y=5", "planner")]
     assert planner["episodes_to_bound_median"] == 0 and planner["compute_seconds"] > 0
     kb = KnowledgeBase.open(str(kb_dir))
     try:  # the run is linked to the layer it started on and to the layers its runs ended on
-        run = kb.get("run", int(summary["stages"][4]["result"].split(":")[1]))
+        run = kb.get("run", int(summary["stages"][5]["result"].split(":")[1]))
         assert f"partition:{run.partition_id}" == layer["result"]
         finals = [kb.get("partition", p) for p in run.metrics["final_partitions"]]
         assert len(finals) == 3 and all(p.kind == "learned" for p in finals)
         assert all(p.parent_ids == (run.partition_id,) for p in finals)
+        start = kb.get("partition", run.partition_id)  # built on the estimated model
+        assert kb.get("environment", start.environment_id).name == model_env
+        assert start.task_id is None  # for no task: phases 1-2 read no task's rewards
+        first_run = kb.get("run", int(model_env.rsplit(":", 1)[1]))
+        assert kb.load(first_run, "experience").num_rows > 0  # stored with the run
     finally:
         kb.close()
     assert (out / "summary.json").exists() and (out / "goal-x-9-y-5.png").exists()
@@ -103,6 +115,20 @@ def test_pipeline_runs_stores_everything_and_a_second_run_recomputes_nothing(tmp
     assert again.output.count("reused") == 7
     assert "episodes" in again.output and "hierarchical" in again.output  # the final table
     assert counts(kb_dir) == before  # nothing stored twice
+
+
+def test_the_true_model_regime_builds_the_layer_on_the_new_tasks_model(tmp_path):
+    run = CliRunner().invoke(cli, [*PIPELINE, "--regime", "true-model",
+                                   "--kb", str(tmp_path / "kb"), "--out", str(tmp_path / "o"),
+                                   "--json"])
+    assert run.exit_code == 0, run.output
+    summary = json.loads(run.output)
+    assert "estimate" not in [s["stage"] for s in summary["stages"]]
+    hier = next(r for r in summary["tasks"] if r["learner"] == "hierarchical")
+    assert "dynamics true-model, rewards known" in hier["knowledge"]
+    assert "phase-3 split by the task's rewards" in hier["knowledge"]
+    assert "threshold L from V*" in hier["knowledge"]
+    assert hier["model_based"] == "known-dynamics"
 
 
 @pytest.mark.processes
@@ -248,7 +274,8 @@ def test_without_a_learned_first_task_only_the_reward_variation_modes_use_the_la
             "--eval-every", "10", "--no-baseline", "--kb", str(tmp_path / "kb"), "--out",
             str(tmp_path / "o"), "--json"]
     variation = json.loads(CliRunner().invoke(cli, [
-        *args, "--hier-opt", "mode=reward-variation+inconsistency"]).output)
+        *args, "--hier-opt", "mode=reward-variation+inconsistency", "--regime",
+        "true-model"]).output)
     assert variation["tasks"][0]["runs_within_bound"] == 0  # the first task is not learned
     stage = next(s for s in variation["stages"] if s["task"] == "goal:x=9,y=5")
     assert stage["stage"] == "predict" and "holds no values to predict from" in (
@@ -257,10 +284,17 @@ def test_without_a_learned_first_task_only_the_reward_variation_modes_use_the_la
     assert "options to the task's reward states, solved on the true model" in (
         variation["tasks"][1]["knowledge"])
     assert "rewards known" in variation["tasks"][1]["knowledge"]
-    default = json.loads(CliRunner().invoke(cli, args).output)
+    default = json.loads(CliRunner().invoke(cli, [*args, "--regime", "true-model"]).output)
     stage = next(s for s in default["stages"] if s["task"] == "goal:x=9,y=5")
     assert stage["stage"] == "fallback" and "is learned flat" in stage["detail"]["reason"]
     assert default["tasks"][1]["learner"] == "flat-fallback"
+    # the learned-model regime decides from what the agent saw, not from V*: its one episode
+    # found the goal, so the layer built from that experience is tried
+    learned = json.loads(CliRunner().invoke(cli, args).output)
+    stage = next(s for s in learned["stages"] if s["task"] == "goal:x=9,y=5")
+    assert stage["stage"] == "predict"
+    assert stage["detail"]["episodes_ending_in_a_terminal"] == 3  # one per run
+    assert learned["tasks"][1]["learner"] == "hierarchical"
 
 
 def test_directed_exploration_is_a_learner_option_and_a_bad_count_is_refused(tmp_path):
@@ -268,7 +302,10 @@ def test_directed_exploration_is_a_learner_option_and_a_bad_count_is_refused(tmp
     a negative count is refused before the knowledge base is opened."""
     kb_dir = tmp_path / "kb"
     rmax = [*PIPELINE, "--hier-opt", "mode=inconsistency", "--kb", str(kb_dir), "--out",
-            str(tmp_path / "o"), "--json"]
+            str(tmp_path / "o"), "--json", "--regime", "true-model"]
+    learned = CliRunner().invoke(cli, [*rmax[:-2], "--hier-opt", "explore-known=1"])
+    assert learned.exit_code == 2 and not kb_dir.exists()  # R-max plans with the task's rewards
+    assert "--explore-known 0" in learned.output and "--regime true-model" in learned.output
     bad = CliRunner().invoke(cli, [*rmax, "--hier-opt", "explore-known=-1"])
     assert bad.exit_code == 2
     assert bad.output.strip() == ("Error: --hier-opt: learner 'hierarchical': --explore-known "

@@ -22,8 +22,10 @@ def test_every_cell_has_its_table_with_each_learners_knowledge(tmp_path):
         for row in cell["rows"]:
             assert row["knowledge"], row  # every learner says what it knew
         layer = [r for r in cell["rows"] if r["learner"] == "hierarchical"]
-        if layer:  # learned on the stored step-4 layer, beside the planner that knows as much
-            assert "dynamics true-model, rewards known" in layer[0]["knowledge"]
+        if layer:  # learned on the stored step-4 layer (the learned-model regime's), beside
+            # the planner and the model-based learner that knows as much
+            assert layer[0]["knowledge"].startswith("dynamics estimated, rewards observed")
+            assert any(r["learner"] == "estimated-dynamics" for r in cell["rows"])
             assert layer[0]["partition"] is not None
             assert any(r["learner"] == "planner" for r in cell["rows"])
             km = layer[0]["time_to_bound_km"]

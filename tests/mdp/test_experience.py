@@ -32,8 +32,7 @@ def test_the_estimate_converges_to_the_true_model_on_tried_pairs():
     mdp = random_mdp(15, 3, density=0.3, seed=4)
     pairs = np.argwhere(np.ones((15, 3), bool))
     exp = _sampled(mdp, pairs, 20000, seed=1)
-    P_hat, admissible = exp.estimate()
-    assert admissible.all()
+    P_hat = exp.estimate()
     # each entry is a binomial frequency: within 5 standard errors of P
     diff = np.abs(P_hat.toarray() - mdp.P.toarray())
     se = np.sqrt(mdp.P.toarray() * (1 - mdp.P.toarray()) / 20000)
@@ -42,20 +41,22 @@ def test_the_estimate_converges_to_the_true_model_on_tried_pairs():
     assert np.all(P_hat.toarray()[mdp.P.toarray() == 0] == 0)
 
 
-def test_unknown_pairs_are_kept_out_and_unvisited_states_are_self_loops():
+def test_unknown_pairs_are_self_loops():
     mdp = random_mdp(6, 2, density=0.5, seed=2)
     pairs = np.array([[0, 0], [0, 1], [1, 1], [3, 0]])  # states 2, 4, 5 never visited
     exp = _sampled(mdp, pairs, 50, seed=3)
-    P_hat, admissible = exp.estimate()
-    assert exp.tried.sum() == 4
+    P_hat = exp.estimate()
     expect = np.zeros((6, 2), bool)
     expect[[0, 0, 1, 3], [0, 1, 1, 0]] = True
-    expect[[2, 4, 5]] = True  # nothing known there: every action a self-loop, admissible
-    assert np.array_equal(admissible, expect)
+    assert np.array_equal(exp.tried, expect)
     dense = P_hat.toarray()
-    for s, a in [(1, 0), (3, 1), (2, 0), (2, 1), (5, 1)]:  # untried: a self-loop
+    for s, a in np.argwhere(~expect):  # untried: a self-loop
         assert dense[a * 6 + s, s] == 1.0 and dense[a * 6 + s].sum() == 1.0
-    est = FiniteMDP(P_hat, np.zeros((6, 2)), 0.9, admissible=admissible)  # a valid model
+    for s, a in pairs:  # tried: the observed frequencies, on the true support
+        row = a * 6 + s
+        assert dense[row].sum() == pytest.approx(1.0)
+        assert np.all(mdp.P.toarray()[row][dense[row] > 0] > 0)
+    est = FiniteMDP(P_hat, np.zeros((6, 2)), 0.9)  # a valid model
     assert est.n_states == 6
 
 

@@ -162,13 +162,22 @@ def test_a_refused_value_is_one_error_line_naming_the_option(tmp_path):
     assert not (tmp_path / "kb").exists()
 
 
+def test_a_learner_that_records_no_experience_is_refused_in_the_learned_model_regime(tmp_path):
+    result = run("pipeline", "three-rooms-line", "--tasks", "reach-east,reach-middle",
+                 "--flat-learner", "sarsa", "--kb", str(tmp_path / "kb"), "-q")
+    assert result.exit_code == 2
+    assert "does not record the transitions" in result.output
+    assert "--regime true-model" in result.output
+    assert not (tmp_path / "kb").exists()  # refused before anything is learned or stored
+
+
 def test_pipeline_with_the_example_learner_and_detector(tmp_path):
     result = run("pipeline", "three-rooms-line", "--tasks", "reach-east,reach-middle",
                  "--detector", "doorways", "--detector-opt", "min-size=3",
                  "--flat-learner", "sarsa", "--flat-opt", "alpha=0.5",
                  "--flat-opt", "epsilon=exp:0.3,0.97", "--runs", "2", "--first-episodes", "100",
                  "--episodes", "60", "--eval-every", "20", "--kb", str(tmp_path / "kb"),
-                 "--out", str(tmp_path / "out"), "--json", "-q")
+                 "--out", str(tmp_path / "out"), "--json", "-q", "--regime", "true-model")
     assert result.exit_code == 0, result.output
     summary = json.loads(result.output)
     config = summary["config"]

@@ -92,7 +92,7 @@ def test_sweep_cells_enumerate_the_grid_in_file_order():
 
 def test_sweep_cell_key_is_the_hash_of_the_canonical_request():
     cell = _plan()[0]
-    text = json.dumps(asdict(cell.request), sort_keys=True, separators=(",", ":"))
+    text = json.dumps(cell.request.to_dict(), sort_keys=True, separators=(",", ":"))
     assert cell.key == hashlib.sha256(text.encode()).hexdigest()
     assert cell_key(json.loads(json.dumps(asdict(cell.request)))) == cell.key
     assert len({c.key for c in _plan(seeds=[0, 1, 1, 0])}) == 2  # duplicates collapse

@@ -63,7 +63,7 @@ class HierarchicalLearner(RunLearner):
 
     name = "hierarchical"
     description = "SMDP Q on a partition's blocks, refined where flat and abstract values disagree"
-    accepts = frozenset({"options", "partition"})
+    accepts = frozenset({"options", "partition", "belief"})
     params = (*settings_params(HierarchicalSettings), *LEARNER_PARAMS)
 
     def __init__(self, **values: object) -> None:
@@ -71,7 +71,8 @@ class HierarchicalLearner(RunLearner):
         self.settings = build_settings(HierarchicalSettings, self.values)
 
     def learn_run(self, mdp: FiniteMDP, run: Run, options: Sequence[Option] | None = None,
-                  partition: Partition | None = None) -> LearnResult:
+                  partition: Partition | None = None, belief: FiniteMDP | None = None
+                  ) -> LearnResult:
         from adpart.learning.hierarchical import hierarchical_learning
 
         if not options and not self.settings.reward_options:
@@ -80,7 +81,8 @@ class HierarchicalLearner(RunLearner):
                 "--options ID (and --partition ID) from the knowledge base, or use a "
                 "reward-variation mode, which makes options to the task's reward states"
             )
-        return hierarchical_learning(mdp, list(options or []), partition, self.settings, run)
+        return hierarchical_learning(mdp, list(options or []), partition, self.settings, run,
+                                     belief=belief)
 
 
 @hookimpl

@@ -5,13 +5,16 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from adpart.learning.settings import LEARNER_FIELDS, Run
 from adpart.mdp.model import FiniteMDP
 from adpart.params import build_settings, settings_params
 from adpart.plugins.hookspecs import hookimpl
 from adpart.plugins.registry import Registrar
+
+if TYPE_CHECKING:
+    from adpart.mdp.experience import Experience
 
 #: The parameters every sample-based learner takes: the update's fields of
 #: :class:`~adpart.learning.settings.Run` (one declaration, one --help text).
@@ -61,6 +64,9 @@ class QLearner(RunLearner):
 
     name = "q-learning"
     description = "flat epsilon-greedy Q-learning, all runs advanced together (numba, threaded)"
+    #: its result carries ``experience``, the transitions its runs took (the learned-model
+    #: regime estimates the dynamics from them)
+    records_experience = True
     params = LEARNER_PARAMS
 
     def learn_run(self, mdp: FiniteMDP, run: Run) -> object:
@@ -83,6 +89,25 @@ class KnownDynamicsLearner(RunLearner):
         from adpart.learning.model_based import known_dynamics_learning
 
         return known_dynamics_learning(mdp, run)
+
+
+class EstimatedDynamicsLearner(RunLearner):
+    """Certainty-equivalent control on a counts model (earlier runs' experience, given as
+    ``--model ENV@experience:run:N``, and its own steps) with observed rewards: the flat baseline
+    that knows what a layer learner in the learned-model regime knows of the dynamics
+    (:func:`adpart.learning.model_based.estimated_dynamics_learning`)."""
+
+    name = "estimated-dynamics"
+    description = ("flat certainty-equivalent control on the counts of earlier runs and its own "
+                   "steps, rewards as observed (optimistic where untried)")
+    params = settings_params(Run, only=("epsilon", "max_steps_per_episode", "kernel"))
+    accepts = frozenset({"experience"})
+
+    def learn_run(self, mdp: FiniteMDP, run: Run, experience: Experience | None = None
+                  ) -> object:
+        from adpart.learning.model_based import estimated_dynamics_learning
+
+        return estimated_dynamics_learning(mdp, run, experience)
 
 
 class ValueIterationLearner:
@@ -115,4 +140,5 @@ class ValueIterationLearner:
 def register_learners(register: Registrar) -> None:
     register(QLearner)
     register(KnownDynamicsLearner)
+    register(EstimatedDynamicsLearner)
     register(ValueIterationLearner)

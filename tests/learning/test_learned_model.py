@@ -1,0 +1,148 @@
+"""The learned-model regime's learners read only what experience gave them (issue 37).
+
+Independent checks: the knowledge guard (a learner that declared estimated dynamics cannot read
+the task's true ``P``, ``R`` or terminal set without raising), and the counts learner against
+the true-model learner where the two must coincide (a deterministic environment whose every
+pair the prior tried).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from adpart.errors import ModelError, TaskError
+from adpart.learning import q_learning
+from adpart.learning.curves import LearningCurve
+from adpart.learning.hierarchical import hierarchical_learning
+from adpart.learning.hierarchical_settings import HierarchicalSettings
+from adpart.learning.knowledge import Knowledge, KnowledgeError, guard
+from adpart.learning.model_based import estimated_dynamics_learning, known_dynamics_learning
+from adpart.learning.settings import Run
+from adpart.mdp.experience import Experience
+from adpart.options.subgoal_options import subgoal_options
+from adpart.params import build_settings
+from adpart.partition import Partition
+from adpart.workflows.experience import EstimatedDomain, belief_model
+from adpart.workflows.pipeline import agent_verdict
+from adpart.workflows.resolve import resolve_domain
+
+ESTIMATED = Knowledge("estimated", "observed")
+
+
+@pytest.fixture(scope="module")
+def two_rooms():
+    """two-rooms' first task learned flat (its experience), the estimate, and the new task."""
+    domain = resolve_domain("two-rooms")
+    first = domain.mdp("reach-goal")
+    learned = q_learning(first, Run(runs=3, episodes=200, seed=3, alpha=1, epsilon=0.5))
+    estimated = EstimatedDomain(domain, learned.experience, "two-rooms@experience:test")
+    return domain, estimated, domain.mdp("goal:x=9,y=5")
+
+
+def _layer(estimated: EstimatedDomain):
+    """The option to the doorway (23), solved on the estimated model, and a two-block layer over
+    the primitives then it: the option where it may start, the primitives elsewhere."""
+    model = estimated.mdp("reach-goal")
+    options = subgoal_options(model, [23], initiation="reachable")
+    starts = options[0].initiation
+    A = model.n_actions
+    offers = np.zeros((2, A + 1), dtype=bool)
+    offers[0, A] = True
+    offers[1, :A] = True
+    return options, Partition(np.where(starts, 0, 1), offers)
+
+
+def test_the_belief_model_knows_the_step_reward_and_no_terminal(two_rooms):
+    _, estimated, new = two_rooms
+    belief = belief_model(estimated, new, "reach-goal")
+    assert not belief.terminal.any()
+    assert np.unique(belief.R).size == 1  # one step reward, no goal reward
+    assert np.array_equal(belief.admissible, new.admissible)
+    tried = estimated.experience.tried
+    P = belief.P.toarray()
+    S = belief.n_states
+    for s, a in np.argwhere(~tried)[:20]:  # unknown: a self-loop
+        assert P[a * S + s, s] == 1.0
+    truth = new.P.toarray()  # tried (deterministic two-rooms): exactly the true row
+    for s, a in np.argwhere(tried)[:50]:
+        assert np.array_equal(P[a * S + s], truth[a * S + s])
+
+
+def test_on_a_belief_the_layer_learner_reads_nothing_of_the_new_task(two_rooms):
+    _, estimated, new = two_rooms
+    options, partition = _layer(estimated)
+    belief = belief_model(estimated, new, "reach-goal")
+    settings = build_settings(HierarchicalSettings, {"threshold": 1.0})
+    run = Run(runs=2, episodes=40, seed=1, alpha=1, epsilon=0.3)
+    guarded = guard(new, ESTIMATED)  # P, R and terminal raise outside the environment's use
+    result = hierarchical_learning(guarded, options, partition, settings, run, belief=belief)
+    assert result.curve.metadata["knowledge"]["dynamics"] == "estimated"
+    assert result.curve.metadata["knowledge"]["rewards"] == "observed"
+    with pytest.raises(KnowledgeError, match="outside the declared regime"):
+        hierarchical_learning(guard(new, ESTIMATED), options, partition, settings, run)
+
+
+def test_a_belief_needs_a_threshold_and_the_inconsistency_mode(two_rooms):
+    _, estimated, new = two_rooms
+    options, partition = _layer(estimated)
+    belief = belief_model(estimated, new, "reach-goal")
+    run = Run(runs=1, episodes=2, seed=0)
+    with pytest.raises(TaskError, match="--threshold"):
+        hierarchical_learning(new, options, partition, HierarchicalSettings(), run,
+                              belief=belief)
+    rmax = build_settings(HierarchicalSettings, {"threshold": 1.0, "explore-known": 1})
+    with pytest.raises(TaskError, match="--explore-known 0"):
+        hierarchical_learning(new, options, partition, rmax, run, belief=belief)
+
+
+def test_the_counts_learner_is_the_true_model_learner_once_every_pair_is_known():
+    """Deterministic two-rooms, every pair tried once in the prior: the counts model is the true
+    model, so the two certainty-equivalent agents make the same plans and the same steps."""
+    new = resolve_domain("two-rooms").mdp("goal:x=9,y=5")
+    S, A = new.n_states, new.n_actions
+    live = np.argwhere(new.admissible & ~new.terminal[:, None])
+    rows = live[:, 1] * S + live[:, 0]
+    succ = new.P.tocsr()[rows].indices  # one successor per row (deterministic)
+    assert succ.size == rows.size
+    prior = Experience.from_table({"state": live[:, 0], "action": live[:, 1],
+                                   "next_state": succ, "count": np.ones(rows.size)}, S, A,
+                                  sources=("run:0",))
+    run = Run(runs=2, episodes=15, seed=4, eval_every=5)
+    known = known_dynamics_learning(new, run)
+    counted = estimated_dynamics_learning(new, run, prior)
+    for column in ("steps", "return", "eval_value"):
+        assert np.array_equal(known.curve[column], counted.curve[column], equal_nan=True)
+    assert counted.curve.metadata["knowledge"]["dynamics"] == "estimated"
+    assert "run:0 and its own steps" in counted.curve.metadata["knowledge"]["uses"][0]
+
+
+def test_the_counts_learner_learns_without_a_prior_and_refuses_a_foreign_one():
+    new = resolve_domain("two-rooms").mdp("goal:x=9,y=5")
+    res = estimated_dynamics_learning(new, Run(runs=2, episodes=60, seed=2, eval_every=20))
+    assert np.all(res.curve.matrix("value_gap")[:, -1] < 1e-6)
+    S, A = new.n_states, new.n_actions
+    s = int(np.flatnonzero(~new.terminal)[0])
+    reachable = set(new.P.tocsr()[np.arange(A) * S + s].indices)
+    far = next(t for t in range(S) if t not in reachable)  # a jump no action makes
+    foreign = Experience.from_table({"state": [s], "action": [0], "next_state": [far],
+                                     "count": [3]}, S, A)
+    with pytest.raises(ModelError, match="another environment"):
+        estimated_dynamics_learning(new, Run(runs=1, episodes=1), foreign)
+
+
+def test_the_fallback_is_decided_from_what_the_agent_saw():
+    meta = {"max_steps_per_episode": 50}
+
+    def curve(steps):
+        return LearningCurve.from_matrices(
+            steps=np.array([steps]), decisions=np.array([steps]),
+            returns=np.zeros((1, 3)), discounted_returns=np.zeros((1, 3)),
+            eval_value=np.zeros((1, 3)), value_gap=np.zeros((1, 3)), metadata=meta)
+
+    never = curve([50, 50, 50])
+    verdict = agent_verdict(never, "reach-goal", "goal:x=9,y=5")
+    assert verdict["fallback"] and "no episode of reach-goal" in verdict["reason"]
+    found = curve([50, 12, 50])
+    verdict = agent_verdict(found, "reach-goal", "goal:x=9,y=5")
+    assert not verdict["fallback"] and verdict["episodes_ending_in_a_terminal"] == 1
