@@ -1,5 +1,5 @@
-"""docs/knowledge.md's and docs/learning.md's command blocks print what the pages show (numbers
-aside)."""
+"""docs/knowledge.md's, docs/learning.md's and docs/learned-model.md's command blocks print what
+the pages show (numbers aside)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,8 @@ from tests.plugins.test_example_package import _console_blocks, _run_documented,
 DOCS = Path(__file__).resolve().parents[1] / "docs"
 
 
-@pytest.mark.parametrize(("page", "n"), [("knowledge.md", 2), ("learning.md", 1)])
+@pytest.mark.parametrize(("page", "n"), [("knowledge.md", 2), ("learning.md", 1),
+                                         ("learned-model.md", 2)])
 def test_the_pages_commands_print_what_it_shows(page, n, tmp_path, monkeypatch):
     blocks = _console_blocks((DOCS / page).read_text())
     assert len(blocks) == n

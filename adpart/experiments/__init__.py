@@ -25,6 +25,7 @@ EXPERIMENT_MODULES: tuple[str, ...] = (
     "adpart.experiments.maxq",
     "adpart.experiments.maxq_parr",
     "adpart.experiments.comparisons",
+    "adpart.experiments.random_goals",
 )
 
 
