@@ -1,4 +1,4 @@
-"""`adpart experiment random-goals --quick`: one layer for every goal, ratios per goal and pooled."""
+"""`adpart experiment random-goals --quick`: one layer for every goal, ratios per goal, pooled."""
 
 from __future__ import annotations
 
