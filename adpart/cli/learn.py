@@ -34,6 +34,7 @@ from adpart.workflows import (
     write_learning_outputs,
 )
 from adpart.workflows.reports import folder_name
+from adpart.workflows.resolve import resolve_domain
 from adpart.workflows.store import KnowledgeStore
 
 
@@ -69,6 +70,13 @@ from adpart.workflows.store import KnowledgeStore
     metavar="ID",
     help="Decision layer for the hierarchical learner (partition:N, from the KB).",
 )
+@click.option(
+    "--model",
+    "model_ref",
+    metavar="ENV@experience:run:N",
+    help="The dynamics estimated from runs' experience, for hierarchical (its belief) or "
+    "estimated-dynamics (its prior counts).",
+)
 @click.option("--no-store", is_flag=True, help="Do not record the run in the knowledge base.")
 @click.option("--force", is_flag=True,
               help="Record the run again even if the knowledge base already holds it (e.g. to "
@@ -91,6 +99,7 @@ def learn_cmd(
     quiet: bool,
     options_ref: str | None,
     partition_ref: str | None,
+    model_ref: str | None,
     no_store: bool,
     force: bool,
     kb_path: str | None,
@@ -128,10 +137,12 @@ def learn_cmd(
         runs_per_batch=runs_per_batch,
         options=options_ref,
         partition=partition_ref,
+        model=model_ref,
     )
+    resolve_domain(env).task(task)  # an unknown environment or task: refused before any work
     single = len(request.batches()) == 1
     kb = None
-    if not no_store or options_ref or partition_ref:
+    if not no_store or options_ref or partition_ref or model_ref:
         from adpart.store import KnowledgeBase
 
         kb = KnowledgeBase.open(KBLocation.resolve(kb_path, kb_artifacts))

@@ -189,22 +189,21 @@ def _learn_batch(job: dict[str, Any]) -> dict[str, Any]:
 
 
 def _check_accepts(spec: Any, request: LearnRequest) -> None:
-    """Refuse options or a partition for a learner that does not declare them (``accepts``)."""
-    accepts = frozenset(getattr(spec.factory, "accepts", ()))
-    model_inputs = accepts & {"belief", "experience"}  # what a --model gives a learner
-    for what, option, given in (("options", "options", request.options),
-                                ("partition", "partition", request.partition),
-                                ("belief", "model", request.model)):
-        if what == "belief" and model_inputs:
+    """Refuse options, a partition or a model for a learner that does not declare them
+    (``accepts``; a model is given as ``belief`` or ``experience``)."""
+    model = frozenset({"belief", "experience"})
+    for what, option, given, inputs in (
+            ("options", "options", request.options, frozenset({"options"})),
+            ("partition", "partition", request.partition, frozenset({"partition"})),
+            ("a model estimated from experience", "model", request.model, model)):
+        if given is None or frozenset(getattr(spec.factory, "accepts", ())) & inputs:
             continue
-        if given is not None and what not in accepts:
-            users = sorted(s.name for s in get_registry().all("learner")
-                           if what in (takes := frozenset(getattr(s.factory, "accepts", ())))
-                           or (what == "belief" and takes & {"experience"}))
-            raise PluginError(
-                f"learner {spec.name!r} does not learn over {what}; drop --{option} or pick "
-                f"--learner {' or '.join(users) or '(none installed)'}"
-            )
+        users = sorted(s.name for s in get_registry().all("learner")
+                       if frozenset(getattr(s.factory, "accepts", ())) & inputs)
+        raise PluginError(
+            f"learner {spec.name!r} does not learn over {what}; drop --{option} or pick "
+            f"--learner {' or '.join(users) or '(none installed)'}"
+        )
 
 
 def check_learn_result(result: Any, learner: str, *, runs: int, n_states: int) -> None:
