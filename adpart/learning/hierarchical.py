@@ -433,6 +433,32 @@ def hierarchical_knowledge(settings: HierarchicalSettings, *, belief: bool = Fal
     return Knowledge("true-model", "known", tuple(uses))
 
 
+def real_firings(events: Sequence[dict], smdp: SMDPModel, mdp: FiniteMDP, runs: int
+                 ) -> np.ndarray:
+    """Per run, how many of its firings were real inconsistencies of the task: at the firing
+    state ``s`` the added action ``a`` is worth more under the task's exact ``Q*`` than every
+    column the block offered there, ``Q*(s, a) > max_c Q*(s, c) + 1e-9 (1 + |V*(s)|)``, with
+    ``Q*(s, c) = R(s, c) + sum_s' F(s' | s, c) V*(s')`` on the world's exact model of the
+    columns (primitives first). Reads the true model: call it inside
+    :func:`~adpart.learning.knowledge.world`, after learning (an audit, never an input)."""
+    from adpart.mdp.solvers import solve
+
+    out = np.zeros(runs, dtype=np.int64)
+    if not events:
+        return out
+    V = solve(mdp, 1e-10).V
+    S = mdp.n_states
+    for e in events:
+        s, a = e["state"], e["action"]
+        cols = np.asarray(e["offers"], dtype=np.int64)
+        rows = cols * S + s
+        q = smdp.R[s, cols] + smdp.F[rows] @ V if cols.size else np.array([-np.inf])
+        q_a = smdp.R[s, a] + smdp.F[[a * S + s]] @ V
+        if float(q_a[0]) > float(np.max(q)) + 1e-9 * (1.0 + abs(float(V[s]))):
+            out[e["run"]] += 1
+    return out
+
+
 def belief_problem(settings: HierarchicalSettings) -> str | None:
     """Why the learner cannot learn on a belief model with ``settings`` (None: it can)."""
     if settings.mode != "inconsistency":
@@ -559,6 +585,8 @@ def hierarchical_learning(
 
     eval_value = drive(st, step_kernel, seed, episodes=N, eval_every=run.eval_every,
                        score=score, progress=run.progress, on_fire=on_fire if check else None)
+    with world():  # an audit of the firings against the task's exact Q*: scoring, not learning
+        real = real_firings(events, world_smdp, mdp, K)
     names = tuple(o.name for o in full)
     delta, epsilon = refinement.delta, refinement.partition_epsilon
     parameters: dict[str, object] = {
@@ -587,7 +615,9 @@ def hierarchical_learning(
         discounted_returns=st.out_dret, eval_value=eval_value, value_gap=v_star - eval_value,
         metadata={"learner": "hierarchical", "mdp": mdp.name, "mdp_hash": mdp.content_hash,
                   "gamma": mdp.gamma, "v_star_start": v_star, **parameters,
-                  "final_blocks": st.out_blocks[:, -1].tolist()},
+                  "final_blocks": st.out_blocks[:, -1].tolist(),
+                  "firings": np.bincount([e["run"] for e in events], minlength=K).tolist(),
+                  "real_firings": real.tolist()},
     )
     grounded = st.Ql.copy() if st.Ql.shape[1] == S else None  # a placeholder when not testing
     return HierarchicalResult(

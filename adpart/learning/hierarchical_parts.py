@@ -139,7 +139,8 @@ class LayerRefiner:
         reference.refresh(st, k, new)
         return new, {"run": k, "episode": int(st.episode[k]), "state": s, "block": b,
                      "action": a, "offered": offered, "blocks_before": B_old,
-                     "blocks_after": B_new}
+                     "blocks_after": B_new,
+                     "offers": np.flatnonzero(old.admissible[b]).tolist()}
 
 
 def _grow(st: SMDPLockStepState, needed: int, per_block_reference: bool) -> None:

@@ -342,6 +342,11 @@ def _decision_layer(kb: KnowledgeStore | None, request: LearnRequest) -> dict[st
     return layer
 
 
+#: Curve metadata with one entry per run (concatenated across batches, stored in the run's
+#: metrics): a layer learner's blocks after refinement, its firings and the real ones among them.
+PER_RUN_METADATA = ("final_blocks", "firings", "real_firings")
+
+
 def _merge_curves(parts: list[dict[str, np.ndarray]], metadatas: list[dict[str, Any]]
                   ) -> LearningCurve:
     """One curve of all batches' runs; per-run metadata lists (``final_blocks``) concatenated."""
@@ -354,9 +359,9 @@ def _merge_curves(parts: list[dict[str, np.ndarray]], metadatas: list[dict[str, 
         offset = int(shifted["run"].max()) + 1
         for key, col in shifted.items():
             columns.setdefault(key, []).append(np.asarray(col))
-    if all("final_blocks" in part_meta for part_meta in metadatas):
-        metadata = {**metadata,
-                    "final_blocks": [b for m in metadatas for b in m["final_blocks"]]}
+    for key in PER_RUN_METADATA:
+        if all(key in part_meta for part_meta in metadatas):
+            metadata = {**metadata, key: [b for m in metadatas for b in m[key]]}
     return LearningCurve({k: np.concatenate(v) for k, v in columns.items()}, metadata)
 
 
@@ -453,8 +458,9 @@ def _record_learning(kb: KnowledgeStore, outcome: LearnOutcome) -> dict[str, Any
             "episodes",
         )
     }
-    if "final_blocks" in outcome.curve.metadata:  # a decision layer's blocks after refinement
-        metrics["final_blocks"] = list(outcome.curve.metadata["final_blocks"])
+    for key in PER_RUN_METADATA:  # a decision layer's blocks after refinement, its firings
+        if key in outcome.curve.metadata:
+            metrics[key] = list(outcome.curve.metadata[key])
     if "initial_blocks" in outcome.curve.metadata:
         metrics["initial_blocks"] = int(outcome.curve.metadata["initial_blocks"])
     if outcome.experience is not None:
@@ -599,7 +605,7 @@ def load_curve(kb: KnowledgeStore, run: Any) -> LearningCurve:
         "learner": run.learner,
         "v_star_start": run.metrics.get("v_star_start", curve.metadata.get("v_star_start")),
     }
-    for key in ("initial_blocks", "final_blocks"):  # a decision layer's blocks
+    for key in ("initial_blocks", *PER_RUN_METADATA):  # a decision layer's blocks, firings
         if key in run.metrics:
             metadata[key] = run.metrics[key]
     return LearningCurve(dict(curve.columns), metadata)

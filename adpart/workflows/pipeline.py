@@ -238,6 +238,15 @@ def _chain_cost(report: PipelineReport, config: PipelineConfig) -> dict[str, Any
                                   if s.stage in OFFLINE_STAGES and s.stage != "predict")}
 
 
+def _firing_counts(curve: LearningCurve) -> dict[str, int] | None:
+    """The layer runs' firings of the inconsistency test, and how many were real
+    inconsistencies against the task's exact Q* (an audit; None for a run stored without it)."""
+    fired, real = curve.metadata.get("firings"), curve.metadata.get("real_firings")
+    if fired is None or real is None:
+        return None
+    return {"total": int(sum(fired)), "real": int(sum(real))}
+
+
 def planner_row(env: str, task: str) -> dict[str, Any]:
     """The learner that knows what a layer learner on the true model knows: value iteration
     on the task's exact model. It needs no episode; its cost is its compute time."""
@@ -642,6 +651,7 @@ def run_pipeline(
                 hier_run,
                 config.gap_fraction,
                 {"initial_blocks": start_blocks,
+                 "firings": _firing_counts(hier_curve),
                  "partition": None if own_layer or layer is None else layer.ref,
                  "partition_blocks": None if own_layer or layer is None else layer.blocks,
                  "mode": hierarchical["mode"],

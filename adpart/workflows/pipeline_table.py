@@ -53,6 +53,13 @@ def comparison_lines(rows: list[dict[str, Any]]) -> list[str]:
                     "steps), "
                     f"{c['offline_seconds']:.2g} s off-line"
                     + (" (looked up in the knowledge base)" if c["offline_reused"] else ""))
+            fired = r.get("firings")
+            if fired and fired["total"]:
+                lines.append(
+                    f"  the inconsistency test fired {fired['total']} times over the runs; "
+                    f"{fired['real']} ({fired['real'] / fired['total']:.0%}) were real: the "
+                    "added action beats every column the block offered under the task's "
+                    "exact Q* (an audit after learning)")
             if q["first_evaluation"] > 1 and _sets_it(r, q["first_evaluation"]):
                 lines.append(f"  (the first evaluation, after episode {q['first_evaluation']}, "
                              f"sets {r['learner']}'s median: evaluate more often with "

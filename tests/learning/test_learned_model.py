@@ -146,3 +146,20 @@ def test_the_fallback_is_decided_from_what_the_agent_saw():
     found = curve([50, 12, 50])
     verdict = agent_verdict(found, "reach-goal", "goal:x=9,y=5")
     assert not verdict["fallback"] and verdict["episodes_ending_in_a_terminal"] == 1
+
+
+def test_a_firing_is_real_when_the_added_action_beats_what_the_block_offered():
+    """On a corridor (right is optimal everywhere but the goal), adding right where the block
+    offered only left is a real inconsistency; adding left where it offered right is not."""
+    from adpart.learning.hierarchical import real_firings
+
+    from .conftest import corridor
+
+    mdp = corridor(6)  # actions: 0 left, 1 right; the goal at the right end
+    smdp = mdp.as_smdp()
+    events = [{"run": 0, "state": 2, "action": 1, "offers": [0]},   # real
+              {"run": 0, "state": 3, "action": 0, "offers": [1]},   # not: left is worse
+              {"run": 1, "state": 1, "action": 1, "offers": [0, 1]},  # not: already offered
+              {"run": 1, "state": 4, "action": 1, "offers": []}]    # real: nothing offered
+    assert real_firings(events, smdp, mdp, 2).tolist() == [1, 1]
+    assert real_firings([], smdp, mdp, 2).tolist() == [0, 0]
