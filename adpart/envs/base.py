@@ -24,7 +24,8 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import TYPE_CHECKING
+from types import MappingProxyType
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 import scipy.sparse as sp
@@ -254,6 +255,10 @@ class Domain(ABC):
     description: str = ""
     source: str = ""
     default_task: str = ""
+    #: What a ``goal:FEATURE=VALUE`` task takes on this domain besides its goal (GoalSpec
+    #: fields, e.g. the goal reward and discount of the domain's own named tasks); empty: the
+    #: generic GoalSpec defaults (+10 on arrival, gamma 0.95).
+    goal_defaults: ClassVar[Mapping[str, object]] = MappingProxyType({})
 
     @abstractmethod
     def _build_dynamics(self) -> Dynamics:
@@ -287,7 +292,7 @@ class Domain(ABC):
         if isinstance(task, GoalSpec):
             return task.build(self)
         if task.startswith("goal:"):
-            return GoalSpec.parse(task.removeprefix("goal:")).build(self)
+            return GoalSpec.parse(task.removeprefix("goal:"), **self.goal_defaults).build(self)
         known = self.tasks()
         if task not in known:
             hint = difflib.get_close_matches(task, list(known), n=1)

@@ -77,9 +77,9 @@ class ExperimentReport:
         lines += [f"- {line}" for line in self.findings] + [""]
         known = knowledge_of(self.data)
         if known:
-            note = ("Each run's knowledge record (docs/knowledge.md); where the experiment gave "
-                    "a learner a layer itself, the layer's comes on top: every layer is built "
-                    "on the task's model.")
+            note = ("Each run's knowledge record (docs/knowledge.md), its learner's own with "
+                    "that of the options and the layer it was given on top (the same record "
+                    "with other run ids appears once per cell).")
             lines += ["## What each learner knew", "", note, ""]
             lines += [f"- {learner}: {label}" for learner, label in known] + [""]
         lines += ["## Figures", ""] + [f"![{Path(f).stem}]({Path(f).name})" for f in self.figures]

@@ -36,7 +36,7 @@ GOALS = 20
 #: The settings record: what the published figures were run with (quick: the test's).
 SETTINGS = {
     "full": {"env": "three-floor", "first": "reach-goal", "goals": GOALS, "first_episodes": 500,
-             "episodes": 500, "eval_every": 5},
+             "episodes": 500, "eval_every": 1},
     "quick": {"env": "two-rooms", "first": "reach-goal", "goals": 3, "first_episodes": 300,
               "episodes": 80, "eval_every": 4, "runs": 3},
 }

@@ -253,3 +253,18 @@ def test_three_floor_arm_tasks(domains) -> None:
     assert V[start] > -100.0 + 1.0
     nav = d.mdp("navigate")
     assert solve(nav, 1e-6).V[start] > -100.0 + 1.0
+
+
+def test_a_moved_goal_on_three_floor_pays_what_its_named_tasks_pay():
+    """``goal:`` on three-floor takes the domain's own scale (+100, gamma 0.99), so moving
+    reach-top-west's goal to its own cell gives reach-top-west itself."""
+    import numpy as np
+
+    from adpart.envs import get_domain
+
+    domain = get_domain("three-floor")
+    moved, named = domain.mdp("goal:x=1,y=1,floor=2"), domain.mdp("reach-top-west")
+    assert moved.gamma == named.gamma == 0.99
+    assert np.array_equal(moved.R, named.R) and np.array_equal(moved.terminal, named.terminal)
+    two = get_domain("two-rooms").task("goal:x=9,y=5")  # no scale of its own: the generic one
+    assert two.spec["goal_reward"] == 10.0 and two.gamma == 0.95

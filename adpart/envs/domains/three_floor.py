@@ -39,6 +39,8 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping
+from types import MappingProxyType
+from typing import ClassVar
 
 from adpart.envs.base import Dynamics, GoalSpec, TaskFactory
 from adpart.envs.grid import GridDomain, Slip
@@ -207,6 +209,8 @@ THREE_FLOOR_ARM_MAP = """
 
 GAMMA = 0.99
 GOAL_REWARD = 100.0
+#: A moved goal (``goal:x=..,y=..,floor=..``) pays what the named tasks pay.
+MOVED_GOAL = MappingProxyType({"goal_reward": GOAL_REWARD, "gamma": GAMMA})
 #: Suffix of the tasks in section 5.1.3's reward model (no step cost, +100 at the goal).
 GOAL_ONLY = "-goal-only"
 
@@ -218,6 +222,7 @@ class ThreeFloor(GridDomain):
     description = "three floors of rooms joined by stairways, deterministic (2,900 states)"
     source = "Dissertation section 5.1.1, Fig. 5.1 (our layout; the figure is schematic)"
     default_task = "reach-goal"
+    goal_defaults: ClassVar[Mapping[str, object]] = MOVED_GOAL
 
     MAP = THREE_FLOOR_MAP
 
@@ -252,6 +257,7 @@ class ThreeFloorArm(GridDomain):
     )
     source = "Dissertation section 5.1.4, Fig. 5.6 (our layout; the figure is schematic)"
     default_task = "deliver"
+    goal_defaults: ClassVar[Mapping[str, object]] = MOVED_GOAL
 
     MAP = THREE_FLOOR_ARM_MAP
     SLIP = Slip("perpendicular", 0.5)
