@@ -28,19 +28,9 @@ from click.testing import CliRunner
 from adpart.cli.kb import kb as kb_group
 from adpart.store import KnowledgeBase
 from adpart.store.queries import Queries
+from benchmarks._timing import interleaved_best
 
 N_RECORDS, N_LOADS, REPEATS = 10_000, 500, 5
-
-
-def _best(fns: dict[str, Callable[[], object]], repeats: int) -> dict[str, float]:
-    """Best wall time of each function, running them in turn ``repeats`` times."""
-    best = dict.fromkeys(fns, float("inf"))
-    for _ in range(repeats):
-        for name, fn in fns.items():
-            start = time.perf_counter()
-            fn()
-            best[name] = min(best[name], time.perf_counter() - start)
-    return best
 
 
 def _verifying(on: bool, fn: Callable[[], object]) -> Callable[[], object]:
@@ -102,7 +92,7 @@ def main(n_records: int = N_RECORDS, n_loads: int = N_LOADS,
             figures: dict[str, float] = {}
             for name, fn, times in (("kb_ls", kb_ls, repeats), ("records_table", table, repeats),
                                     ("get_load", get_load, repeats), ("load", load, repeats)):
-                best = _best({"verified": _verifying(True, fn),
+                best = interleaved_best({"verified": _verifying(True, fn),
                               "unverified": _verifying(False, fn)}, times)
                 figures[f"{name}_verified_s"] = best["verified"]
                 figures[f"{name}_unverified_s"] = best["unverified"]

@@ -13,8 +13,6 @@ machine shared with other work loads both sides alike.
 from __future__ import annotations
 
 import tempfile
-import time
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -22,20 +20,9 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from adpart.store import KnowledgeBase
+from benchmarks._timing import interleaved_best
 
 N_STATES, N_ACTIONS, REPEATS = 1_000_000, 8, 5
-
-
-def _interleaved_best(fns: dict[str, Callable[[], None]],
-                      repeats: int = REPEATS) -> dict[str, float]:
-    """Best wall time of each function, running them in turn ``repeats`` times."""
-    best = dict.fromkeys(fns, float("inf"))
-    for _ in range(repeats):
-        for name, fn in fns.items():
-            start = time.perf_counter()
-            fn()
-            best[name] = min(best[name], time.perf_counter() - start)
-    return best
 
 
 def main() -> dict[str, float]:
@@ -67,8 +54,8 @@ def main() -> dict[str, float]:
             def kb_get() -> None:
                 kb.load(policies[-1], "q")
 
-            figures = _interleaved_best({"raw_write_s": raw_write, "kb_put_s": kb_put})
-            figures |= _interleaved_best({"raw_read_s": raw_read, "kb_get_s": kb_get})
+            figures = interleaved_best({"raw_write_s": raw_write, "kb_put_s": kb_put}, REPEATS)
+            figures |= interleaved_best({"raw_read_s": raw_read, "kb_get_s": kb_get}, REPEATS)
             np.testing.assert_array_equal(kb.load(policies[-1], "q"), q)
     figures["put_ratio"] = figures["kb_put_s"] / figures["raw_write_s"]
     figures["get_ratio"] = figures["kb_get_s"] / figures["raw_read_s"]

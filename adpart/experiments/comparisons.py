@@ -22,7 +22,7 @@ import numpy as np
 
 from adpart.experiments.base import ExperimentConfig, ExperimentReport, experiment
 
-__all__ = ["CELLS", "QUICK_CELLS", "Cell"]
+__all__ = ["CELLS", "QUICK_CELLS", "Cell", "layer_ratios"]
 
 
 @dataclass(frozen=True)
@@ -92,22 +92,26 @@ def _measures(pipe: Any, task: str, seed: int) -> tuple[list[str], dict[str, Any
     return lines, data
 
 
-def _ratios(pipe: Any, task: str) -> np.ndarray | None:
-    """Per layer run, its episodes to the bound over flat's KM median (censored: inf)."""
-    curves = pipe.curves.get(task, {})
-    layer = next((c for label, c in curves.items() if label.startswith("hierarchical")), None)
-    flat = curves.get("flat (no transfer)")
-    if layer is None or flat is None:
-        return None
+def layer_ratios(pipe: Any, task: str, baseline: str = "flat",
+                 unit: str = "episodes") -> np.ndarray | None:
+    """Per layer run on ``task``, its time to the bound (``unit``: episodes or steps) over the
+    Kaplan-Meier median of the curve whose label starts with ``baseline`` (censored runs: inf);
+    None when a curve is missing or the baseline's median lies beyond its budget."""
     from adpart.learning.comparison import success_bound
     from adpart.learning.transfer_metrics import km_median, metrics_from_curve
 
-    bound = success_bound(flat, pipe.config.gap_fraction)
-    a, b = metrics_from_curve(layer, bound), metrics_from_curve(flat, bound)
-    base = km_median(*b.event_times("episodes")).estimate
-    if not np.isfinite(base):  # flat's median is beyond its budget: no ratio to aggregate
+    curves = pipe.curves.get(task, {})
+    layer = next((c for label, c in curves.items() if label.startswith("hierarchical")), None)
+    base_curve = next((c for label, c in curves.items() if label.startswith(baseline)), None)
+    flat = curves.get("flat (no transfer)")
+    if layer is None or base_curve is None or flat is None:
         return None
-    times, censored = a.event_times("episodes")
+    bound = success_bound(flat, pipe.config.gap_fraction)
+    a, b = metrics_from_curve(layer, bound), metrics_from_curve(base_curve, bound)
+    base = km_median(*b.event_times(unit)).estimate
+    if not np.isfinite(base) or base <= 0:  # beyond its budget: no ratio to aggregate
+        return None
+    times, censored = a.event_times(unit)
     return np.where(censored, np.inf, times) / base
 
 
@@ -148,7 +152,7 @@ def comparisons(config: ExperimentConfig) -> ExperimentReport:
             title = (f"{cell.tasks[1]}, run means with 95 % bootstrap CIs (Taylor & Stone "
                      "2009; gaps scored as in docs/transfer-metrics.md):")
             tables[cell.env] = [*_cell_table(pipe), "", title, *measures]
-            r = _ratios(pipe, cell.tasks[1])
+            r = layer_ratios(pipe, cell.tasks[1])
             if r is not None:
                 ratios.append(r)
             cell_data.append({"env": cell.env, "tasks": list(cell.tasks), "note": cell.note,

@@ -26,9 +26,10 @@ from typing import Any
 import numpy as np
 
 from adpart.experiments.base import ExperimentConfig, ExperimentReport, experiment
+from adpart.experiments.comparisons import layer_ratios
 from adpart.workflows.reports import strict_json
 
-__all__ = ["GOALS", "SETTINGS", "goal_cells", "layer_ratios"]
+__all__ = ["GOALS", "SETTINGS", "goal_cells"]
 
 #: Goal cells drawn (the issue asks for at least 20).
 GOALS = 20
@@ -54,28 +55,6 @@ def goal_cells(env: str, first: str, n: int, seed: int) -> list[str]:
     candidates = np.flatnonzero(~first_goal)
     cells = np.random.default_rng(seed).choice(candidates, size=n, replace=False)
     return ["goal:" + ",".join(f"{k}={int(features[k][s])}" for k in names) for s in cells]
-
-
-def layer_ratios(pipe: Any, task: str, baseline: str, unit: str) -> np.ndarray | None:
-    """Per layer run on ``task``, its time to the bound (``unit``: episodes or steps) over the
-    Kaplan-Meier median of the curve labelled ``baseline`` (censored runs: inf); None when
-    either curve is missing or the baseline's median lies beyond its budget."""
-    from adpart.learning.comparison import success_bound
-    from adpart.learning.transfer_metrics import km_median, metrics_from_curve
-
-    curves = pipe.curves.get(task, {})
-    layer = next((c for label, c in curves.items() if label.startswith("hierarchical")), None)
-    base_curve = next((c for label, c in curves.items() if label.startswith(baseline)), None)
-    flat = curves.get("flat (no transfer)")
-    if layer is None or base_curve is None or flat is None:
-        return None
-    bound = success_bound(flat, pipe.config.gap_fraction)
-    a, b = metrics_from_curve(layer, bound), metrics_from_curve(base_curve, bound)
-    base = km_median(*b.event_times(unit)).estimate
-    if not np.isfinite(base) or base <= 0:
-        return None
-    times, censored = a.event_times(unit)
-    return np.where(censored, np.inf, times) / base
 
 
 @experiment(

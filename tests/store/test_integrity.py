@@ -154,22 +154,33 @@ def test_check_runs_the_engines_integrity_check(where, populated, table):
     assert "integrity check" in result.output or f"table {table} cannot be read" in result.output
 
 
-def test_an_old_schema_is_upgraded_with_row_hashes(where, populated):
-    kb, rec = populated
+#: What each schema added, newest first: undone to make an older knowledge base again.
+ADDED = {3: ["ALTER TABLE runs DROP COLUMN experience_sha"],
+         2: [f"ALTER TABLE {table} DROP COLUMN row_sha" for table in (
+             "artifacts", "environments", "tasks", "policies", "subgoal_sets", "subgoals",
+             "options", "partition_options", "partitions", "runs")]}
+
+
+def _upgraded_from(where, kb, version: int) -> None:
+    """Make ``kb`` a schema-``version`` knowledge base again, see it refused, upgrade it."""
     kb.close()
     engine = create_engine(where.db_url)
-    with engine.begin() as conn:  # make it a schema-1 knowledge base again
-        for table in ("artifacts", "environments", "tasks", "policies", "subgoal_sets",
-                      "subgoals", "options", "partition_options", "partitions", "runs"):
-            conn.execute(text(f"ALTER TABLE {table} DROP COLUMN row_sha"))
-        conn.execute(text("ALTER TABLE runs DROP COLUMN experience_sha"))  # schema 3's
-        conn.execute(text("UPDATE adpart_schema SET version = 1"))
+    with engine.begin() as conn:
+        for newer in range(SCHEMA_VERSION, version, -1):
+            for statement in ADDED[newer]:
+                conn.execute(text(statement))
+        conn.execute(text(f"UPDATE adpart_schema SET version = {version}"))
     engine.dispose()
     with pytest.raises(StoreError, match="run `adpart kb upgrade`"):
         where.open()
     result = CliRunner().invoke(kb_group, ["upgrade", *where.cli])
     assert result.exit_code == 0, result.output
-    assert f"1 -> {SCHEMA_VERSION}" in result.output
+    assert f"{version} -> {SCHEMA_VERSION}" in result.output
+
+
+def test_an_old_schema_is_upgraded_with_row_hashes(where, populated):
+    kb, rec = populated
+    _upgraded_from(where, kb, 1)
     with where.open() as kb:
         report = kb.check()
         assert report.ok, report.problems
@@ -177,20 +188,9 @@ def test_an_old_schema_is_upgraded_with_row_hashes(where, populated):
         assert kb.get("run", rec["run"].id) == rec["run"]
 
 
-
 def test_a_schema_2_knowledge_base_is_upgraded_with_run_experience(where, populated):
     kb, rec = populated
-    kb.close()
-    engine = create_engine(where.db_url)
-    with engine.begin() as conn:  # make it a schema-2 knowledge base again
-        conn.execute(text("ALTER TABLE runs DROP COLUMN experience_sha"))
-        conn.execute(text("UPDATE adpart_schema SET version = 2"))
-    engine.dispose()
-    with pytest.raises(StoreError, match="run `adpart kb upgrade`"):
-        where.open()
-    result = CliRunner().invoke(kb_group, ["upgrade", *where.cli])
-    assert result.exit_code == 0, result.output
-    assert f"2 -> {SCHEMA_VERSION}" in result.output
+    _upgraded_from(where, kb, 2)
     with where.open() as kb:
         report = kb.check()
         assert report.ok, report.problems  # the runs' row hashes cover the new column
