@@ -244,7 +244,8 @@ def _firing_counts(curve: LearningCurve) -> dict[str, int] | None:
     fired, real = curve.metadata.get("firings"), curve.metadata.get("real_firings")
     if fired is None or real is None:
         return None
-    return {"total": int(sum(fired)), "real": int(sum(real))}
+    return {"total": int(sum(fired)), "real": int(sum(real)),
+            "tied": int(sum(curve.metadata.get("tied_firings") or ()))}
 
 
 def planner_row(env: str, task: str) -> dict[str, Any]:

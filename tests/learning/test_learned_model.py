@@ -94,6 +94,9 @@ def test_a_belief_needs_a_threshold_and_the_inconsistency_mode(two_rooms):
     rmax = build_settings(HierarchicalSettings, {"threshold": 1.0, "explore-known": 1})
     with pytest.raises(TaskError, match="--explore-known 0"):
         hierarchical_learning(new, options, partition, rmax, run, belief=belief)
+    planned = build_settings(HierarchicalSettings, {"threshold": 1.0, "reference": "offered"})
+    with pytest.raises(TaskError, match="--reference learned"):
+        hierarchical_learning(new, options, partition, planned, run, belief=belief)
 
 
 def test_the_counts_learner_is_the_true_model_learner_once_every_pair_is_known():
@@ -161,5 +164,6 @@ def test_a_firing_is_real_when_the_added_action_beats_what_the_block_offered():
               {"run": 0, "state": 3, "action": 0, "offers": [1]},   # not: left is worse
               {"run": 1, "state": 1, "action": 1, "offers": [0, 1]},  # not: already offered
               {"run": 1, "state": 4, "action": 1, "offers": []}]    # real: nothing offered
-    assert real_firings(events, smdp, mdp, 2).tolist() == [1, 1]
-    assert real_firings([], smdp, mdp, 2).tolist() == [0, 0]
+    real, tied = real_firings(events, smdp, mdp, 2)
+    assert real.tolist() == [1, 1] and tied.tolist() == [0, 1]  # already offered: a tie
+    assert [x.tolist() for x in real_firings([], smdp, mdp, 2)] == [[0, 0], [0, 0]]
