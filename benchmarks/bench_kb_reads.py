@@ -93,7 +93,7 @@ def main(n_records: int = N_RECORDS, n_loads: int = N_LOADS,
             for name, fn, times in (("kb_ls", kb_ls, repeats), ("records_table", table, repeats),
                                     ("get_load", get_load, repeats), ("load", load, repeats)):
                 best = interleaved_best({"verified": _verifying(True, fn),
-                              "unverified": _verifying(False, fn)}, times)
+                                         "unverified": _verifying(False, fn)}, times)
                 figures[f"{name}_verified_s"] = best["verified"]
                 figures[f"{name}_unverified_s"] = best["unverified"]
                 figures[f"{name}_ratio"] = best["verified"] / best["unverified"]
