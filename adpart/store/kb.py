@@ -126,6 +126,17 @@ def _discount(value: Any, field: str, *, optional: bool = False) -> float | None
     return gamma
 
 
+def _threshold(value: Any, field: str, high: float) -> float:
+    """A partition threshold: a number in [0, ``high``] (``inf`` allowed where ``high`` is)."""
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise StoreError(f"{field} must be a number in [0, {high}], got {value!r}") from None
+    if math.isnan(x) or not 0.0 <= x <= high:
+        raise StoreError(f"{field} = {value!r} must be a number in [0, {high}] (nan is refused)")
+    return x
+
+
 def _json(value: Any, what: str) -> str:
     try:
         return json.dumps(value, sort_keys=True, separators=(",", ":"), allow_nan=False)
@@ -679,6 +690,9 @@ class KnowledgeBase(Queries, Tables, Maintenance):
         if kind not in PARTITION_KINDS:
             raise StoreError(f"unknown partition kind {kind!r}; use one of "
                              f"{', '.join(PARTITION_KINDS)}")
+        epsilon = _threshold(epsilon, "put_partition: epsilon (eq. 4.7; inf: no reward split)",
+                             math.inf)
+        delta = _threshold(delta, "put_partition: delta (eq. 4.6)", 1.0)
         env_id = _id(environment)
         S, A = self._env_shape(env_id)
         labels = np.asarray(labels, dtype=np.int64)

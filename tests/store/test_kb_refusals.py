@@ -179,3 +179,15 @@ def test_the_kb_docstring_names_only_methods_that_exist():
 def test_learn_of_an_unknown_gym_module_names_it(tmp_path):
     out = _cli("learn", "gym:no_such_module_here:X-v0", "--kb", str(tmp_path / "kb"), "-q")
     assert out.exit_code == 2 and "cannot import module 'no_such_module_here'" in out.output
+
+
+@pytest.mark.parametrize(("field", "value"), [("epsilon", float("nan")), ("epsilon", -1.0),
+                                               ("delta", 1.5), ("delta", float("nan"))])
+def test_put_partition_refuses_a_threshold_out_of_range_naming_it(tmp_path, field, value):
+    with KnowledgeBase.open(tmp_path / "kb") as kb:
+        env = kb.put_environment("e", model_hash="a" * 64, n_states=2, n_actions=2)
+        given = {"epsilon": 0.0, "delta": 0.0, field: value}
+        with pytest.raises(StoreError, match=f"put_partition: {field}"):
+            kb.put_partition(env, "per-option", [0, 1], **given)
+        assert kb.counts().get("partition", 0) == 0
+        kb.put_partition(env, "per-option", [0, 1], epsilon=float("inf"), delta=1.0)  # the ends
