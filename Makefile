@@ -75,10 +75,14 @@ test-all: $(STAMP)
 	$(SINGLE_THREAD) $(PY) -m pytest -n 2 -q -m ""
 
 # The result tables the docs show, regenerated: the pipeline's defaults on the benchmark's cells
-# (adpart experiment comparisons, a few minutes), its summary copied to docs/results/.
+# (adpart experiment comparisons, about 20 minutes on two cores) and on 20 randomly moved goals
+# of three-floor (adpart experiment random-goals, about 25), their summaries copied to
+# docs/results/.
 results: $(BASE)
 	$(ADPART) experiment comparisons --out build/results/comparisons
+	$(ADPART) experiment random-goals --out build/results/random-goals
 	mkdir -p docs/results && cp build/results/comparisons/summary.md docs/results/comparisons.md
+	cp build/results/random-goals/summary.md docs/results/random-goals.md
 
 bench: $(VENV)/.installed-bench
 	$(PY) -m benchmarks

@@ -244,8 +244,9 @@ def _firing_counts(curve: LearningCurve) -> dict[str, int] | None:
     fired, real = curve.metadata.get("firings"), curve.metadata.get("real_firings")
     if fired is None or real is None:
         return None
+    tied = curve.metadata.get("tied_firings")  # None: stored before ties were counted
     return {"total": int(sum(fired)), "real": int(sum(real)),
-            "tied": int(sum(curve.metadata.get("tied_firings") or ()))}
+            "tied": None if tied is None else int(sum(tied))}
 
 
 def planner_row(env: str, task: str) -> dict[str, Any]:

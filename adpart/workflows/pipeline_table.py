@@ -59,7 +59,9 @@ def comparison_lines(rows: list[dict[str, Any]]) -> list[str]:
                     f"  the inconsistency test fired {fired['total']} times over the runs; "
                     f"{fired['real']} ({fired['real'] / fired['total']:.0%}) were real: the "
                     "added action beats every column the block offered under the task's "
-                    f"exact Q*; {fired.get('tied', 0)} were ties (an audit after learning)")
+                    "exact Q*"
+                    + (f"; {fired['tied']} were ties" if fired.get("tied") is not None else "")
+                    + " (an audit after learning)")
             if q["first_evaluation"] > 1 and _sets_it(r, q["first_evaluation"]):
                 lines.append(f"  (the first evaluation, after episode {q['first_evaluation']}, "
                              f"sets {r['learner']}'s median: evaluate more often with "
