@@ -164,7 +164,8 @@ def test_killed_pipeline_resumes_from_the_knowledge_base(tmp_path):
         cli, [*slow, "--kb", str(kb_dir), "--out", str(tmp_path / "o"), "--json"]
     )
     assert resumed.exit_code == 0, resumed.output
-    reused = {s["stage"]: s["reused"] for s in json.loads(resumed.output)["stages"][:3]}
+    stages = json.loads(resumed.output)["stages"]  # the estimate is rebuilt from the stored run
+    reused = {s["stage"]: s["reused"] for s in stages[:4] if s["stage"] != "estimate"}
     assert reused == {"learn-flat": True, "discover": True, "options": True}
     assert counts(kb_dir)["subgoal-set"] == 1 and counts(kb_dir)["option"] == 1
 
