@@ -156,14 +156,20 @@ def test_a_changed_artifact_row_is_refused_naming_the_record(where):
     assert any(f"referenced by policy:{policy.id} (q)" in p for p in problems), problems
 
 
-def test_random_bit_flips_in_the_database_never_change_what_is_read(where, tmp_path):
-    """Every flip either leaves what a reader returns unchanged or is refused (exit 1 or 2)."""
+def _filled_file(where, n: int) -> Path:
+    """A SQLite knowledge base of ``n`` records, its write-ahead log folded in: the one file."""
     _sqlite_only(where)
     with where.open() as kb:
-        _fill(kb, n=6)
+        _fill(kb, n=n)
     db = Path(where.location) / "kb.sqlite"
     with sqlite3.connect(db) as conn:
         conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+    return db
+
+
+def test_random_bit_flips_in_the_database_never_change_what_is_read(where, tmp_path):
+    """Every flip either leaves what a reader returns unchanged or is refused (exit 1 or 2)."""
+    db = _filled_file(where, 6)
     clean = db.read_bytes()
     refs = [f"run:{i}" for i in range(1, 7)] + [f"policy:{i}" for i in range(1, 7)]
     commands = [["ls", "--json"], *(["show", r, "--json"] for r in refs)]
@@ -197,12 +203,7 @@ def test_random_bit_flips_in_the_database_never_change_what_is_read(where, tmp_p
 
 @pytest.mark.parametrize("cut", [1000, 8192, 40000])
 def test_a_truncated_database_file_is_named_not_a_traceback(where, cut):
-    _sqlite_only(where)
-    with where.open() as kb:
-        _fill(kb, n=40)
-    db = Path(where.location) / "kb.sqlite"
-    with sqlite3.connect(db) as conn:
-        conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+    db = _filled_file(where, 40)
     data = db.read_bytes()
     db.write_bytes(data[: max(len(data) - cut, 4096)])
     for command in (["check"], ["ls"], ["show", "run:1"], ["gc"], ["info"]):
