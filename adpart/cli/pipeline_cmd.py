@@ -45,7 +45,8 @@ def _check_plugin_params(kind: str, name: str, params: dict[str, Any], option: s
 
 def check_pipeline_options(config: Any) -> None:
     """Every value of a pipeline's config checked up front (plugins, parameters, tasks)."""
-    from adpart.workflows.pipeline import check_regime, check_tasks
+    from adpart.workflows.pipeline import check_tasks
+    from adpart.workflows.regime import check_regime
 
     try:
         check_tasks(config.env, config.tasks)

@@ -141,6 +141,7 @@ from adpart.learning.decision_layer import (
     reward_options,
     reward_states,
 )
+from adpart.learning.firing_audit import firing_audit
 from adpart.learning.hierarchical_parts import LayerRefiner, ReferenceValues, lifted_values
 from adpart.learning.hierarchical_settings import (
     MODES,
@@ -433,36 +434,6 @@ def hierarchical_knowledge(settings: HierarchicalSettings, *, belief: bool = Fal
     return Knowledge("true-model", "known", tuple(uses))
 
 
-def real_firings(events: Sequence[dict], smdp: SMDPModel, mdp: FiniteMDP, runs: int
-                 ) -> tuple[np.ndarray, np.ndarray]:
-    """Per run, how many of its firings were real inconsistencies of the task, and how many
-    were ties: at the firing state ``s`` the added action ``a`` is worth more under the task's
-    exact ``Q*`` than every column the block offered there, ``Q*(s, a) > max_c Q*(s, c) + tol``
-    (real), or as much within ``tol = 1e-9 (1 + |V*(s)|)`` (a tie: the block already offered
-    as good a choice), with ``Q*(s, c) = R(s, c) + sum_s' F(s' | s, c) V*(s')`` on the world's
-    exact model of the columns (primitives first). Reads the true model: call it inside
-    :func:`~adpart.learning.knowledge.world`, after learning (an audit, never an input)."""
-    from adpart.mdp.solvers import solve
-
-    out, ties = np.zeros(runs, dtype=np.int64), np.zeros(runs, dtype=np.int64)
-    if not events:
-        return out, ties
-    V = solve(mdp, 1e-10).V
-    S = mdp.n_states
-    for e in events:
-        s, a = e["state"], e["action"]
-        cols = np.asarray(e["offers"], dtype=np.int64)
-        rows = cols * S + s
-        q = smdp.R[s, cols] + smdp.F[rows] @ V if cols.size else np.array([-np.inf])
-        q_a = smdp.R[s, a] + smdp.F[[a * S + s]] @ V
-        gap, tol = float(q_a[0]) - float(np.max(q)), 1e-9 * (1.0 + abs(float(V[s])))
-        if gap > tol:
-            out[e["run"]] += 1
-        elif gap >= -tol:
-            ties[e["run"]] += 1
-    return out, ties
-
-
 def belief_problem(settings: HierarchicalSettings) -> str | None:
     """Why the learner cannot learn on a belief model with ``settings`` (None: it can)."""
     if settings.mode != "inconsistency":
@@ -594,7 +565,7 @@ def hierarchical_learning(
     eval_value = drive(st, step_kernel, seed, episodes=N, eval_every=run.eval_every,
                        score=score, progress=run.progress, on_fire=on_fire if check else None)
     with world():  # an audit of the firings against the task's exact Q*: scoring, not learning
-        real, tied = real_firings(events, world_smdp, mdp, K)
+        real, tied = firing_audit(events, world_smdp, mdp, K)
     names = tuple(o.name for o in full)
     delta, epsilon = refinement.delta, refinement.partition_epsilon
     parameters: dict[str, object] = {

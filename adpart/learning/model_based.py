@@ -227,12 +227,11 @@ def _prior_counts(mdp: FiniteMDP, prior: Experience | None) -> np.ndarray:
                          f"{prior.n_actions} actions; the task has {mdp.n_states} and "
                          f"{mdp.n_actions}")
     coo = prior.counts.tocoo()
-    starts, ends = P.indptr[coo.row], P.indptr[coo.row + 1]
-    pos = np.array([start + np.searchsorted(P.indices[start:end], col)
-                    for start, end, col in zip(starts, ends, coo.col, strict=True)],
-                   dtype=np.int64)
-    ok = (pos < ends) & (P.indices[np.minimum(pos, P.nnz - 1)] == coo.col)
-    if not ok.all():
+    S = P.shape[1]  # key row * S + column: sorted over the whole CSR (FiniteMDP sorts indices)
+    keys = np.repeat(np.arange(P.shape[0], dtype=np.int64), np.diff(P.indptr)) * S + P.indices
+    wanted = coo.row.astype(np.int64) * S + coo.col
+    pos = np.minimum(np.searchsorted(keys, wanted), P.nnz - 1)
+    if not np.array_equal(keys[pos], wanted):
         raise ModelError("the prior experience holds a transition this environment cannot "
                          "make; it was gathered on another environment")
     np.add.at(out, pos, coo.data.astype(np.float64))

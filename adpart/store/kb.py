@@ -20,7 +20,6 @@ This module opens the database and writes records; reads and queries are the
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
@@ -67,6 +66,14 @@ from adpart.store.schema import (
     verify_tables,
 )
 from adpart.store.tables import Tables
+from adpart.store.values import (
+    canonical_json_hash,
+    discount,
+    json_text,
+    name_text,
+    threshold,
+    whole_number,
+)
 
 _BUSY_TIMEOUT_S = 60.0
 #: what a damaged database raises: the driver's errors, and text SQLite returns undecoded (a
@@ -74,75 +81,6 @@ _BUSY_TIMEOUT_S = 60.0
 DB_ERRORS = (SQLAlchemyError, UnicodeDecodeError)
 R = TypeVar("R", bound=E.Record)
 
-
-
-def canonical_json_hash(value: Any) -> str:
-    """SHA-256 of ``value`` as canonical JSON (sorted keys, no spaces): the task spec hash."""
-    import hashlib
-
-    return hashlib.sha256(_json(value, "spec").encode()).hexdigest()
-
-
-_INT64 = (-(2**63), 2**63 - 1)
-_MAX_TEXT = 255  # the width of the name columns
-
-
-def _text(value: Any, field: str, *, longest: int = _MAX_TEXT, empty: bool = False) -> str:
-    """A name as stored: a string of at most ``longest`` characters, without NUL characters."""
-    if not isinstance(value, str):
-        raise StoreError(f"{field} must be a string, got {type(value).__name__}")
-    if not value and not empty:
-        raise StoreError(f"{field} must not be empty")
-    if len(value) > longest:
-        raise StoreError(f"{field} has {len(value)} characters; at most {longest} are stored")
-    if "\x00" in value:
-        raise StoreError(f"{field} contains a NUL character; names are text without NUL")
-    return value
-
-
-def _whole(value: Any, field: str, low: int = _INT64[0], high: int = _INT64[1],
-           *, optional: bool = False) -> int | None:
-    """A count, seed or size as stored: a whole number in ``[low, high]`` (64-bit columns)."""
-    if value is None and optional:
-        return None
-    if isinstance(value, bool) or not isinstance(value, int | np.integer):
-        raise StoreError(f"{field} must be a whole number, got {value!r}")
-    if not low <= int(value) <= high:
-        raise StoreError(f"{field} = {int(value)} is outside [{low}, {high}]")
-    return int(value)
-
-
-def _discount(value: Any, field: str, *, optional: bool = False) -> float | None:
-    """A discount factor: a finite number in [0, 1]."""
-    if value is None and optional:
-        return None
-    try:
-        gamma = float(value)
-    except (TypeError, ValueError):
-        raise StoreError(f"{field} must be a number in [0, 1], got {value!r}") from None
-    if not math.isfinite(gamma) or not 0.0 <= gamma <= 1.0:
-        raise StoreError(f"{field} = {value!r} must be a finite number in [0, 1] (a discount "
-                         "factor; nan and inf are refused)")
-    return gamma
-
-
-def _threshold(value: Any, field: str, high: float) -> float:
-    """A partition threshold: a number in [0, ``high``] (``inf`` allowed where ``high`` is)."""
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise StoreError(f"{field} must be a number in [0, {high}], got {value!r}") from None
-    if math.isnan(x) or not 0.0 <= x <= high:
-        raise StoreError(f"{field} = {value!r} must be a number in [0, {high}] (nan is refused)")
-    return x
-
-
-def _json(value: Any, what: str) -> str:
-    try:
-        return json.dumps(value, sort_keys=True, separators=(",", ":"), allow_nan=False)
-    except (TypeError, ValueError) as exc:
-        raise StoreError(f"the {what} must be JSON-serialisable (numbers, strings, lists, dicts; "
-                         f"no NaN): {exc}") from exc
 
 
 def _first(error: BaseException) -> str:
@@ -463,10 +401,10 @@ class KnowledgeBase(Queries, Tables, Maintenance):
     # ------------------------------------------------------------------ provenance and artifacts
     @staticmethod
     def _prov(plugin: str, plugin_version: str, parameters: Mapping[str, Any] | None) -> dict:
-        _text(plugin, "plugin", empty=True)
-        _text(plugin_version, "plugin_version", longest=64, empty=True)
+        name_text(plugin, "plugin", empty=True)
+        name_text(plugin_version, "plugin_version", longest=64, empty=True)
         params = dict(parameters or {})
-        _json(params, "parameters")
+        json_text(params, "parameters")
         return {"adpart_version": __version__, "plugin": plugin, "plugin_version": plugin_version,
                 "parameters": params, "created_at": datetime.now(timezone.utc),
                 "schema_version": SCHEMA_VERSION}
@@ -541,12 +479,12 @@ class KnowledgeBase(Queries, Tables, Maintenance):
                         plugin_version: str = "", parameters: Mapping[str, Any] | None = None,
                         ) -> E.Environment:
         """Get-or-put an environment keyed by its model hash (e.g. ``FiniteMDP.content_hash``)."""
-        _text(name, "put_environment: name")
-        _text(model_hash, "put_environment: model_hash", longest=64)
-        n_states = _whole(n_states, "put_environment: n_states", 1)
-        n_actions = _whole(n_actions, "put_environment: n_actions", 1, 2**31 - 1)
+        name_text(name, "put_environment: name")
+        name_text(model_hash, "put_environment: model_hash", longest=64)
+        n_states = whole_number(n_states, "put_environment: n_states", 1)
+        n_actions = whole_number(n_actions, "put_environment: n_actions", 1, 2**31 - 1)
         spec = dict(spec or {})
-        _json(spec, "environment spec")
+        json_text(spec, "environment spec")
         with self._session(write=True) as s:
             row = self._get_or_add(s, SqlEnvironment, SqlEnvironment.model_hash == model_hash,
                                    SqlEnvironment(name=name, spec=spec, model_hash=model_hash,
@@ -565,8 +503,8 @@ class KnowledgeBase(Queries, Tables, Maintenance):
                  gamma: float, plugin: str = "", plugin_version: str = "",
                  parameters: Mapping[str, Any] | None = None) -> E.Task:
         """Get-or-put a task keyed by (environment, hash of canonical JSON of spec and gamma)."""
-        _text(name, "put_task: name")
-        gamma = _discount(gamma, "put_task: gamma")
+        name_text(name, "put_task: name")
+        gamma = discount(gamma, "put_task: gamma")
         spec = dict(spec)
         spec_hash = canonical_json_hash({"spec": spec, "gamma": float(gamma)})
         env_id = _id(environment)
@@ -590,10 +528,10 @@ class KnowledgeBase(Queries, Tables, Maintenance):
         primitive actions, then ``option:7``, ...); ``pi`` then indexes those columns. The names
         are kept in the record's parameters as ``q_columns``.
         """
-        _text(learner, "put_policy: learner")
-        seed = _whole(seed, "put_policy: seed", optional=True)
-        episodes = _whole(episodes, "put_policy: episodes", 0, optional=True)
-        steps = _whole(steps, "put_policy: steps", 0, optional=True)
+        name_text(learner, "put_policy: learner")
+        seed = whole_number(seed, "put_policy: seed", optional=True)
+        episodes = whole_number(episodes, "put_policy: episodes", 0, optional=True)
+        steps = whole_number(steps, "put_policy: steps", 0, optional=True)
         task_id = _id(task)
         S, A = self._task_shape(task_id)
         if q_columns is not None:
@@ -615,7 +553,7 @@ class KnowledgeBase(Queries, Tables, Maintenance):
                         plugin: str = "", plugin_version: str = "",
                         parameters: Mapping[str, Any] | None = None) -> E.SubgoalSet:
         """Store the subgoal states a detector found (and its per-state scores (S,) float64)."""
-        _text(detector, "put_subgoal_set: detector")
+        name_text(detector, "put_subgoal_set: detector")
         env_id = _id(environment)
         S, _ = self._env_shape(env_id)
         ids = np.unique(np.asarray(states, dtype=np.int64).reshape(-1))
@@ -643,8 +581,8 @@ class KnowledgeBase(Queries, Tables, Maintenance):
         scipy.sparse matrix stored as a COO table (row, col, value) sorted row-major.
         ``subgoal`` is a subgoal id (``SubgoalSet.subgoal_ids``).
         """
-        _text(name, "put_option: name")
-        gamma = _discount(gamma, "put_option: gamma", optional=True)
+        name_text(name, "put_option: name")
+        gamma = discount(gamma, "put_option: gamma", optional=True)
         env_id = _id(environment)
         S, A = self._env_shape(env_id)
         pol = np.asarray(policy)
@@ -690,9 +628,9 @@ class KnowledgeBase(Queries, Tables, Maintenance):
         if kind not in PARTITION_KINDS:
             raise StoreError(f"unknown partition kind {kind!r}; use one of "
                              f"{', '.join(PARTITION_KINDS)}")
-        epsilon = _threshold(epsilon, "put_partition: epsilon (eq. 4.7; inf: no reward split)",
+        epsilon = threshold(epsilon, "put_partition: epsilon (eq. 4.7; inf: no reward split)",
                              math.inf)
-        delta = _threshold(delta, "put_partition: delta (eq. 4.6)", 1.0)
+        delta = threshold(delta, "put_partition: delta (eq. 4.6)", 1.0)
         env_id = _id(environment)
         S, A = self._env_shape(env_id)
         labels = np.asarray(labels, dtype=np.int64)
@@ -740,10 +678,10 @@ class KnowledgeBase(Queries, Tables, Maintenance):
         """Store a learning run: ``curve`` a table (episodes, steps, value gap, ...), metrics,
         and ``experience``, a table of the transitions its runs took (``state, action,
         next_state, count``), when the learner recorded them."""
-        _text(learner, "put_run: learner")
-        seed = _whole(seed, "put_run: seed", optional=True)
+        name_text(learner, "put_run: learner")
+        seed = whole_number(seed, "put_run: seed", optional=True)
         metrics = dict(metrics or {})
-        _json(metrics, "metrics")
+        json_text(metrics, "metrics")
         task_id = _id(task)
         curve_art = self._table(curve, "curve")
         experience_art = self._table(experience, "experience")

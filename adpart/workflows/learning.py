@@ -179,7 +179,7 @@ def _learn_batch(job: dict[str, Any]) -> dict[str, Any]:
     experience = getattr(result, "experience", None)
     return {
         "Q": result.Q,
-        "experience": None if experience is None else experience.to_table(),
+        "experience": experience,
         "curve": result.curve.to_dict(),
         "metadata": dict(result.curve.metadata),
         "v_star_start": result.v_star_start,
@@ -296,17 +296,14 @@ def run_learning(
         model_hash=mdp.content_hash,
         option_ids=option_ids,
         final_layers=tuple(layer for r in results for layer in r.get("layers", ())),
-        experience=_merge_experience(results, mdp.n_states, mdp.n_actions),
+        experience=_merge_experience(results),
     )
 
 
-def _merge_experience(results: list[dict[str, Any]], n_states: int, n_actions: int
-                      ) -> Experience | None:
+def _merge_experience(results: list[dict[str, Any]]) -> Experience | None:
     """All batches' experience together, or None when the learner counts none."""
-    tables = [r.get("experience") for r in results]
-    if any(t is None for t in tables):
-        return None
-    return Experience.merge(Experience.from_table(t, n_states, n_actions) for t in tables)
+    parts = [r.get("experience") for r in results]
+    return None if any(p is None for p in parts) else Experience.merge(parts)
 
 
 def _decision_layer(kb: KnowledgeStore | None, request: LearnRequest) -> dict[str, Any]:
@@ -503,14 +500,18 @@ def _record_learning(kb: KnowledgeStore, outcome: LearnOutcome) -> dict[str, Any
 
 def _estimated_from(kb: KnowledgeStore, option_ids: Sequence[int]) -> str | None:
     """The runs whose experience estimated the model the options were built on (None: they
-    were built on the true model)."""
+    were built on the true model; a layer's options are all of one environment)."""
     from adpart.workflows.resolve import EXPERIENCE_MARK
 
-    for oid in option_ids:
-        name = kb.get("environment", kb.get("option", oid).environment_id).name
-        if EXPERIENCE_MARK in name:
-            return name.split(EXPERIENCE_MARK, 1)[1]
-    return None
+    if not option_ids:
+        return None
+    name = _options_environment(kb, option_ids).name
+    return name.split(EXPERIENCE_MARK, 1)[1] if EXPERIENCE_MARK in name else None
+
+
+def _options_environment(kb: KnowledgeStore, option_ids: Sequence[int]) -> Any:
+    """The environment record the options (all of one environment) were stored under."""
+    return kb.get("environment", kb.get("option", option_ids[0]).environment_id)
 
 
 def _put_final_layers(kb: KnowledgeStore, environment: Any, task: Any, outcome: LearnOutcome,
@@ -525,7 +526,7 @@ def _put_final_layers(kb: KnowledgeStore, environment: Any, task: Any, outcome: 
     named: dict[str, Any] = {}
     if outcome.option_ids:  # the layer is over the options, of their environment (a model
         # estimated from experience, in the learned-model regime: then the task is named only)
-        own = kb.get("environment", kb.get("option", outcome.option_ids[0]).environment_id)
+        own = _options_environment(kb, outcome.option_ids)
         if own.id != environment.id:
             environment, task, named = own, None, {"task_id": task.id}
     delta = float(meta.get("delta") or 0.0)

@@ -66,6 +66,7 @@ from adpart.workflows.options import options_for_subgoals
 from adpart.workflows.partitioning import DEFAULT_CRITERION, partition_environment
 from adpart.workflows.pipeline_figures import write_figures
 from adpart.workflows.refs import parse_ref
+from adpart.workflows.regime import agent_verdict, check_regime, learned_threshold
 from adpart.workflows.resolve import resolve_domain
 from adpart.workflows.store import KnowledgeStore
 
@@ -372,64 +373,28 @@ def predict_fallback(kb: KnowledgeStore, env: str, task_ids: list[int], params: 
             "flat_estimate": res.flat_estimate, "blocks": res.n_blocks}
 
 
-#: The inconsistency threshold as a fraction of the first task's learned start value (the
-#: hierarchical learner's own default fraction of |V*(start)|, on values the agent learned).
-THRESHOLD_SCALE = 0.025
-
-
-def learned_threshold(kb: KnowledgeStore, policy: Any, env: str, task: str) -> float:
-    """``L = THRESHOLD_SCALE * |sum_s mu(s) max_a Q_1(s, a)|``: the scale of the values the
-    agent learned in the first task (``policy``'s stored Q), where the learner's default reads
-    ``|V*(start)|`` of the task it learns."""
-    q = np.asarray(kb.load(policy, "q"), dtype=np.float64)
-    best = np.nanmax(np.where(np.isnan(q), -np.inf, q), axis=1)
-    mu = resolve_domain(env).task(task).initial  # where episodes start: observed in every run
-    live = np.isfinite(best) & (mu > 0)
-    value = float(mu[live] @ best[live] / mu[live].sum()) if live.any() else 0.0
-    return THRESHOLD_SCALE * abs(value)
-
-
-def agent_verdict(first_curve: LearningCurve, first: str, task: str) -> dict[str, Any]:
-    """The learned-model regime's fallback, decided from what the agent saw: a first task none
-    of whose episodes ever ended in a terminal state (every one ran to the step limit) gave the
-    agent no goal, so nothing it learned is evidence for a layer and ``task`` is learned flat.
-    (The expected-learning-time estimate of section 4.4 reads the true option models and the
-    runs' scores against V*; this regime does not use it.)"""
-    cap = int(first_curve.metadata.get("max_steps_per_episode") or 0)
-    steps = np.asarray(first_curve["steps"])
-    ended = int(np.count_nonzero(steps < cap)) if cap else int(steps.size)
-    if ended == 0:
-        return {"fallback": True, "episodes_ending_in_a_terminal": 0,
-                "reason": f"no episode of {first} ever ended in a terminal state (each ran to "
-                          f"the {cap}-step limit): the agent found no goal, so {task} is "
-                          "learned flat"}
-    return {"fallback": False, "episodes_ending_in_a_terminal": ended,
-            "reason": f"{ended} episodes of {first} ended in a terminal state: {task} is learned "
-                      "on the layer built from that experience (the expected-learning-time "
-                      "estimate of 4.4 reads the true option models; this regime does not use "
-                      "it)"}
-
-
-def check_regime(config: PipelineConfig) -> None:
-    """Refuse, before any work, a layer learner that could not learn in the config's regime
-    (the learned-model regime's learner reads a belief model, not the task's rewards)."""
-    if config.regime != "learned-model":
-        return
-    from adpart.learning.hierarchical import belief_problem
-    from adpart.plugins import get_registry
-
-    flat = get_registry().get("learner", config.flat_learner)
-    if not getattr(flat.factory, "records_experience", False):
-        raise TaskError(
-            f"--flat-learner {config.flat_learner} does not record the transitions its runs take "
-            "(records_experience), and the learned-model regime estimates the dynamics from "
-            "them: give --regime true-model, or a flat learner that records them (q-learning)")
-    learner = get_registry().get("learner", "hierarchical").create(
-        dict(config.hierarchical_params))
-    problem = belief_problem(learner.settings)
-    if problem is not None:
-        raise TaskError(f"--hier-opt: {problem}; or give --regime true-model, which reads the "
-                        "new task's model")
+def _predicted_verdict(kb: KnowledgeStore, config: PipelineConfig, task: str,
+                       evidence: list[int], own_layer: bool, mode: str) -> dict[str, Any]:
+    """The true-model regime's fallback: section 4.4's estimate from the tasks learned to the
+    bound (``evidence``), with the ``reason`` the stage and the row print."""
+    params = (dict(config.hierarchy_params) if config.hierarchy == "expected-learning-time"
+              else {})
+    if evidence:
+        verdict = predict_fallback(kb, config.env, list(evidence), params)
+        falls = verdict["fallback"]
+        return {**verdict, "reason": (
+            f"the knowledge base predicts abstraction will {'not pay' if falls else 'pay'} for "
+            f"{task}: E[t_learn] {verdict['estimate']:.4g} of the best layer "
+            f"({verdict['blocks']} blocks) {'>=' if falls else '<'} "
+            f"{verdict['flat_estimate']:.4g} flat")}
+    if own_layer:  # the layer is built from the task's own rewards, not from evidence
+        return {"fallback": False, "reason": (
+            f"no earlier task was learned to the bound in any run, so the knowledge base holds "
+            f"no values to predict from; {mode} builds its layer from {task}'s own reward "
+            f"states, so {task} is learned on it")}
+    return {"fallback": True, "reason": (
+        f"no earlier task was learned to the bound in any run, so the knowledge base holds no "
+        f"values to predict a layer from: {task} is learned flat")}
 
 
 def check_tasks(env: str, tasks: tuple[str, ...]) -> None:
@@ -472,6 +437,18 @@ def run_pipeline(
                            params=dict(flat), runs=config.runs, episodes=episodes,
                            seed=config.seed, eval_every=config.eval_every)
         return _learn(kb, req, report, stage)
+
+    def learn_instead(task: str, reason: str, label: str) -> Learned:
+        """``task`` learned flat in place of the layer (its row says why), and as the baseline."""
+        flat_run = learn_flat(task, config.episodes)
+        report.curves[task] = {label: flat_run.curve}
+        report.rows.append(_row(task, "flat-fallback", flat_run, config.gap_fraction,
+                                {"fallback": reason}))
+        if config.baseline:
+            if label == "flat (fallback)":
+                report.curves[task]["flat (no transfer)"] = flat_run.curve
+            report.rows.append(_row(task, "flat", flat_run, config.gap_fraction, {}))
+        return flat_run
 
     say(f"learning {first} flat ({config.runs} runs x {config.first_episodes} episodes)")
     first_req = LearnRequest(
@@ -526,12 +503,7 @@ def run_pipeline(
         report.stages.append(Stage("no-subgoals", first, found.record.ref, found.reused, 0.0,
                                    {"reason": reason}))
         for task in later:
-            flat_run = learn_flat(task, config.episodes)
-            report.curves[task] = {"flat (no subgoals)": flat_run.curve}
-            report.rows.append(_row(task, "flat-fallback", flat_run, config.gap_fraction,
-                                    {"fallback": reason}))
-            if config.baseline:
-                report.rows.append(_row(task, "flat", flat_run, config.gap_fraction, {}))
+            learn_instead(task, reason, "flat (no subgoals)")
         write_figures(kb, report, config, out)
         return report
     option_ids: list[int] = []
@@ -562,53 +534,18 @@ def run_pipeline(
     # on learned tasks T_i = (pi_i, P_i, Q_i); an unlearned task's Q predicts nothing)
     evidence = list(learned) if report.rows[0]["runs_within_bound"] > 0 else []
     for task in later:
-        if config.fallback and model_env is not None:
-            verdict = agent_verdict(first_curve, first, task)
-            report.stages.append(Stage("fallback" if verdict["fallback"] else "predict", task,
-                                       "flat" if verdict["fallback"] else "layer", False, 0.0,
-                                       verdict))
-            if verdict["fallback"]:
-                say(verdict["reason"])
-                flat_run = learn_flat(task, config.episodes)
-                report.curves[task] = {"flat (fallback)": flat_run.curve}
-                report.rows.append(_row(task, "flat-fallback", flat_run, config.gap_fraction,
-                                        {"fallback": verdict["reason"]}))
-                if config.baseline:
-                    report.curves[task]["flat (no transfer)"] = flat_run.curve
-                    report.rows.append(_row(task, "flat", flat_run, config.gap_fraction, {}))
-                continue
-        elif config.fallback:
+        if config.fallback:
             start = time.perf_counter()
-            params = dict(config.hierarchy_params) if config.hierarchy == (
-                "expected-learning-time") else {}
-            if evidence:
-                verdict = predict_fallback(kb, config.env, list(evidence), params)
-                reason = (f"the knowledge base predicts abstraction will "
-                          f"{'not pay' if verdict['fallback'] else 'pay'} for {task}: E[t_learn] "
-                          f"{verdict['estimate']:.4g} of the best layer ({verdict['blocks']} "
-                          f"blocks) {'>=' if verdict['fallback'] else '<'} "
-                          f"{verdict['flat_estimate']:.4g} flat")
-            elif own_layer:  # the layer is built from the task's own rewards, not from evidence
-                verdict = {"fallback": False}
-                reason = (f"no earlier task was learned to the bound in any run, so the knowledge "
-                          f"base holds no values to predict from; {hierarchical['mode']} builds "
-                          f"its layer from {task}'s own reward states, so {task} is learned on it")
-            else:
-                verdict = {"fallback": True}
-                reason = (f"no earlier task was learned to the bound in any run, so the knowledge "
-                          f"base holds no values to predict a layer from: {task} is learned flat")
-            report.stages.append(Stage("fallback" if verdict["fallback"] else "predict", task,
-                                       "flat" if verdict["fallback"] else "layer", False,
-                                       time.perf_counter() - start, {**verdict, "reason": reason}))
-            if verdict["fallback"]:
-                say(reason)
-                flat_run = learn_flat(task, config.episodes)
-                report.curves[task] = {"flat (fallback)": flat_run.curve}
-                report.rows.append(_row(task, "flat-fallback", flat_run, config.gap_fraction,
-                                        {"fallback": reason}))
-                if config.baseline:
-                    report.curves[task]["flat (no transfer)"] = flat_run.curve
-                    report.rows.append(_row(task, "flat", flat_run, config.gap_fraction, {}))
+            verdict = (agent_verdict(first_curve, first, task) if model_env is not None else
+                       _predicted_verdict(kb, config, task, evidence, own_layer,
+                                          hierarchical["mode"]))
+            falls = bool(verdict["fallback"])
+            report.stages.append(Stage("fallback" if falls else "predict", task,
+                                       "flat" if falls else "layer", False,
+                                       time.perf_counter() - start, verdict))
+            if falls:
+                say(verdict["reason"])
+                flat_run = learn_instead(task, verdict["reason"], "flat (fallback)")
                 tid = parse_ref(flat_run.ids["task"], "task")
                 if tid not in learned:
                     learned.append(tid)

@@ -24,7 +24,7 @@ from adpart.options.subgoal_options import subgoal_options
 from adpart.params import build_settings
 from adpart.partition import Partition
 from adpart.workflows.experience import EstimatedDomain, belief_model
-from adpart.workflows.pipeline import agent_verdict
+from adpart.workflows.regime import agent_verdict
 from adpart.workflows.resolve import resolve_domain
 
 ESTIMATED = Knowledge("estimated", "observed")
@@ -154,7 +154,7 @@ def test_the_fallback_is_decided_from_what_the_agent_saw():
 def test_a_firing_is_real_when_the_added_action_beats_what_the_block_offered():
     """On a corridor (right is optimal everywhere but the goal), adding right where the block
     offered only left is a real inconsistency; adding left where it offered right is not."""
-    from adpart.learning.hierarchical import real_firings
+    from adpart.learning.firing_audit import firing_audit
 
     from .conftest import corridor
 
@@ -164,6 +164,6 @@ def test_a_firing_is_real_when_the_added_action_beats_what_the_block_offered():
               {"run": 0, "state": 3, "action": 0, "offers": [1]},   # not: left is worse
               {"run": 1, "state": 1, "action": 1, "offers": [0, 1]},  # not: already offered
               {"run": 1, "state": 4, "action": 1, "offers": []}]    # real: nothing offered
-    real, tied = real_firings(events, smdp, mdp, 2)
+    real, tied = firing_audit(events, smdp, mdp, 2)
     assert real.tolist() == [1, 1] and tied.tolist() == [0, 1]  # already offered: a tie
-    assert [x.tolist() for x in real_firings([], smdp, mdp, 2)] == [[0, 0], [0, 0]]
+    assert [x.tolist() for x in firing_audit([], smdp, mdp, 2)] == [[0, 0], [0, 0]]

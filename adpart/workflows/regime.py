@@ -1,0 +1,89 @@
+"""What the pipeline's learned-model regime decides from the agent's own experience.
+
+In ``--regime learned-model`` (:mod:`adpart.workflows.experience`, docs/learned-model.md) nothing
+of a later task is read before it is learned, so three of the pipeline's decisions are taken from
+what the first task's runs gave the agent instead:
+
+* :func:`learned_threshold` - the inconsistency test's ``L``, from the first task's learned
+  values (the learner's own default reads ``|V*(start)|`` of the task it learns);
+* :func:`agent_verdict` - whether to learn a later task on the layer at all: not if no episode
+  of the first task ever ended in a terminal state;
+* :func:`check_regime` - which settings cannot run without the task's model or rewards, refused
+  before any work.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from adpart.errors import TaskError
+from adpart.learning.curves import LearningCurve
+from adpart.workflows.resolve import resolve_domain
+from adpart.workflows.store import KnowledgeStore
+
+if TYPE_CHECKING:
+    from adpart.workflows.pipeline import PipelineConfig
+
+__all__ = ["THRESHOLD_SCALE", "agent_verdict", "check_regime", "learned_threshold"]
+
+
+#: The inconsistency threshold as a fraction of the first task's learned start value (the
+#: hierarchical learner's own default fraction of |V*(start)|, on values the agent learned).
+THRESHOLD_SCALE = 0.025
+
+
+def learned_threshold(kb: KnowledgeStore, policy: Any, env: str, task: str) -> float:
+    """``L = THRESHOLD_SCALE * |sum_s mu(s) max_a Q_1(s, a)|``: the scale of the values the
+    agent learned in the first task (``policy``'s stored Q), where the learner's default reads
+    ``|V*(start)|`` of the task it learns."""
+    q = np.asarray(kb.load(policy, "q"), dtype=np.float64)
+    best = np.nanmax(np.where(np.isnan(q), -np.inf, q), axis=1)
+    mu = resolve_domain(env).task(task).initial  # where episodes start: observed in every run
+    live = np.isfinite(best) & (mu > 0)
+    value = float(mu[live] @ best[live] / mu[live].sum()) if live.any() else 0.0
+    return THRESHOLD_SCALE * abs(value)
+
+
+def agent_verdict(first_curve: LearningCurve, first: str, task: str) -> dict[str, Any]:
+    """The learned-model regime's fallback, decided from what the agent saw: a first task none
+    of whose episodes ever ended in a terminal state (every one ran to the step limit) gave the
+    agent no goal, so nothing it learned is evidence for a layer and ``task`` is learned flat.
+    (The expected-learning-time estimate of section 4.4 reads the true option models and the
+    runs' scores against V*; this regime does not use it.)"""
+    cap = int(first_curve.metadata.get("max_steps_per_episode") or 0)
+    steps = np.asarray(first_curve["steps"])
+    ended = int(np.count_nonzero(steps < cap)) if cap else int(steps.size)
+    if ended == 0:
+        return {"fallback": True, "episodes_ending_in_a_terminal": 0,
+                "reason": f"no episode of {first} ever ended in a terminal state (each ran to "
+                          f"the {cap}-step limit): the agent found no goal, so {task} is "
+                          "learned flat"}
+    return {"fallback": False, "episodes_ending_in_a_terminal": ended,
+            "reason": f"{ended} episodes of {first} ended in a terminal state: {task} is learned "
+                      "on the layer built from that experience (the expected-learning-time "
+                      "estimate of 4.4 reads the true option models; this regime does not use "
+                      "it)"}
+
+
+def check_regime(config: PipelineConfig) -> None:
+    """Refuse, before any work, a layer learner that could not learn in the config's regime
+    (the learned-model regime's learner reads a belief model, not the task's rewards)."""
+    if config.regime != "learned-model":
+        return
+    from adpart.learning.hierarchical import belief_problem
+    from adpart.plugins import get_registry
+
+    flat = get_registry().get("learner", config.flat_learner)
+    if not getattr(flat.factory, "records_experience", False):
+        raise TaskError(
+            f"--flat-learner {config.flat_learner} does not record the transitions its runs take "
+            "(records_experience), and the learned-model regime estimates the dynamics from "
+            "them: give --regime true-model, or a flat learner that records them (q-learning)")
+    learner = get_registry().get("learner", "hierarchical").create(
+        dict(config.hierarchical_params))
+    problem = belief_problem(learner.settings)
+    if problem is not None:
+        raise TaskError(f"--hier-opt: {problem}; or give --regime true-model, which reads the "
+                        "new task's model")
