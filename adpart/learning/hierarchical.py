@@ -141,7 +141,7 @@ from adpart.learning.decision_layer import (
     reward_options,
     reward_states,
 )
-from adpart.learning.firing_audit import firing_audit
+from adpart.learning.firing_audit import firing_audit, first_actions
 from adpart.learning.hierarchical_parts import LayerRefiner, ReferenceValues, lifted_values
 from adpart.learning.hierarchical_settings import (
     MODES,
@@ -565,7 +565,8 @@ def hierarchical_learning(
     eval_value = drive(st, step_kernel, seed, episodes=N, eval_every=run.eval_every,
                        score=score, progress=run.progress, on_fire=on_fire if check else None)
     with world():  # an audit of the firings against the task's exact Q*: scoring, not learning
-        real, tied = firing_audit(events, world_smdp, mdp, K)
+        audit = firing_audit(events, world_smdp, mdp, K,
+                             first_actions(full[mdp.n_actions:], S, mdp.n_actions))
     names = tuple(o.name for o in full)
     delta, epsilon = refinement.delta, refinement.partition_epsilon
     parameters: dict[str, object] = {
@@ -596,7 +597,8 @@ def hierarchical_learning(
                   "gamma": mdp.gamma, "v_star_start": v_star, **parameters,
                   "final_blocks": st.out_blocks[:, -1].tolist(),
                   "firings": np.bincount([e["run"] for e in events], minlength=K).tolist(),
-                  "real_firings": real.tolist(), "tied_firings": tied.tolist()},
+                  "real_firings": audit.real.tolist(), "tied_firings": audit.ties.tolist(),
+                  "own_step_ties": audit.own_step.tolist()},
     )
     grounded = st.Ql.copy() if st.Ql.shape[1] == S else None  # a placeholder when not testing
     return HierarchicalResult(

@@ -341,7 +341,7 @@ def _decision_layer(kb: KnowledgeStore | None, request: LearnRequest) -> dict[st
 
 #: Curve metadata with one entry per run (concatenated across batches, stored in the run's
 #: metrics): a layer learner's blocks after refinement, its firings and the real ones among them.
-PER_RUN_METADATA = ("final_blocks", "firings", "real_firings", "tied_firings")
+PER_RUN_METADATA = ("final_blocks", "firings", "real_firings", "tied_firings", "own_step_ties")
 
 
 def _merge_curves(parts: list[dict[str, np.ndarray]], metadatas: list[dict[str, Any]]

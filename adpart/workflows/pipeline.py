@@ -245,9 +245,11 @@ def _firing_counts(curve: LearningCurve) -> dict[str, int] | None:
     fired, real = curve.metadata.get("firings"), curve.metadata.get("real_firings")
     if fired is None or real is None:
         return None
-    tied = curve.metadata.get("tied_firings")  # None: stored before ties were counted
+    # None: a run stored before ties (or own steps among them) were counted
+    tied, own = curve.metadata.get("tied_firings"), curve.metadata.get("own_step_ties")
     return {"total": int(sum(fired)), "real": int(sum(real)),
-            "tied": None if tied is None else int(sum(tied))}
+            "tied": None if tied is None else int(sum(tied)),
+            "own_step": None if own is None else int(sum(own))}
 
 
 def planner_row(env: str, task: str) -> dict[str, Any]:

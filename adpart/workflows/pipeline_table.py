@@ -61,6 +61,8 @@ def comparison_lines(rows: list[dict[str, Any]]) -> list[str]:
                     "added action beats every column the block offered under the task's "
                     "exact Q*"
                     + (f"; {fired['tied']} were ties" if fired.get("tied") is not None else "")
+                    + (f", {fired['own_step']} of them the first step of an offered option"
+                       if fired.get("tied") and fired.get("own_step") is not None else "")
                     + " (an audit after learning)")
             if q["first_evaluation"] > 1 and _sets_it(r, q["first_evaluation"]):
                 lines.append(f"  (the first evaluation, after episode {q['first_evaluation']}, "

@@ -164,6 +164,34 @@ def test_a_firing_is_real_when_the_added_action_beats_what_the_block_offered():
               {"run": 0, "state": 3, "action": 0, "offers": [1]},   # not: left is worse
               {"run": 1, "state": 1, "action": 1, "offers": [0, 1]},  # not: already offered
               {"run": 1, "state": 4, "action": 1, "offers": []}]    # real: nothing offered
-    real, tied = firing_audit(events, smdp, mdp, 2)
-    assert real.tolist() == [1, 1] and tied.tolist() == [0, 1]  # already offered: a tie
-    assert [x.tolist() for x in firing_audit([], smdp, mdp, 2)] == [[0, 0], [0, 0]]
+    audit = firing_audit(events, smdp, mdp, 2)
+    assert audit.real.tolist() == [1, 1] and audit.ties.tolist() == [0, 1]  # offered: a tie
+    empty = firing_audit([], smdp, mdp, 2)
+    assert [x.tolist() for x in (empty.real, empty.ties, empty.own_step)] == [[0, 0]] * 3
+
+
+def test_a_tie_is_an_own_step_when_an_offered_option_moves_first_as_the_added_action():
+    """An option "go right" offered at state 1: adding right there ties (the option does it
+    first, then continues optimally) and is its own step; a primitive offered beside it is not
+    counted unless it is the added action itself."""
+    from adpart.learning.firing_audit import firing_audit, first_actions
+    from adpart.options import Option
+
+    from .conftest import corridor
+
+    mdp = corridor(6)  # actions: 0 left, 1 right; the goal at the right end
+    S = mdp.n_states
+    right = Option("right", np.ones(S, dtype=bool) & ~mdp.terminal, np.ones(S, dtype=np.int64),
+                   mdp.terminal.astype(np.float64))
+    from adpart.learning.hierarchical import option_set
+
+    columns, smdp = option_set(mdp, [right], include_primitives=True)
+    first = first_actions(columns[mdp.n_actions:], S, mdp.n_actions)
+    assert first[2].tolist() == [1] * S  # column 2, the option, moves right everywhere
+    events = [{"run": 0, "state": 1, "action": 1, "offers": [2]},     # tie, own step
+              {"run": 0, "state": 2, "action": 1, "offers": [0, 2]},  # tie, own step
+              {"run": 0, "state": 3, "action": 1, "offers": [0]}]     # real
+    audit = firing_audit(events, smdp, mdp, 1, first)
+    assert (audit.real.tolist(), audit.ties.tolist(), audit.own_step.tolist()) == (
+        [1], [2], [2])
+    assert firing_audit(events, smdp, mdp, 1).own_step.tolist() == [0]  # not asked: none
