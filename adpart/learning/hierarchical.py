@@ -419,7 +419,7 @@ def hierarchical_knowledge(settings: HierarchicalSettings, *, belief: bool = Fal
         uses = ["option models on the estimated dynamics for refinement",
                 "the earlier tasks' step reward as the reward floor"]
         if settings.directed:
-            uses.append("R-max on the counts")
+            uses.append("R-max on the counts, unknown pairs at the given value ceiling")
         return Knowledge("estimated", "observed", tuple(uses))
     uses = ["option models for refinement", "reward floor r_min", "terminal states"]
     if settings.reward_options:
@@ -439,9 +439,14 @@ def belief_problem(settings: HierarchicalSettings) -> str | None:
     if settings.mode != "inconsistency":
         return (f"mode {settings.mode} reads the task's rewards, which a learner on a belief "
                 "model does not know; use mode inconsistency (--mode inconsistency)")
-    if settings.directed:
-        return ("R-max exploration (--explore-known) plans with the task's reward function; on "
-                "a belief model the rewards are only observed: give --explore-known 0")
+    if settings.directed and settings.exploration.value_ceiling is None:
+        return ("R-max exploration (--explore-known) values an unknown pair at the ceiling of "
+                "the task's rewards, which a learner on a belief model does not know: give "
+                "--value-ceiling V (the pipeline's learned-model regime gives the ceiling of the "
+                "rewards its first task paid), or --explore-known 0")
+    if settings.layer_values == "planned":
+        return ("planned layer values (--layer-values planned) plan on the counts over the "
+                "true model's transition table; on a belief model give --layer-values learned")
     if settings.testing and settings.test_reference != "learned":
         return (f"reference {settings.test_reference} plans on the model's rewards, which on a "
                 "belief model hold no goal (on two-rooms it made 1,771 firings, 36 % real, "
@@ -539,6 +544,7 @@ def hierarchical_learning(
         **(reference.initial(part0) if check else
            {"block_values": None, "state_values": None, "offered_values": None}),
         explore_known=settings.exploration.explore_known,
+        v_max=settings.exploration.value_ceiling,
     )
     B0 = part0.n_blocks
     with world():  # the simulator of the environment

@@ -72,6 +72,12 @@ class Exploration:
     m tries, and test against the grounded values of the empirical model (inconsistency mode
     with flat-explore)."""
 
+    value_ceiling: float | None = setting(None, kind="float", none="auto")
+    """R-max's v_max, what an unknown pair is worth; auto: max(R, 0) / (1 - gamma) of the
+    task's own rewards (the true-model regime; a learner on a belief model must be given one:
+    the pipeline's learned-model regime gives the ceiling of the rewards its first task
+    paid)."""
+
 
 @settings
 class InconsistencyTest:

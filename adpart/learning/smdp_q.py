@@ -170,9 +170,10 @@ def _reference_table(K: int, S: int, capacity: int, block_values: np.ndarray | N
 
 
 def _rmax_arrays(mdp: FiniteMDP, K: int, m: int, horizon: int, *, floor: float,
-                 grounded: bool) -> dict[str, object]:
-    """The kernel's count model for K runs, all pairs unknown: R-max's plan and, when the test
-    is on (``grounded``), the grounded values ``Vl`` at ``floor`` (placeholders when ``m = 0``)."""
+                 grounded: bool, v_max: float | None = None) -> dict[str, object]:
+    """The kernel's count model for K runs, all pairs unknown: R-max's plan (an unknown pair
+    worth ``v_max``; None: the ceiling of ``mdp``'s rewards) and, when the test is on
+    (``grounded``), the grounded values ``Vl`` at ``floor`` (placeholders when ``m = 0``)."""
     S, A = mdp.n_states, mdp.n_actions
     if m == 0:
         one = np.zeros((1, 1), dtype=np.int64)
@@ -181,7 +182,7 @@ def _rmax_arrays(mdp: FiniteMDP, K: int, m: int, horizon: int, *, floor: float,
                 "pred_ptr": np.zeros(1, dtype=np.int64), "pred_idx": np.zeros(1, dtype=np.int64),
                 "xqueue": one, "xinq": np.zeros((1, 1), dtype=bool), "v_max": 0.0,
                 "sweep_tol": 0.0, "Vl": np.zeros((1, 1)), "floor": floor}
-    v_max = value_ceiling(mdp, horizon)
+    v_max = value_ceiling(mdp, horizon) if v_max is None else float(v_max)
     ptr, idx = predecessors(mdp)
     nnz = mdp.sampler_arrays[2].size
     return {"explore_m": m, "xc": np.zeros((K, nnz), dtype=np.int64),
@@ -215,6 +216,8 @@ class InconsistencyArrays:
             (``+inf`` where the state cannot be split from its block), or None: not tested.
         explore_known: R-max's m (0: off; with ``flat_explore`` the action explored is the
             optimistic model's, :mod:`adpart.learning._rmax`).
+        v_max: R-max's value of an unknown pair (None: :func:`~adpart.learning._rmax.
+            value_ceiling` of the simulated task's rewards).
     """
 
     threshold: float
@@ -229,6 +232,7 @@ class InconsistencyArrays:
     state_values: np.ndarray | None
     offered_values: np.ndarray | None
     explore_known: int
+    v_max: float | None = None
 
     def __post_init__(self) -> None:
         if self.block_values is not None and self.state_values is not None:
@@ -310,7 +314,8 @@ def make_state(
         split_offered=offered_values is not None,
         Voff=np.zeros((1, 1)) if offered_values is None
         else np.broadcast_to(offered_values, (K, S)).astype(np.float64),
-        **_rmax_arrays(mdp, K, m_known, horizon, floor=float(lower_bound), grounded=check),
+        **_rmax_arrays(mdp, K, m_known, horizon, floor=float(lower_bound), grounded=check,
+                       v_max=t.v_max),
         Ql=np.broadcast_to(np.where(mdp.admissible, float(lower_bound), -np.inf)
                            if check else np.zeros((1, A)), flat_shape if check else (1, 1, A)
                            ).copy(),

@@ -66,7 +66,12 @@ from adpart.workflows.options import options_for_subgoals
 from adpart.workflows.partitioning import DEFAULT_CRITERION, partition_environment
 from adpart.workflows.pipeline_figures import write_figures
 from adpart.workflows.refs import parse_ref
-from adpart.workflows.regime import agent_verdict, check_regime, learned_threshold
+from adpart.workflows.regime import (
+    agent_verdict,
+    check_regime,
+    learned_threshold,
+    learned_value_ceiling,
+)
 from adpart.workflows.resolve import resolve_domain
 from adpart.workflows.store import KnowledgeStore
 
@@ -399,6 +404,15 @@ def _predicted_verdict(kb: KnowledgeStore, config: PipelineConfig, task: str,
         f"values to predict a layer from: {task} is learned flat")}
 
 
+def _directed_without_ceiling(params: dict[str, Any]) -> bool:
+    """Whether the layer learner's ``params`` ask for R-max exploration without a value
+    ceiling (the learned-model regime then gives the first task's)."""
+    from adpart.plugins import get_registry
+
+    resolved = get_registry().get("learner", "hierarchical").resolve_params(params)
+    return bool(resolved["explore_known"]) and resolved["value_ceiling"] is None
+
+
 def check_tasks(env: str, tasks: tuple[str, ...]) -> None:
     """Resolve every task of the sequence before any work is done: an unknown task name or a
     goal that matches no state raises here, naming it, not after the earlier tasks were learned
@@ -560,11 +574,14 @@ def run_pipeline(
         say(f"learning {task} on the layer of the options and {task}'s reward states "
             f"({hierarchical['mode']})" if own_layer or layer is None else
             f"learning {task} on {layer.blocks} blocks (hierarchical)")
+        params = dict(hierarchical)
+        if model_env is not None and _directed_without_ceiling(params):
+            params["value-ceiling"] = learned_value_ceiling(model_env, first, task)
         hier_req = LearnRequest(
             env=config.env,
             task=task,
             learner="hierarchical",
-            params=dict(hierarchical),
+            params=params,
             runs=config.runs,
             episodes=config.episodes,
             seed=config.seed,

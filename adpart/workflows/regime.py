@@ -26,7 +26,8 @@ from adpart.workflows.store import KnowledgeStore
 if TYPE_CHECKING:
     from adpart.workflows.pipeline import PipelineConfig
 
-__all__ = ["THRESHOLD_SCALE", "agent_verdict", "check_regime", "learned_threshold"]
+__all__ = ["THRESHOLD_SCALE", "agent_verdict", "check_regime", "learned_threshold",
+           "learned_value_ceiling"]
 
 
 #: The inconsistency threshold as a fraction of the first task's learned start value (the
@@ -44,6 +45,23 @@ def learned_threshold(kb: KnowledgeStore, policy: Any, env: str, task: str) -> f
     live = np.isfinite(best) & (mu > 0)
     value = float(mu[live] @ best[live] / mu[live].sum()) if live.any() else 0.0
     return THRESHOLD_SCALE * abs(value)
+
+
+def learned_value_ceiling(model_env: str, first: str, task: str) -> float:
+    """R-max's ``v_max`` for ``task`` from what the first task paid: ``max(r, 0) / (1 -
+    gamma)`` over the rewards of the pairs the first task's runs tried (each paid its reward on
+    every try; the tasks' rewards are deterministic), with ``task``'s discount (its interface).
+    The true-model regime's default reads the ceiling of ``task``'s own rewards instead."""
+    domain = resolve_domain(model_env)
+    earlier = domain.base.mdp(first)  # type: ignore[attr-defined]
+    tried = domain.experience.tried & earlier.admissible  # type: ignore[attr-defined]
+    paid = earlier.R[tried & ~earlier.terminal[:, None]]
+    top = max(float(paid.max()) if paid.size else 0.0, 0.0)
+    gamma = domain.base.mdp(task).gamma  # type: ignore[attr-defined]
+    if gamma >= 1.0:
+        raise TaskError(f"{task} is undiscounted, so R-max's value ceiling max(r, 0) / (1 - "
+                        "gamma) is undefined: give --hier-opt value-ceiling=V")
+    return top / (1.0 - gamma)
 
 
 def agent_verdict(first_curve: LearningCurve, first: str, task: str) -> dict[str, Any]:
@@ -81,8 +99,18 @@ def check_regime(config: PipelineConfig) -> None:
             f"--flat-learner {config.flat_learner} does not record the transitions its runs take "
             "(records_experience), and the learned-model regime estimates the dynamics from "
             "them: give --regime true-model, or a flat learner that records them (q-learning)")
-    learner = get_registry().get("learner", "hierarchical").create(
-        dict(config.hierarchical_params))
+    spec = get_registry().get("learner", "hierarchical")
+    params = dict(config.hierarchical_params)
+    learner = spec.create(params)
+    if learner.settings.directed and learner.settings.exploration.value_ceiling is None:
+        # the pipeline gives R-max the ceiling of the first task's rewards (learned_value_ceiling)
+        domain = resolve_domain(config.env)
+        for task in config.tasks[1:]:
+            if domain.mdp(task).gamma >= 1.0:
+                raise TaskError(f"--hier-opt explore-known: {task} is undiscounted, so R-max's "
+                                "value ceiling max(r, 0) / (1 - gamma) is undefined: give "
+                                "--hier-opt value-ceiling=V")
+        learner = spec.create({**params, "value-ceiling": 0.0})
     problem = belief_problem(learner.settings)
     if problem is not None:
         raise TaskError(f"--hier-opt: {problem}; or give --regime true-model, which reads the "

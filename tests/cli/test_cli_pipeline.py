@@ -15,6 +15,7 @@ from click.testing import CliRunner
 
 from adpart.cli import cli
 from adpart.store import KnowledgeBase
+from adpart.workflows.resolve import resolve_domain
 
 PIPELINE = [
     "pipeline",
@@ -304,9 +305,6 @@ def test_directed_exploration_is_a_learner_option_and_a_bad_count_is_refused(tmp
     kb_dir = tmp_path / "kb"
     rmax = [*PIPELINE, "--hier-opt", "mode=inconsistency", "--kb", str(kb_dir), "--out",
             str(tmp_path / "o"), "--json", "--regime", "true-model"]
-    learned = CliRunner().invoke(cli, [*rmax[:-2], "--hier-opt", "explore-known=1"])
-    assert learned.exit_code == 2 and not kb_dir.exists()  # R-max plans with the task's rewards
-    assert "--explore-known 0" in learned.output and "--regime true-model" in learned.output
     bad = CliRunner().invoke(cli, [*rmax, "--hier-opt", "explore-known=-1"])
     assert bad.exit_code == 2
     assert bad.output.strip() == ("Error: --hier-opt: learner 'hierarchical': --explore-known "
@@ -341,6 +339,34 @@ def test_directed_exploration_is_a_learner_option_and_a_bad_count_is_refused(tmp
     layer = next(r for r in split["tasks"] if r["learner"] == "hierarchical")
     assert layer["runs_within_bound"] == layer["runs"] == 3
     assert split["config"]["hierarchical_params"]["split-offered"] == "true"
+
+
+def test_r_max_in_the_learned_model_regime_plans_unknown_pairs_at_the_first_tasks_ceiling(
+        tmp_path):
+    """In the learned-model regime the pipeline gives R-max the ceiling of the rewards its first
+    task paid (the new task's own is not read), and the run records it; planned layer values,
+    which plan on the true model's transition table, are refused before any work."""
+    kb_dir = tmp_path / "kb"
+    base = [*PIPELINE, "--hier-opt", "explore-known=1", "--kb", str(kb_dir)]
+    planned = CliRunner().invoke(cli, [*base, "--hier-opt", "layer-values=planned",
+                                       "--out", str(tmp_path / "p")])
+    assert planned.exit_code == 2 and not kb_dir.exists()
+    assert "--layer-values learned" in planned.output
+    res = CliRunner().invoke(cli, [*base, "--out", str(tmp_path / "o"), "--json"])
+    assert res.exit_code == 0, res.output
+    summary = json.loads(res.output)
+    layer = next(r for r in summary["tasks"] if r["learner"] == "hierarchical")
+    assert "R-max on the counts" in layer["knowledge"]
+    kb = KnowledgeBase.open(str(kb_dir))
+    try:
+        stage = next(s for s in summary["stages"] if s["stage"] == "learn-hierarchical")
+        run = kb.get("run", int(stage["result"].split(":")[1]))
+        first = resolve_domain("two-rooms").mdp("reach-goal")
+        gamma = resolve_domain("two-rooms").mdp(summary["config"]["tasks"][1]).gamma
+        paid = float(first.R[first.admissible & ~first.terminal[:, None]].max())
+        assert run.provenance.parameters["value_ceiling"] == pytest.approx(paid / (1 - gamma))
+    finally:
+        kb.close()
 
 
 @pytest.mark.parametrize(("tasks", "message"), [

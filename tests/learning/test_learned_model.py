@@ -14,7 +14,7 @@ import pytest
 from adpart.errors import ModelError, TaskError
 from adpart.learning import q_learning
 from adpart.learning.curves import LearningCurve
-from adpart.learning.hierarchical import hierarchical_learning
+from adpart.learning.hierarchical import hierarchical_knowledge, hierarchical_learning
 from adpart.learning.hierarchical_settings import HierarchicalSettings
 from adpart.learning.knowledge import Knowledge, KnowledgeError, guard
 from adpart.learning.model_based import estimated_dynamics_learning, known_dynamics_learning
@@ -92,8 +92,13 @@ def test_a_belief_needs_a_threshold_and_the_inconsistency_mode(two_rooms):
         hierarchical_learning(new, options, partition, HierarchicalSettings(), run,
                               belief=belief)
     rmax = build_settings(HierarchicalSettings, {"threshold": 1.0, "explore-known": 1})
-    with pytest.raises(TaskError, match="--explore-known 0"):
+    with pytest.raises(TaskError, match="--value-ceiling V"):  # the task's ceiling is unknown
         hierarchical_learning(new, options, partition, rmax, run, belief=belief)
+    planned = build_settings(HierarchicalSettings, {"threshold": 1.0, "explore-known": 1,
+                                                    "value-ceiling": 20.0,
+                                                    "layer-values": "planned"})
+    with pytest.raises(TaskError, match="--layer-values learned"):
+        hierarchical_learning(new, options, partition, planned, run, belief=belief)
     planned = build_settings(HierarchicalSettings, {"threshold": 1.0, "reference": "offered"})
     with pytest.raises(TaskError, match="--reference learned"):
         hierarchical_learning(new, options, partition, planned, run, belief=belief)
@@ -195,3 +200,42 @@ def test_a_tie_is_an_own_step_when_an_offered_option_moves_first_as_the_added_ac
     assert (audit.real.tolist(), audit.ties.tolist(), audit.own_step.tolist()) == (
         [1], [2], [2])
     assert firing_audit(events, smdp, mdp, 1).own_step.tolist() == [0]  # not asked: none
+
+
+def test_r_max_on_a_belief_values_unknown_pairs_at_the_ceiling_it_is_given(two_rooms):
+    """With a value ceiling R-max runs on a belief model, and the ceiling is what it plans an
+    unknown pair at: given a ceiling below every value it has no optimism left, and the runs
+    differ from those given a high one (the agent explores by it)."""
+    _, estimated, new = two_rooms
+    options, partition = _layer(estimated)
+    belief = belief_model(estimated, new, "reach-goal")
+    run = Run(runs=3, episodes=30, seed=5)
+
+    def learn(ceiling: float):
+        settings = build_settings(HierarchicalSettings, {
+            "threshold": 0.05, "explore-known": 1, "value-ceiling": ceiling})
+        return hierarchical_learning(new, options, partition, settings, run, belief=belief)
+
+    high, low = learn(20.0), learn(-1e6)
+    assert high.curve.metadata["explore_known"] == 1
+    assert not np.array_equal(np.asarray(high.curve["steps"]), np.asarray(low.curve["steps"]))
+    knowledge = hierarchical_knowledge(build_settings(HierarchicalSettings, {
+        "threshold": 0.05, "explore-known": 1, "value-ceiling": 20.0}), belief=True)
+    assert knowledge.dynamics == "estimated" and knowledge.rewards == "observed"
+    assert any("value ceiling" in use for use in knowledge.uses)
+
+
+def test_the_learned_value_ceiling_is_the_first_tasks_best_paid_reward(two_rooms):
+    """``learned_value_ceiling``: max(r, 0) / (1 - gamma) over the rewards of the pairs the
+    first task's runs tried, with the later task's discount; computed here from the first
+    task's reward table and the experience's tried pairs."""
+    from adpart.workflows.regime import learned_value_ceiling
+    from adpart.workflows.resolve import register_domain
+
+    domain, estimated, new = two_rooms
+    register_domain(estimated.name, estimated)
+    first = domain.mdp("reach-goal")
+    tried = estimated.experience.tried & first.admissible & ~first.terminal[:, None]
+    expected = max(first.R[tried].max(), 0.0) / (1.0 - new.gamma)
+    assert expected > 0  # the goal's reward was paid
+    assert learned_value_ceiling(estimated.name, "reach-goal", "goal:x=9,y=5") == expected
