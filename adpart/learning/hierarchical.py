@@ -80,7 +80,10 @@ still at the floor in most route states). The layer's values then start at that 
 (``q_init``): with optimistic zeros one three-floor run in 20 kept a greedy path into blocks it
 had never visited (all their values still 0), a loop that never arrives (gap 27.9 from episode
 100 to 1,000); started at the floor, 20 of 20 runs were exact by episode 200, the median
-unchanged at 40 episodes.
+unchanged at 40 episodes. An unknown pair is worth ``value_ceiling``: by default the ceiling of
+the task's own rewards; on a belief model (the learned-model regime) it must be given, and the
+pipeline gives the ceiling of the rewards the first task paid (three-floor ``reach-top-west``: 29
+episodes to the bound against flat Q-learning's 305, docs/learned-model.md).
 
 **Planned layer values** (``layer_values="planned"``, with R-max). On arm ``deliver`` the
 layer's SMDP Q-values, learned by step sizes over 1,400-1,600 blocks of a slip-0.5 domain, sit
