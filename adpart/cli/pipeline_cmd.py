@@ -30,7 +30,8 @@ from adpart.workflows.pipeline_table import comparison_lines
 from adpart.workflows.reports import folder_name
 
 
-def _check_plugin_params(kind: str, name: str, params: dict[str, Any], option: str) -> None:
+def _check_plugin_params(kind: str, name: str, params: dict[str, Any], option: str,
+                         name_option: str) -> None:
     """Validate ``params`` against plugin ``name`` now, naming ``option`` in the message.
 
     The pipeline stores a run, policies, subgoals and options before it reaches the later
@@ -38,7 +39,11 @@ def _check_plugin_params(kind: str, name: str, params: dict[str, Any], option: s
     run too) means a bad value fails before anything is computed or stored.
     """
     try:
-        registry().get(kind, name).create(params)
+        spec = registry().get(kind, name)
+    except AdpartError as exc:  # the plugin itself is unknown: the option that named it
+        raise CLIError(f"{name_option}: {exc}") from None
+    try:
+        spec.create(params)
     except AdpartError as exc:
         raise CLIError(f"{option}: {exc}") from None
 
@@ -53,9 +58,11 @@ def check_pipeline_options(config: Any) -> None:
     except AdpartError as exc:
         raise CLIError(f"--tasks: {exc}") from None
     _check_plugin_params("subgoal-detector", config.detector, config.detector_params,
-                         "--detector-opt")
-    _check_plugin_params("learner", config.flat_learner, config.flat_params, "--flat-opt")
-    _check_plugin_params("learner", "hierarchical", config.hierarchical_params, "--hier-opt")
+                         "--detector-opt", "--detector")
+    _check_plugin_params("learner", config.flat_learner, config.flat_params, "--flat-opt",
+                         "--flat-learner")
+    _check_plugin_params("learner", "hierarchical", config.hierarchical_params, "--hier-opt",
+                         "--hier-opt")
     check_criterion(config.criterion, config.criterion_params, config.partition)
     try:
         check_regime(config)
@@ -63,7 +70,7 @@ def check_pipeline_options(config: Any) -> None:
         raise CLIError(str(exc)) from None
     if config.hierarchy is not None:
         _check_plugin_params("hierarchy-estimator", config.hierarchy, config.hierarchy_params,
-                             "--hierarchy-opt")
+                             "--hierarchy-opt", "--hierarchy")
 
 
 def split_tasks(text: str) -> tuple[str, ...]:
@@ -322,7 +329,7 @@ def transfer_cmd(
     from adpart.workflows.refs import parse_ref
 
     hier_params = key_values(hier_opt, "--hier-opt")
-    _check_plugin_params("learner", "hierarchical", hier_params, "--hier-opt")
+    _check_plugin_params("learner", "hierarchical", hier_params, "--hier-opt", "--hier-opt")
     out = out or Path("adpart-transfer") / folder_name(env, task)
     requests = {
         "hierarchical": LearnRequest(

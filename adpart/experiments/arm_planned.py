@@ -73,8 +73,8 @@ def three_floor_arm_planned(config: ExperimentConfig) -> ExperimentReport:
     ]
     ctx = pipeline_layer(config, setup, report)
     mdp, pipe = ctx["mdp"], ctx["pipe"]
-    kw = {"delta": DELTA, "partition_epsilon": EPSILON, "explore_known": b["known"],
-          "reference": "policy", "intra_option": True, "refine": "block",
+    kw = {"delta": DELTA, "partition_epsilon": EPSILON, "explore": "r-max",
+          "known_after": b["known"], "reference": "policy", "intra_option": True, "refine": "block",
           "layer_values": "planned", "split_offered": True}
     run = Run(**ctx["common"])
     results = {}
@@ -87,8 +87,8 @@ def three_floor_arm_planned(config: ExperimentConfig) -> ExperimentReport:
     curves = {"flat Q": pipe.curves[setup.new][flat_label],
               **{label: r.curve for label, r in results.items()}}
     rows, reached = curve_rows(setup.new, curves)
-    report.data["settings"] = {**setup_settings(setup, config), "explore_known": b["known"],
-                               "split_offered": kw["split_offered"]}
+    report.data["settings"] = {**setup_settings(setup, config), "explore": "r-max",
+                               "known_after": b["known"], "split_offered": kw["split_offered"]}
     report.data["rows"] = rows
     report.data["episodes_to_bound"] = {k: v.tolist() for k, v in reached.items()}
     for row in rows:

@@ -15,7 +15,7 @@ and partition the pipeline stored, learns the new task the other ways the seed c
   extra subgoals before partitioning.
 
 ``three-floor-arm`` (5.1.4, Figs. 5.9-5.10) adds both hierarchical learners again with directed
-exploration (R-max, ``explore_known``), which is what first reaches ``deliver``'s goal, the test
+exploration (R-max, ``explore="r-max"``), which is what first reaches ``deliver``'s goal, the test
 reading the grounded model values against what the layer offers, and refinement by 4.3.3's block
 rule; for each run it reports the value of the best block-constant policy of the final layer
 (:func:`layer_optimum_gaps`), beside what the learned values achieve, and the sample limit of
@@ -405,8 +405,8 @@ def _directed(config: ExperimentConfig, ctx: dict[str, Any]) -> None:
     grounded model values against what the layer offers (module docstring)."""
     from adpart.learning.hierarchical import hierarchical_learning
 
-    kw = {"explore_known": ARM_KNOWN, "reference": "offered", "intra_option": True,
-          "refine": "block"}
+    kw = {"explore": "r-max", "known_after": ARM_KNOWN, "reference": "offered",
+          "intra_option": True, "refine": "block"}
     for label, threshold in zip(DIRECTED, (np.inf, None), strict=True):
         config.progress(f"three-floor-arm/deliver: {label}")
         result = hierarchical_learning(ctx["mdp"], ctx["options"], ctx["partition"],

@@ -55,17 +55,19 @@ sizes as the flat table. In a deterministic MDP every target ``r + gamma max Q_l
 then at most ``Q*(s, a)``, so ``Q_low <= Q*`` at all times and a firing certifies
 ``Q*(s, a*) - Q_P(b) > L``. Where a pair has shown more than one successor the test subtracts
 ``lcb_z`` standard errors of its targets (a normal-approximation bound, one-sided level about
-2.3% at the default z = 2; not a finite-sample guarantee). Exploration is separate: with
-``flat_explore`` the agent, at a greedy decision, takes the *optimistic* flat action where its
-value beats the block's best - that is how a goal that is no subgoal is found - but the test
-never reads that table. Epsilon-exploration draws among the primitive actions alone until the
-run first collects a reward above ``r_min`` (``primitive_exploration="until-reward"``, the
+2.3% at the default z = 2; not a finite-sample guarantee). Exploration is separate (a strategy
+of its own, ``explore``): with ``"optimistic-flat"``, the default, the agent, at a greedy
+decision, takes the *optimistic* flat action where its value beats the block's best - that is
+how a goal that is no subgoal is found - but the test never reads that table.
+Epsilon-exploration draws among the primitive actions alone until the run first collects a reward
+above ``r_min`` (``primitive_exploration="until-reward"``, the
 default; ``"always"``, ``"never"``: over every column and primitive from the start, the former
 rule): a random option carries the agent to a subgoal of the *earlier* task, and on the pipeline's
 28-block three-floor layer such jumps delayed the first arrival at the new goal from episodes 10-24
 to 53-103. Once a reward is found the options are explored too, which the layer's values need.
 
-**Directed exploration** (``explore_known = m > 0``, :mod:`adpart.learning._rmax`). Neither
+**Directed exploration** (``explore="r-max"``, ``known_after = m``,
+:mod:`adpart.learning._rmax`). Neither
 the optimistic flat table nor epsilon-exploration ever reached three-floor-arm ``deliver``'s goal
 (docs/hierarchical-learning.md). With ``m`` the agent counts each flat pair's successors and
 explores by R-max: at a greedy decision it takes the action of the optimistic model's optimum
@@ -198,7 +200,7 @@ class HierarchicalResult(LearnResult):
         block_Q: per run, the ``(B_k, O)`` block values.
         partitions: per run, the final decision layer.
         Q_flat: ``(K, S, A)`` the flat values learned beside it.
-        Q_grounded: ``(K, S, A)`` the grounded flat values the test read (with ``explore_known``
+        Q_grounded: ``(K, S, A)`` the grounded flat values the test read (with R-max
             the optimum of each run's empirical model, untried pairs at the floor), or ``None``
             when the test was off (threshold infinite, or a mode that does not test).
         curve: the :class:`LearningCurve`.
@@ -443,10 +445,10 @@ def belief_problem(settings: HierarchicalSettings) -> str | None:
         return (f"mode {settings.mode} reads the task's rewards, which a learner on a belief "
                 "model does not know; use mode inconsistency (--mode inconsistency)")
     if settings.directed and settings.exploration.value_ceiling is None:
-        return ("R-max exploration (--explore-known) values an unknown pair at the ceiling of "
+        return ("R-max exploration (--explore r-max) values an unknown pair at the ceiling of "
                 "the task's rewards, which a learner on a belief model does not know: give "
                 "--value-ceiling V (the pipeline's learned-model regime gives the ceiling of the "
-                "rewards its first task paid), or --explore-known 0")
+                "rewards its first task paid), or another --explore")
     if settings.layer_values == "planned":
         return ("planned layer values (--layer-values planned) plan on the counts over the "
                 "true model's transition table; on a belief model give --layer-values learned")
@@ -546,7 +548,7 @@ def hierarchical_learning(
         else 0, r_min=reward_floor(known),
         **(reference.initial(part0) if check else
            {"block_values": None, "state_values": None, "offered_values": None}),
-        explore_known=settings.exploration.explore_known,
+        explore_known=settings.exploration.known_after if settings.directed else 0,
         v_max=settings.exploration.value_ceiling,
     )
     B0 = part0.n_blocks
@@ -588,7 +590,8 @@ def hierarchical_learning(
         "test_reference": reference.name, "refine": refinement.refine,
         "primitive_exploration": settings.exploration.primitive_exploration if check
         else "never",
-        "explore_known": settings.exploration.explore_known if settings.directed else 0,
+        "exploration": settings.exploration_rule,
+        "known_after": settings.exploration.known_after if settings.directed else None,
         "layer_values": settings.layer_values, "split_offered": test.split_offered,
         "flat_lower_bound": lower, "min_visits": test.min_visits,
         "alpha": run.alpha.to_dict(), "epsilon_greedy": run.epsilon.to_dict(),

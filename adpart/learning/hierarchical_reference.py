@@ -96,7 +96,7 @@ splitting blocks by where they may), ``refine`` ``state`` and ``block``, all thr
 ``primitive_exploration`` rules, ``flat_explore`` (``inconsistency`` mode only, as in the learner),
 ``min_visits``, ``lcb_z``, the four references and ``split_offered``. Left out, and refused with a
 :class:`~adpart.errors.TaskError`: intra-option learning (``intra_option``), R-max exploration
-(``explore_known``) and planned layer values (``layer_values="planned"``, which needs R-max).
+(``explore="r-max"``) and planned layer values (``layer_values="planned"``, which needs R-max).
 """
 
 from __future__ import annotations
@@ -556,16 +556,16 @@ def hierarchical_reference(
 
     Raises:
         TaskError: a setting outside this reference's scope (``intra_option``,
-            ``explore_known``, ``layer_values="planned"``, a mode that does not test).
+            ``explore="r-max"``, ``layer_values="planned"``, a mode that does not test).
     """
     settings = HierarchicalSettings() if settings is None else settings
     run = Run() if run is None else run
     if settings.intra_option:
         raise TaskError("the plain reference leaves out intra-option learning "
                         "(intra_option=True); compare with intra_option=False")
-    if settings.exploration.explore_known:
-        raise TaskError("the plain reference leaves out R-max exploration (explore_known); "
-                        "compare with explore_known=0")
+    if settings.directed:
+        raise TaskError("the plain reference leaves out R-max exploration (explore r-max); "
+                        "compare with another explore")
     if settings.layer_values != "learned":
         raise TaskError("the plain reference leaves out planned layer values "
                         f"(layer_values={settings.layer_values!r}); compare with 'learned'")
@@ -577,7 +577,7 @@ def hierarchical_reference(
     delta, epsilon, refine = refinement.delta, refinement.partition_epsilon, refinement.refine
     threshold, threshold_scale = test.threshold, test.threshold_scale
     min_visits, lcb_z, split_offered = test.min_visits, test.lcb_z, test.split_offered
-    flat_explore = settings.exploration.flat_explore
+    flat_explore = settings.flat_explore
     primitive_exploration = settings.exploration.primitive_exploration
     runs, episodes, seed = run.runs, run.episodes, 0 if run.seed is None else run.seed
     alpha, epsilon_greedy, q_init = run.alpha, run.epsilon, run.q_init

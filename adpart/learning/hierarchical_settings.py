@@ -25,6 +25,7 @@ from adpart.errors import TaskError
 from adpart.params import setting, settings
 
 __all__ = [
+    "EXPLORATION_RULES",
     "LAYER_VALUES",
     "MODES",
     "PRIMITIVE_EXPLORATION",
@@ -50,6 +51,8 @@ REFERENCES = ("model", "learned", "offered", "policy")
 REFINE_RULES = ("state", "block")
 #: When epsilon-exploration draws among the primitive actions alone (kernel codes).
 PRIMITIVE_EXPLORATION = {"never": 0, "always": 1, "until-reward": 2}
+#: What the layer learner explores by beside epsilon over the block's columns (section 4.3.3).
+EXPLORATION_RULES = ("optimistic-flat", "r-max", "columns")
 #: What the greedy policy is greedy on.
 LAYER_VALUES = ("learned", "planned")
 
@@ -63,20 +66,23 @@ class Exploration:
     collects a reward above the step reward (until-reward), always, or never (a random option
     jumps to a subgoal of the earlier task; testing modes only)."""
 
-    flat_explore: bool = setting(True)
-    """at a greedy decision take the optimistic flat action where it beats the block's best
-    value, so that a goal that is no subgoal is found (inconsistency mode only)."""
+    explore: str = setting("optimistic-flat", choices=EXPLORATION_RULES)
+    """what the agent explores by beside epsilon over the block's columns, a strategy of its own
+    (inconsistency mode only; the other modes explore by the columns): at a greedy decision take
+    the action of the optimistic flat Q-table where it beats the block's best value
+    (optimistic-flat), or the action of R-max's optimistic model of the run's counts, a pair
+    known after known-after tries and an unknown one worth value-ceiling, the test then reading
+    the grounded values of the empirical model (r-max); or nothing more (columns: the seed's
+    decisions "only based on the abstract partition")."""
 
-    explore_known: int = setting(0, min=0)
-    """R-max's m (0: off): explore by the optimistic model of the flat pairs, a pair known after
-    m tries, and test against the grounded values of the empirical model (inconsistency mode
-    with flat-explore)."""
+    known_after: int = setting(1, min=1)
+    """R-max's m: the tries after which a flat pair's model is known (explore r-max)."""
 
     value_ceiling: float | None = setting(None, kind="float", none="auto")
-    """R-max's v_max, what an unknown pair is worth; auto: max(R, 0) / (1 - gamma) of the
-    task's own rewards (the true-model regime; a learner on a belief model must be given one:
-    the pipeline's learned-model regime gives the ceiling of the rewards its first task
-    paid)."""
+    """R-max's v_max, what an unknown pair is worth (explore r-max); auto: max(R, 0) / (1 -
+    gamma) of the task's own rewards (the true-model regime; a learner on a belief model must be
+    given one: the pipeline's learned-model regime gives the ceiling of the rewards its first
+    task paid)."""
 
 
 @settings
@@ -137,7 +143,7 @@ class HierarchicalSettings:
 
     layer_values: str = setting("learned", choices=LAYER_VALUES)
     """what the greedy policy is greedy on: the layer's learned Q-values (learned), or the
-    layer's point model planned on the counts of explore-known (planned)."""
+    layer's point model planned on the counts of R-max, explore r-max (planned)."""
 
     intra_option: bool = setting(False)
     """update every offered option consistent with each step (virtual executions, block
@@ -155,8 +161,8 @@ class HierarchicalSettings:
                             "(--reference policy)")
         if self.layer_values == "planned" and not self.directed:
             raise TaskError("layer_values = planned (--layer-values planned) plans on the counts "
-                            "of R-max exploration: give explore_known >= 1 (--explore-known 1) "
-                            "in inconsistency mode with flat_explore on")
+                            "of R-max exploration: give explore = r-max (--explore r-max) in "
+                            "inconsistency mode")
 
     @property
     def testing(self) -> bool:
@@ -169,14 +175,20 @@ class HierarchicalSettings:
         return self.mode in REWARD_OPTION_MODES
 
     @property
+    def exploration_rule(self) -> str:
+        """The exploration strategy in force: the given one in inconsistency mode, else the
+        block's columns."""
+        return self.exploration.explore if self.mode == "inconsistency" else "columns"
+
+    @property
     def flat_explore(self) -> bool:
-        """The optimistic flat action is taken (inconsistency mode only)."""
-        return self.exploration.flat_explore and self.mode == "inconsistency"
+        """A flat action is explored at greedy decisions (optimistic-flat or r-max)."""
+        return self.exploration_rule != "columns"
 
     @property
     def directed(self) -> bool:
-        """R-max exploration is on (explore_known, flat_explore, inconsistency mode)."""
-        return bool(self.exploration.explore_known and self.flat_explore)
+        """R-max exploration is on (explore r-max, inconsistency mode)."""
+        return self.exploration_rule == "r-max"
 
     @property
     def test_reference(self) -> str:

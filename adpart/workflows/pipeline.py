@@ -409,8 +409,8 @@ def _directed_without_ceiling(params: dict[str, Any]) -> bool:
     ceiling (the learned-model regime then gives the first task's)."""
     from adpart.plugins import get_registry
 
-    resolved = get_registry().get("learner", "hierarchical").resolve_params(params)
-    return bool(resolved["explore_known"]) and resolved["value_ceiling"] is None
+    settings = get_registry().get("learner", "hierarchical").create(params).settings
+    return settings.directed and settings.exploration.value_ceiling is None
 
 
 def check_tasks(env: str, tasks: tuple[str, ...]) -> None:

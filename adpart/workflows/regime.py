@@ -107,7 +107,7 @@ def check_regime(config: PipelineConfig) -> None:
         domain = resolve_domain(config.env)
         for task in config.tasks[1:]:
             if domain.mdp(task).gamma >= 1.0:
-                raise TaskError(f"--hier-opt explore-known: {task} is undiscounted, so R-max's "
+                raise TaskError(f"--hier-opt explore=r-max: {task} is undiscounted, so R-max's "
                                 "value ceiling max(r, 0) / (1 - gamma) is undefined: give "
                                 "--hier-opt value-ceiling=V")
         learner = spec.create({**params, "value-ceiling": 0.0})

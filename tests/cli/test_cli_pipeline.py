@@ -236,20 +236,22 @@ def test_transfer_runs_the_last_step_alone(tmp_path):
 @pytest.mark.slow
 def test_no_subgoals_is_a_reported_outcome_and_the_flat_learner_is_a_choice(tmp_path):
     """Taxi's learned policy has no subgoal for count-exhaustive: instead of failing, the pipeline
-    says so and learns the later task on the layer of its reward-state options alone (the default
-    mode) or, in inconsistency mode, which needs subgoal options, flat; the Gymnasium keyword
-    arguments are stored."""
+    says so and learns the later task on the layer of its reward-state options alone (the
+    true-model regime's reward-variation mode) or, in the default inconsistency mode, which
+    needs subgoal options, flat; the Gymnasium keyword arguments are stored."""
     args = ["pipeline", "gym:Taxi-v4[is_rainy=false]", "--tasks", "reward,reward", "--runs",
             "10", "--episodes", "20", "--first-episodes", "500", "--kb", str(tmp_path / "kb"),
             "--out", str(tmp_path / "o")]
-    res = CliRunner().invoke(cli, [*args, "--json"])
+    res = CliRunner().invoke(cli, [*args, "--json", "--regime", "true-model", "--hier-opt",
+                                   "mode=reward-variation+inconsistency"])
     assert res.exit_code == 0, res.output
     summary = json.loads(res.output)
     stage = next(s for s in summary["stages"] if s["stage"] == "no-subgoals")
     assert "reward-state options alone" in stage["detail"]["reason"]
-    assert [r["learner"] for r in summary["tasks"]] == ["flat", "hierarchical", "flat"]
+    assert [r["learner"] for r in summary["tasks"]] == [
+        "flat", "hierarchical", "flat", "known-dynamics", "planner"]
     assert summary["tasks"][1]["initial_blocks"] > 1 and summary["tasks"][1]["partition"] is None
-    res = CliRunner().invoke(cli, [*args, "--json", "--hier-opt", "mode=inconsistency"])
+    res = CliRunner().invoke(cli, [*args, "--json"])
     assert res.exit_code == 0, res.output
     summary = json.loads(res.output)
     stage = next(s for s in summary["stages"] if s["stage"] == "no-subgoals")
@@ -300,41 +302,43 @@ def test_without_a_learned_first_task_only_the_reward_variation_modes_use_the_la
 
 
 def test_directed_exploration_is_a_learner_option_and_a_bad_count_is_refused(tmp_path):
-    """``--hier-opt explore-known=M`` turns on R-max exploration (docs/hierarchical-learning.md);
-    a negative count is refused before the knowledge base is opened."""
+    """``--hier-opt explore=r-max`` turns on R-max exploration (docs/hierarchical-learning.md);
+    a count below one is refused before the knowledge base is opened."""
     kb_dir = tmp_path / "kb"
     rmax = [*PIPELINE, "--hier-opt", "mode=inconsistency", "--kb", str(kb_dir), "--out",
             str(tmp_path / "o"), "--json", "--regime", "true-model"]
-    bad = CliRunner().invoke(cli, [*rmax, "--hier-opt", "explore-known=-1"])
+    bad = CliRunner().invoke(cli, [*rmax, "--hier-opt", "explore=r-max",
+                                   "--hier-opt", "known-after=0"])
     assert bad.exit_code == 2
-    assert bad.output.strip() == ("Error: --hier-opt: learner 'hierarchical': --explore-known "
-                                  "must be >= 0; got -1")
+    assert bad.output.strip() == ("Error: --hier-opt: learner 'hierarchical': --known-after "
+                                  "must be >= 1; got 0")
     assert not kb_dir.exists()
     unplanned = CliRunner().invoke(cli, [*rmax, "--hier-opt", "layer-values=planned"])
     assert unplanned.exit_code == 2 and not kb_dir.exists()
-    assert "--layer-values planned" in unplanned.output and "--explore-known" in unplanned.output
+    assert "--layer-values planned" in unplanned.output and "--explore r-max" in unplanned.output
     unsplit = CliRunner().invoke(cli, [*rmax, "--hier-opt", "split-offered=true"])
     assert unsplit.exit_code == 2 and not kb_dir.exists()
     assert "--split-offered" in unsplit.output and "--reference policy" in unsplit.output
-    res = CliRunner().invoke(cli, [*rmax, "--hier-opt", "explore-known=1"])
+    res = CliRunner().invoke(cli, [*rmax, "--hier-opt", "explore=r-max"])
     assert res.exit_code == 0, res.output
     summary = json.loads(res.output)
-    assert summary["config"]["hierarchical_params"]["explore-known"] == "1"
+    assert summary["config"]["hierarchical_params"]["explore"] == "r-max"
     layer = next(r for r in summary["tasks"] if r["learner"] == "hierarchical")
     assert layer["runs_within_bound"] == layer["runs"] == 3
     kb = KnowledgeBase.open(str(kb_dir))
     try:
         stage = next(s for s in summary["stages"] if s["stage"] == "learn-hierarchical")
         run = kb.get("run", int(stage["result"].split(":")[1]))
-        assert run.provenance.parameters["explore_known"] == 1
+        assert run.provenance.parameters["explore"] == "r-max"
+        assert run.provenance.parameters["known_after"] == 1
     finally:
         kb.close()
-    planned = json.loads(CliRunner().invoke(cli, [*rmax, "--hier-opt", "explore-known=1",
+    planned = json.loads(CliRunner().invoke(cli, [*rmax, "--hier-opt", "explore=r-max",
                                                   "--hier-opt", "layer-values=planned"]).output)
     layer = next(r for r in planned["tasks"] if r["learner"] == "hierarchical")
     assert layer["runs_within_bound"] == layer["runs"] == 3
     split = json.loads(CliRunner().invoke(cli, [
-        *rmax, "--hier-opt", "explore-known=1", "--hier-opt", "layer-values=planned",
+        *rmax, "--hier-opt", "explore=r-max", "--hier-opt", "layer-values=planned",
         "--hier-opt", "reference=policy", "--hier-opt", "split-offered=true"]).output)
     layer = next(r for r in split["tasks"] if r["learner"] == "hierarchical")
     assert layer["runs_within_bound"] == layer["runs"] == 3
@@ -347,7 +351,7 @@ def test_r_max_in_the_learned_model_regime_plans_unknown_pairs_at_the_first_task
     task paid (the new task's own is not read), and the run records it; planned layer values,
     which plan on the true model's transition table, are refused before any work."""
     kb_dir = tmp_path / "kb"
-    base = [*PIPELINE, "--hier-opt", "explore-known=1", "--kb", str(kb_dir)]
+    base = [*PIPELINE, "--hier-opt", "explore=r-max", "--kb", str(kb_dir)]
     planned = CliRunner().invoke(cli, [*base, "--hier-opt", "layer-values=planned",
                                        "--out", str(tmp_path / "p")])
     assert planned.exit_code == 2 and not kb_dir.exists()

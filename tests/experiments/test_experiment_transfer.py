@@ -94,7 +94,7 @@ def test_the_grounded_policy_of_a_learner_that_tried_every_pair_is_optimal():
     opts = [subgoal_option(mdp, c, initiation="reachable")
             for c in (0, side - 1, side * (side - 1), side * side - 1)]
     part, _, _ = decision_layer(mdp, opts, delta=DELTA, epsilon=0.0)
-    kw = dict(SETTINGS, runs=2, episodes=200, explore_known=1)
+    kw = dict(SETTINGS, runs=2, episodes=200, explore="r-max")
     np.testing.assert_allclose(
         grounded_policy_gaps(hierarchical_run(mdp, opts, part, **kw), mdp), 0.0, atol=1e-9)
     assert grounded_policy_gaps(
@@ -147,7 +147,7 @@ def test_three_floor_arm_planned_quick(tmp_path):
     assert off["learner_samples_gap"] is None
     on = report.data["layers"]["partition, refinement, planned"]
     assert all(-1e-9 <= g <= never + 1e-6 for g in on["layer_optimum_gap"])
-    assert report.data["settings"]["explore_known"] == 2
+    assert report.data["settings"]["known_after"] == 2
     assert report.data["settings"]["split_offered"] is True
     for fig in report.figures:
         assert (tmp_path / "out" / fig.split("/")[-1]).stat().st_size > 1000

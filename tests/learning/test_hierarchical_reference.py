@@ -190,7 +190,7 @@ def cases(draw):
         "mode": draw(st.sampled_from(["inconsistency", "reward-variation+inconsistency"])),
         "refine": draw(st.sampled_from(["state", "block"])),
         "primitive_exploration": draw(st.sampled_from(["until-reward", "always", "never"])),
-        "flat_explore": draw(st.booleans()),
+        "explore": draw(st.sampled_from(["optimistic-flat", "columns"])),
         "min_visits": draw(st.integers(0, 3)),
         "lcb_z": draw(st.sampled_from([0.0, 1.0, 2.0])),
         "reference": reference,
@@ -325,7 +325,7 @@ def equal_targets_case():
     layer = Partition(np.array([0, 1, 0, 0, 2]),
                       np.array([[False, True], [True, False], [False, True]]))
     run = {"mode": "inconsistency", "refine": "state", "primitive_exploration": "until-reward",
-           "flat_explore": False, "min_visits": 0, "lcb_z": 1.0, "reference": "model",
+           "explore": "columns", "min_visits": 0, "lcb_z": 1.0, "reference": "model",
            "delta": 0.0, "epsilon": 0.0, "alpha": "1/n^0.8", "epsilon_greedy": "0.1",
            "runs": 1, "episodes": 3, "max_steps_per_episode": 8, "seed": 1, "threshold": 0.0}
     return mdp, options, layer, run
@@ -350,7 +350,7 @@ def test_the_kernel_agrees_where_a_pairs_targets_are_all_equal():
     compare(mdp, options, models, layer, run)
 
 
-@pytest.mark.parametrize("setting", [{"intra_option": True}, {"explore_known": 1},
+@pytest.mark.parametrize("setting", [{"intra_option": True}, {"explore": "r-max"},
                                      {"layer_values": "planned"}, {"mode": "reward-variation"}])
 def test_settings_outside_the_scope_are_refused(setting):
     mdp, options, layer = corridor_case()

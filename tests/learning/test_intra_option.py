@@ -115,7 +115,7 @@ def test_block_layer_virtual_executions_by_hand():
     admissible[6] = True
     layer = Partition(np.arange(7), admissible)
     kw = {"runs": 1, "episodes": 1, "seed": 0, "alpha": 1.0, "epsilon": 0.0,
-          "eval_every": 1, "threshold": np.inf, "flat_explore": False}
+          "eval_every": 1, "threshold": np.inf, "explore": "columns"}
     res = hierarchical_run(mdp, [whole, tail], layer, intra_option=True, **kw)
     Q = res.block_Q[0]
     A = mdp.n_actions

@@ -91,10 +91,10 @@ def test_a_belief_needs_a_threshold_and_the_inconsistency_mode(two_rooms):
     with pytest.raises(TaskError, match="--threshold"):
         hierarchical_learning(new, options, partition, HierarchicalSettings(), run,
                               belief=belief)
-    rmax = build_settings(HierarchicalSettings, {"threshold": 1.0, "explore-known": 1})
+    rmax = build_settings(HierarchicalSettings, {"threshold": 1.0, "explore": "r-max"})
     with pytest.raises(TaskError, match="--value-ceiling V"):  # the task's ceiling is unknown
         hierarchical_learning(new, options, partition, rmax, run, belief=belief)
-    planned = build_settings(HierarchicalSettings, {"threshold": 1.0, "explore-known": 1,
+    planned = build_settings(HierarchicalSettings, {"threshold": 1.0, "explore": "r-max",
                                                     "value-ceiling": 20.0,
                                                     "layer-values": "planned"})
     with pytest.raises(TaskError, match="--layer-values learned"):
@@ -213,14 +213,15 @@ def test_r_max_on_a_belief_values_unknown_pairs_at_the_ceiling_it_is_given(two_r
 
     def learn(ceiling: float):
         settings = build_settings(HierarchicalSettings, {
-            "threshold": 0.05, "explore-known": 1, "value-ceiling": ceiling})
+            "threshold": 0.05, "explore": "r-max", "value-ceiling": ceiling})
         return hierarchical_learning(new, options, partition, settings, run, belief=belief)
 
     high, low = learn(20.0), learn(-1e6)
-    assert high.curve.metadata["explore_known"] == 1
+    assert high.curve.metadata["exploration"] == "r-max"
+    assert high.curve.metadata["known_after"] == 1
     assert not np.array_equal(np.asarray(high.curve["steps"]), np.asarray(low.curve["steps"]))
     knowledge = hierarchical_knowledge(build_settings(HierarchicalSettings, {
-        "threshold": 0.05, "explore-known": 1, "value-ceiling": 20.0}), belief=True)
+        "threshold": 0.05, "explore": "r-max", "value-ceiling": 20.0}), belief=True)
     assert knowledge.dynamics == "estimated" and knowledge.rewards == "observed"
     assert any("value ceiling" in use for use in knowledge.uses)
 

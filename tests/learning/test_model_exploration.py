@@ -141,13 +141,13 @@ def test_on_a_deterministic_mdp_the_grounded_values_never_exceed_q_star(seed, st
 
 def test_with_directed_exploration_refinement_reaches_the_goal_and_kernels_agree(setup):  # noqa: F811
     mdp, opts, part, smdp = setup
-    kw = dict(SETTINGS, episodes=300, explore_known=1)
+    kw = dict(SETTINGS, episodes=300, explore="r-max")
     on = hierarchical_run(mdp, opts, part, **kw)
     off = hierarchical_run(mdp, opts, part, threshold=np.inf, **kw)
     np.testing.assert_allclose(final_gap(off), off.v_star_start)  # still never arrives
     assert (on.n_refinements > 0).all()
     assert (final_gap(on) <= 0.05 * on.v_star_start).all()
-    assert on.parameters["explore_known"] == 1
+    assert on.parameters["exploration"] == "r-max" and on.parameters["known_after"] == 1
     # every pair tried in 300 episodes of R-max: the grounded values are the task's Q*
     Q_star = optimal_q(mdp)
     live = ~mdp.terminal
@@ -165,10 +165,10 @@ def test_with_directed_exploration_refinement_reaches_the_goal_and_kernels_agree
     # exploration is R-max's: the layer starts at the lower bound, not at optimistic zeros
     costly = mdp.with_rewards(mdp.R - 0.1)  # a step costs 0.1: the bound is -0.1 / (1 - 0.9)
     quick = dict(SETTINGS, episodes=1, runs=1)
-    assert hierarchical_run(costly, opts, part, explore_known=1, **quick
+    assert hierarchical_run(costly, opts, part, explore="r-max", **quick
                                  ).parameters["q_init"] == pytest.approx(-0.1 / (1 - 0.9))
     assert hierarchical_run(costly, opts, part, **quick).parameters["q_init"] == 0.0
-    assert hierarchical_run(costly, opts, part, explore_known=1, q_init=-3.0, **quick
+    assert hierarchical_run(costly, opts, part, explore="r-max", q_init=-3.0, **quick
                                  ).parameters["q_init"] == -3.0
     small = dict(kw, runs=2, episodes=60, eval_every=20)
     a = hierarchical_run(mdp, opts, part, kernel="numba", **small)
@@ -178,11 +178,38 @@ def test_with_directed_exploration_refinement_reaches_the_goal_and_kernels_agree
     assert a.refinements == b.refinements
 
 
-@pytest.mark.parametrize("bad", [-1, 1.5, True])
+@pytest.mark.parametrize("bad", [0, -1, 1.5, True])
 def test_a_bad_known_count_is_refused(setup, bad):  # noqa: F811
     mdp, opts, part, _ = setup
-    with pytest.raises(TaskError, match="explore_known"):
-        hierarchical_run(mdp, opts, part, explore_known=bad, **SETTINGS)
+    with pytest.raises(TaskError, match="known_after"):
+        hierarchical_run(mdp, opts, part, explore="r-max", known_after=bad, **SETTINGS)
+
+
+def test_a_bad_exploration_rule_is_refused_naming_the_rules(setup):  # noqa: F811
+    mdp, opts, part, _ = setup
+    with pytest.raises(TaskError, match="optimistic-flat"):
+        hierarchical_run(mdp, opts, part, explore="ucb", **SETTINGS)
+
+
+def test_each_exploration_rule_is_recorded_and_without_epsilon_only_r_max_finds_the_goal(
+        setup):  # noqa: F811
+    """The three rules are one setting and the run records the one in force. Without epsilon
+    (the options go to the corners, the goal is the centre and pays 1, every other step 0):
+    the block's columns never leave the options' routes, the optimistic flat table (zeros) is no
+    more optimistic than a step that pays 0, and R-max's unknown pairs draw the agent to the
+    goal - every run ends on V* (measured: gaps 0.86, 0.86, 0)."""
+    mdp, opts, part, _ = setup
+    kw = dict(SETTINGS, episodes=300, epsilon=0.0)
+    got = {rule: hierarchical_run(mdp, opts, part, explore=rule, **kw)
+           for rule in ("optimistic-flat", "r-max", "columns")}
+    assert {rule: r.parameters["exploration"] for rule, r in got.items()} == {
+        rule: rule for rule in got}
+    for rule in ("optimistic-flat", "columns"):
+        np.testing.assert_allclose(final_gap(got[rule]), got[rule].v_star_start)
+    np.testing.assert_allclose(final_gap(got["r-max"]), 0.0, atol=1e-9)
+    other = hierarchical_run(mdp, opts, part, explore="r-max", mode="action-refinement",
+                             **dict(kw, episodes=2))
+    assert other.parameters["exploration"] == "columns"  # the other modes explore by columns
 
 
 @given(st.integers(0, 500), st.booleans())
@@ -214,8 +241,8 @@ def test_the_counted_layer_model_is_the_task_model_where_counts_are_its_probabil
 
 def test_planned_layer_values_need_directed_exploration(setup):  # noqa: F811
     mdp, opts, part, _ = setup
-    with pytest.raises(TaskError, match="explore_known"):
+    with pytest.raises(TaskError, match="explore = r-max"):
         hierarchical_run(mdp, opts, part, layer_values="planned", **SETTINGS)
     with pytest.raises(TaskError, match="layer_values"):
-        hierarchical_run(mdp, opts, part, layer_values="guessed", explore_known=1,
+        hierarchical_run(mdp, opts, part, layer_values="guessed", explore="r-max",
                               **SETTINGS)

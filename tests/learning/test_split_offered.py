@@ -31,7 +31,7 @@ from .test_hierarchical import DELTA, setup  # noqa: F401
 CELLS, GOAL, HORIZON = 7, 3, 50
 RUN = {"delta": 1.0, "partition_epsilon": None, "runs": 3, "episodes": 60, "seed": 0,
        "eval_every": 10,
-       "explore_known": 1, "reference": "policy", "refine": "block", "layer_values": "planned",
+       "explore": "r-max", "reference": "policy", "refine": "block", "layer_values": "planned",
        "max_steps_per_episode": HORIZON}
 
 
