@@ -18,7 +18,7 @@ from adpart.errors import ModelError
 from adpart.learning.schedules import Schedule, parse_schedule
 from adpart.params import hook, setting, settings
 
-__all__ = ["LEARNER_FIELDS", "MAX_SEED", "Run", "fresh_seed", "require_mdp"]
+__all__ = ["LEARNER_FIELDS", "MAX_SEED", "Run", "SMDPQSettings", "fresh_seed", "require_mdp"]
 
 #: The largest seed: the knowledge base stores seeds as signed 64-bit integers.
 MAX_SEED = 2**63 - 1
@@ -96,3 +96,15 @@ def require_mdp(learner: str, mdp: object) -> object:
             "adpart.envs.registry.get_domain(name).mdp()"
         )
     return mdp
+
+
+@settings
+class SMDPQSettings:
+    """The settings of SMDP Q-learning over options (section 3.1) beyond its run."""
+
+    include_primitives: bool = setting(False)
+    """offer the primitive actions beside the options (their one-step options first)."""
+
+    intra_option: bool = setting(False)
+    """also update every option consistent with each primitive step (intra-option Q-learning,
+    Sutton, Precup & Singh 1999)."""
