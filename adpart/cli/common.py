@@ -13,12 +13,12 @@ import click
 
 from adpart.cli.group import CLIError
 from adpart.errors import AdpartError
-from adpart.execution import Executor
 from adpart.params import Param, build_settings, settings_params
 from adpart.plugins import PluginSpec, PluginWarning, Registry, get_registry
 from adpart.plugins.manager import builtin_registry
 
 if TYPE_CHECKING:
+    from adpart.execution import Executor
     from adpart.workflows.progress import BarFactory
 
 

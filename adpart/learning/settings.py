@@ -10,13 +10,14 @@ stored provenance are derived from it (:mod:`adpart.params`).
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from adpart.errors import ModelError
 from adpart.learning.schedules import Schedule, parse_schedule
 from adpart.params import hook, setting, settings
+
+if TYPE_CHECKING:
+    import numpy as np
 
 __all__ = ["LEARNER_FIELDS", "MAX_SEED", "Run", "SMDPQSettings", "fresh_seed", "require_mdp"]
 
@@ -82,6 +83,8 @@ class Run:
 def fresh_seed(seed: int | None) -> int:
     """``seed``, or for a ``fresh`` seed (None) one drawn from OS entropy here, once."""
     if seed is None:
+        import numpy as np
+
         return int(np.random.SeedSequence().entropy) % (MAX_SEED + 1)  # type: ignore[operator]
     return int(seed)
 
