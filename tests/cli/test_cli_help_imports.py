@@ -1,7 +1,7 @@
-"""``--help`` of every command starts light: no numpy, numba, scipy, SQLAlchemy, pyarrow, matplotlib or
-pandas (nor gymnasium) is imported to show it - the settings the options come from live in
-modules without them, the built-in plugins import their implementations when used, and a
-built-in plugin's help reads adpart's own plugins only. Each help runs in a fresh interpreter
+"""``--help`` of every command starts light: no numpy, numba, scipy, SQLAlchemy, pyarrow,
+matplotlib or pandas (nor gymnasium) is imported to show it - the settings the options come from
+live in modules without them, the built-in plugins import their implementations when used, and
+a built-in plugin's help reads adpart's own plugins only. Each help runs in a fresh interpreter
 (``benchmarks/bench_cli_startup.py`` times them)."""
 
 from __future__ import annotations

@@ -15,7 +15,7 @@ def _section_code() -> str:
     text = GUIDE.read_text()
     section = text[text.index(HEADING):]
     section = section[:section.index("\n### ", len(HEADING))]
-    [code] = re.findall(r"```python\n(.*?)```", section, flags=re.S)
+    [code] = re.findall(r"```python\n(.*?)```", section, flags=re.DOTALL)
     return code
 
 
