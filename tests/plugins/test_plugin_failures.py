@@ -174,3 +174,28 @@ def test_each_plugin_option_shows_its_own_plugins_help(crashing):
     assert "crashing learner" not in text
     default = runner.invoke(cli, ["learn", "--help"])
     assert "--trajectories" not in default.output and "--alpha" in default.output
+
+
+def test_builtin_detectors_sharing_a_field_each_say_what_it_means_for_them():
+    """count-exhaustive and count-mc share CountSettings' --trajectories; count-mc's own help
+    says it is also the first batch, the exhaustive detector's does not."""
+    runner = CliRunner()
+    exhaustive = " ".join(runner.invoke(cli, ["discover", "--help"]).output.split())
+    mc = " ".join(runner.invoke(cli, ["discover", "--detector", "count-mc", "--help"])
+                  .output.split())
+    assert "--trajectories INTEGER sampled paths along which ratios are taken" in exhaustive
+    assert "first batch" not in exhaustive.split("--trajectories")[1].split("[default")[0]
+    assert "--trajectories INTEGER trajectories of the first batch" in mc
+
+
+def test_with_help_replaces_only_the_help():
+    from adpart.params import settings_params, with_help
+    from adpart.subgoals.settings import CountSettings
+
+    params = settings_params(CountSettings)
+    changed = with_help(params, trajectories="other text")
+    assert [p.help for p in changed if p.name == "trajectories"] == ["other text"]
+    assert [(p.name, p.default, p.min) for p in changed] == [(p.name, p.default, p.min)
+                                                            for p in params]
+    with pytest.raises(TypeError, match="no parameter 'nope'"):
+        with_help(params, nope="x")

@@ -13,7 +13,7 @@ from __future__ import annotations
 import time
 from typing import TYPE_CHECKING
 
-from adpart.params import build_settings, settings_dict, settings_params
+from adpart.params import build_settings, settings_dict, settings_params, with_help
 from adpart.plugins.hookspecs import hookimpl
 from adpart.plugins.registry import Registrar
 from adpart.subgoals.settings import (
@@ -59,7 +59,10 @@ class CountMonteCarlo:
 
     name = "count-mc"
     description = "Monte Carlo count metric in batches (def. 4.4, eq. 4.3, theorem 4.3)"
-    params = settings_params(MonteCarloSettings)
+    params = with_help(
+        settings_params(MonteCarloSettings),
+        trajectories="trajectories of the first batch, and the sampled paths along which "
+        "ratios are taken (--ratios paths).")
 
     def __init__(self, **values: object) -> None:
         self.settings = build_settings(MonteCarloSettings, values)
