@@ -41,5 +41,5 @@ class PluginFailure(PluginError):
     The message names the plugin, its kind, its package and version, the method and the
     exception, in one line; the original exception is the ``__cause__`` (``adpart --debug``
     prints its traceback). Raised by the guard :meth:`adpart.plugins.PluginSpec.create` puts
-    around a third-party plugin's contract methods.
+    around a third-party plugin's constructor and contract methods.
     """

@@ -31,7 +31,7 @@ def describe(name: str, domain: Domain) -> dict[str, object]:
 def envs_cmd(as_json: bool) -> None:
     """List the installed environments with their sizes and tasks."""
     reg = registry()
-    rows = [describe(spec.name, spec.factory()) for spec in reg.all("environment")]
+    rows = [describe(spec.name, spec.create()) for spec in reg.all("environment")]
     if as_json:
         echo_json(rows)
         return

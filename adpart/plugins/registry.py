@@ -26,6 +26,7 @@ KINDS: dict[str, str] = {
 #: kind -> the methods of its contract (:mod:`adpart.plugins.contracts`) that adpart calls on an
 #: instance: a third-party plugin's are guarded (:meth:`PluginSpec.create`).
 CONTRACT_METHODS: dict[str, tuple[str, ...]] = {
+    "environment": ("dynamics", "tasks", "task", "mdp"),
     "learner": ("learn",),
     "executor": ("map",),
     "subgoal-detector": ("detect",),

@@ -64,6 +64,26 @@ class BrokenConstructor:
         raise AssertionError("never reached")
 
 
+from adpart.envs.grid import GridDomain
+
+
+class CrashingRooms(GridDomain):
+    name = "crashing-rooms"
+    description = "a grid whose tasks() has a bug (test plugin)"
+    MAP = """
+    S..
+    ..G
+    """
+
+    def tasks(self):
+        return {"reach": self.undefined_goal_spec}
+
+
+@hookimpl
+def register_environments(register):
+    register(CrashingRooms)
+
+
 @hookimpl
 def register_learners(register):
     register(CrashingLearner)
@@ -124,6 +144,14 @@ def test_a_failing_constructor_is_named_too(crashing, tmp_path):
     assert out.exit_code == 2
     assert ("learner 'broken-constructor' (package fake-adpart-crash 0.1) failed in building "
             "it: RuntimeError: constructor bug") in out.output
+
+
+def test_an_environments_own_bug_is_named_too(crashing, tmp_path):
+    out = CliRunner().invoke(cli, ["learn", "crashing-rooms", "--runs", "1", "--episodes", "2",
+                                   "--no-store", "-q", "--out", str(tmp_path / "o")])
+    assert out.exit_code == 2, out.output
+    assert out.output.startswith("Error: environment 'crashing-rooms' (package "
+                                 "fake-adpart-crash 0.1) failed in tasks(): AttributeError")
 
 
 def test_the_guard_wraps_detect_keeps_its_signature_and_pickles(crashing):
