@@ -32,3 +32,14 @@ class UnknownNameError(AdpartError, KeyError):
 
 class PluginError(AdpartError, ValueError):
     """An implementation or its parameters are invalid."""
+
+
+class PluginFailure(PluginError):
+    """A third-party plugin's own code raised an exception adpart did not expect (a bug of that
+    plugin, not of adpart or of the user's input).
+
+    The message names the plugin, its kind, its package and version, the method and the
+    exception, in one line; the original exception is the ``__cause__`` (``adpart --debug``
+    prints its traceback). Raised by the guard :meth:`adpart.plugins.PluginSpec.create` puts
+    around a third-party plugin's constructor and contract methods.
+    """

@@ -8,6 +8,7 @@ may declare parameters.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 from collections.abc import Callable, Sequence
@@ -351,6 +352,18 @@ def settings_params(cls: type, only: Sequence[str] | None = None) -> tuple[Param
     if twice:
         raise TypeError(f"{cls.__name__}: fields {twice} are declared in two groups")
     return tuple(sf.param() for sf in found)
+
+
+def with_help(params: tuple[Param, ...], **helps: str) -> tuple[Param, ...]:
+    """``params`` with the ``--help`` text of some replaced (by keyword), for a plugin whose
+    shared settings field means more for it than the field's own docstring says (its default,
+    range and checks stay the field's). A keyword that names no parameter is a TypeError."""
+    unknown = sorted(set(helps) - {p.keyword for p in params})
+    if unknown:
+        raise TypeError(f"with_help: no parameter {unknown[0]!r} among "
+                        f"{', '.join(p.keyword for p in params)}")
+    return tuple(dataclasses.replace(p, help=helps[p.keyword]) if p.keyword in helps else p
+                 for p in params)
 
 
 def build_settings(cls: type, values: dict[str, Any] | None = None) -> Any:

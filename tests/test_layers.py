@@ -23,7 +23,7 @@ import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "adpart"
 
-FOUNDATION = {"errors", "params", "plotting"}
+FOUNDATION = {"errors", "lazy", "params", "plotting"}
 #: the numeric cores by rank: a core may import cores of a lower rank only
 CORE_RANK = {"mdp": 1, "envs": 2, "subgoals": 3, "partition": 3, "options": 4, "learning": 5,
              "hierarchy": 6}
@@ -37,6 +37,7 @@ BASE = FOUNDATION | CORES | {FRONT_DOOR}
 #: The units each top-level unit may import (besides itself).
 RULES: dict[str, set[str]] = {
     "errors": set(),
+    "lazy": set(),
     "params": {"errors"},
     "plotting": {"errors"},
     **{core: FOUNDATION | {c for c, r in CORE_RANK.items() if r < rank}

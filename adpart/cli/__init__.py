@@ -9,7 +9,7 @@ from __future__ import annotations
 import click
 
 from adpart import __version__
-from adpart.cli.group import LazyGroup
+from adpart.cli.group import DEBUG, LazyGroup
 
 #: name -> (module:attribute, the one-line help ``adpart --help`` lists; tests check it).
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -66,7 +66,11 @@ COMMANDS: dict[str, tuple[str, str]] = {
 @click.group(cls=LazyGroup, lazy=COMMANDS,
              context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="adpart")
-def cli() -> None:
+@click.option("--debug", is_flag=True, envvar="ADPART_DEBUG",
+              help="Print the traceback above a one-line error (e.g. a plugin's own failure) "
+              "[env ADPART_DEBUG=1].")
+@click.pass_context
+def cli(ctx: click.Context, debug: bool) -> None:
     """adpart: hierarchical RL through subgoals and action-dependent state partitions.
 
     \b
@@ -76,3 +80,4 @@ def cli() -> None:
       adpart learn two-rooms --task reach-goal --runs 8 --episodes 300
       adpart plugins --kind learner
     """
+    ctx.meta[DEBUG] = debug

@@ -7,15 +7,19 @@ import math
 import sys
 import warnings
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
 
 from adpart.cli.group import CLIError
 from adpart.errors import AdpartError
-from adpart.execution import Executor
 from adpart.params import Param, build_settings, settings_params
 from adpart.plugins import PluginSpec, PluginWarning, Registry, get_registry
+from adpart.plugins.manager import builtin_registry
+
+if TYPE_CHECKING:
+    from adpart.execution import Executor
+    from adpart.workflows.progress import BarFactory
 
 
 class FiniteFloat(click.ParamType):
@@ -94,6 +98,15 @@ def progress_callback(
     return update, lambda: bar.__exit__(None, None, None)
 
 
+def stage_bars(enabled: bool) -> BarFactory | None:
+    """:func:`progress_callback` as the bar factory of the workflows' long stages
+    (:func:`adpart.workflows.progress.progress_bars`): a bar with ETA per stage on a terminal;
+    None (silent) when not ``enabled`` or when stderr is piped."""
+    if not enabled or not sys.stderr.isatty():
+        return None
+    return lambda total, label: progress_callback(True, total, label)
+
+
 def plugin_options_command(kind: str, chooser: str) -> type[click.Command]:
     """A click Command class whose options include every ``kind`` plugin's declared parameters.
 
@@ -121,24 +134,34 @@ def plugin_options_command(kind: str, chooser: str) -> type[click.Command]:
                         return word[len(flag) + 1:]
             return str(option.default)
 
+        def _registry(self, ctx: click.Context, chosen: str) -> Registry:
+            """The registry to read: for ``--help`` of a built-in plugin adpart's own plugins
+            of ``kind`` (no third-party package imported), else every installed plugin."""
+            raw = getattr(self, "_raw_args", [])
+            words = raw[:raw.index("--")] if "--" in raw else raw
+            if set(words) & set(self.get_help_option_names(ctx)):
+                own = builtin_registry(kind)
+                if chosen in own.names(kind):
+                    return own
+            return registry()
+
         def get_params(self, ctx: click.Context) -> list[click.Parameter]:
             params = super().get_params(ctx)
             chosen = self._chosen(params)
-            return (params[:-1] + _plugin_options(registry(), kind, chosen)
+            return (params[:-1] + _plugin_options(self._registry(ctx, chosen), kind, chosen)
                     + params[-1:])  # keep --help last
 
         def format_epilog(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
             chosen = self._chosen(super().get_params(ctx))
-            reg = registry()
-            others = [n for n in reg.names(kind) if n != chosen]
+            reg = self._registry(ctx, chosen)
             own = [f"--{p.name}" for p in reg.get(kind, chosen).params] if chosen in (
                 reg.names(kind)) else []
             super().format_epilog(ctx, formatter)
             formatter.write_paragraph()
             formatter.write_text(
                 f"{kind} {chosen!r} takes {', '.join(own) or 'no parameters'}. Another "
-                f"{kind}'s parameters: --{chooser.replace('_', '-')} NAME --help "
-                f"({', '.join(others) or 'none installed'}).")
+                f"{kind}'s parameters: --{chooser.replace('_', '-')} NAME --help (the installed "
+                f"ones: adpart plugins --kind {kind}).")
 
     return PluginOptionsCommand
 

@@ -15,10 +15,6 @@ from adpart.cli.common import (
     split_plugin_options,
 )
 from adpart.errors import TaskError
-from adpart.store.location import KBLocation
-from adpart.workflows.discovery import discover_subgoals
-from adpart.workflows.refs import get_ref
-from adpart.workflows.resolve import resolve_domain
 
 
 @click.command(name="discover", cls=plugin_options_command("subgoal-detector", "detector"))
@@ -69,7 +65,10 @@ def discover_cmd(
     and the one-sided t-test threshold mu of eq. 4.2. The subgoal set is stored in the
     knowledge base with its source policy; `adpart options ENV --subgoals ID` builds options.
     """
-    from adpart.store import KnowledgeBase
+    from adpart.store import KBLocation, KnowledgeBase
+    from adpart.workflows.discovery import discover_subgoals
+    from adpart.workflows.refs import get_ref
+    from adpart.workflows.resolve import resolve_domain
 
     spec = registry().get("subgoal-detector", detector)
     given = split_plugin_options(spec, plugin_options)

@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
 from adpart.cli.common import echo_json, registry
-from adpart.envs.base import Domain
-from adpart.workflows.resolve import resolve_domain
+
+if TYPE_CHECKING:
+    from adpart.envs.base import Domain
 
 
 def describe(name: str, domain: Domain) -> dict[str, object]:
@@ -29,7 +31,7 @@ def describe(name: str, domain: Domain) -> dict[str, object]:
 def envs_cmd(as_json: bool) -> None:
     """List the installed environments with their sizes and tasks."""
     reg = registry()
-    rows = [describe(spec.name, spec.factory()) for spec in reg.all("environment")]
+    rows = [describe(spec.name, spec.create()) for spec in reg.all("environment")]
     if as_json:
         echo_json(rows)
         return
@@ -56,6 +58,8 @@ def env_group() -> None:
 @click.option("--json", "as_json", is_flag=True, help="Print the description as JSON.")
 def env_show(name: str, out: Path | None, task: str | None, as_json: bool) -> None:
     """Describe environment NAME and optionally render it (with V* of a task) to PNG."""
+    from adpart.workflows.resolve import resolve_domain
+
     domain = resolve_domain(name)
     info = describe(name, domain)
     if out is not None:

@@ -7,10 +7,8 @@ from pathlib import Path
 
 import click
 
-from adpart.cli.common import echo_json, field_options
-from adpart.experiments import EXPERIMENTS, ExperimentConfig, load_all, run_experiment
+from adpart.cli.common import echo_json, field_options, stage_bars
 from adpart.learning.settings import Run, fresh_seed
-from adpart.workflows.reports import folder_name
 
 
 @click.command(name="experiment")
@@ -42,6 +40,10 @@ def experiment_cmd(
     list_only: bool,
 ) -> None:
     """Run experiment NAME (PNG figures, summary.json, summary.md in --out), or --list them."""
+    from adpart.experiments import EXPERIMENTS, ExperimentConfig, load_all, run_experiment
+    from adpart.workflows.progress import progress_bars
+    from adpart.workflows.reports import folder_name
+
     load_all()
     if list_only or name is None:
         rows = [
@@ -66,7 +68,8 @@ def experiment_cmd(
         if tty
         else (lambda message: None),
     )
-    report, files = run_experiment(name, config)
+    with progress_bars(stage_bars(not as_json)):  # a bar inside each learning stage
+        report, files = run_experiment(name, config)
     if as_json:
         echo_json(
             {

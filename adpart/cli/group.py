@@ -9,6 +9,7 @@ checks that they match the commands' own.
 from __future__ import annotations
 
 import importlib
+import traceback
 from typing import Any
 
 import click
@@ -22,6 +23,9 @@ class CLIError(click.ClickException):
     exit_code = 2
 
 
+#: ``ctx.meta`` key of the main group's ``--debug`` flag (tracebacks of one-line errors).
+DEBUG = "adpart.debug"
+
 #: Exit status after Ctrl-C: 128 + SIGINT, as shells report an interrupted command.
 INTERRUPTED = 130
 
@@ -29,8 +33,10 @@ INTERRUPTED = 130
 class LazyGroup(click.Group):
     """A group whose sub-commands are ``name -> (module:attribute, short help)``, loaded lazily.
 
-    Every :class:`AdpartError` a command raises is reported as one line with exit status 2,
-    and Ctrl-C ends the command with status 130 (not click's 1).
+    Every :class:`AdpartError` a command raises is reported as one line with exit status 2
+    (after its traceback, chained causes included, when the group's ``--debug`` is on: a
+    third-party plugin's :class:`~adpart.errors.PluginFailure` carries the plugin's own), and
+    Ctrl-C ends the command with status 130 (not click's 1).
     """
 
     def __init__(self, *args: Any, lazy: dict[str, tuple[str, str]] | None = None,
@@ -63,6 +69,8 @@ class LazyGroup(click.Group):
         try:
             return super().invoke(ctx)
         except AdpartError as exc:
+            if ctx.meta.get(DEBUG):
+                click.echo("".join(traceback.format_exception(exc)).rstrip(), err=True)
             raise CLIError(str(exc)) from exc
         except KeyboardInterrupt:
             click.echo("Interrupted.", err=True)

@@ -13,7 +13,6 @@ from pathlib import Path
 from typing import Any
 
 import click
-import numpy as np
 
 from adpart.cli.common import (
     CLIError,
@@ -25,11 +24,12 @@ from adpart.cli.common import (
 )
 from adpart.cli.pipeline_cmd import split_tasks
 from adpart.errors import AdpartError
-from adpart.store.location import KBLocation
 
 
 def _plot(env: str, result: Any, path: Path, task_names: list[str]) -> list[str]:
     """The layer on the map at ``path`` and, for Algorithm 3, the trace at ``<stem>_trace.png``."""
+    import numpy as np
+
     from adpart.plotting import new_figure
     from adpart.workflows.partitioning import plot_partition
 
@@ -94,7 +94,9 @@ def hierarchy_cmd(
     heuristic). The layer is stored as a `hierarchy` partition; learn a new task on it with
     `adpart transfer ENV --task T --partition partition:N`.
     """
-    from adpart.store import KnowledgeBase
+    import numpy as np
+
+    from adpart.store import KBLocation, KnowledgeBase
     from adpart.workflows.hierarchy import build_hierarchy
 
     try:

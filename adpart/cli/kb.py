@@ -12,20 +12,39 @@ import json
 import re
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
-import numpy as np
-import pyarrow as pa
-import pyarrow.csv as pacsv
-import pyarrow.parquet as pq
 
 from adpart.cli.common import FiniteFloat, kb_location_options
 from adpart.errors import AdpartError
 from adpart.store.entities import RECORD_TYPES
-from adpart.store.kb import KnowledgeBase
 from adpart.store.location import KBLocation
-from adpart.store.tables import json_rows, strict, strict_json
+
+if TYPE_CHECKING:
+    import pyarrow as pa
+
+    from adpart.store.kb import KnowledgeBase
+
+
+# The store's table helpers, imported when a command runs (numpy, pyarrow and SQLAlchemy), so
+# that ``adpart kb ... --help`` imports none of them.
+def json_rows(table: pa.Table) -> list[dict[str, Any]]:
+    from adpart.store.tables import json_rows
+
+    return json_rows(table)
+
+
+def strict(value: Any) -> Any:
+    from adpart.store.tables import strict
+
+    return strict(value)
+
+
+def strict_json(data: Any, **kwargs: Any) -> str:
+    from adpart.store.tables import strict_json
+
+    return strict_json(data, **kwargs)
 
 _KIND_ALIASES = {
     "env": "environment",
@@ -86,6 +105,8 @@ def kb_option(func: Callable[..., Any] | None = None, *,
 
 def _open(location: KBLocation, *, verify: bool = True, read_only: bool = False
           ) -> KnowledgeBase:
+    from adpart.store.kb import KnowledgeBase
+
     try:
         return KnowledgeBase.open(location, verify=verify, read_only=read_only)
     except AdpartError as exc:
@@ -401,6 +422,9 @@ def show(kb_location: KBLocation, ref: str, as_json: bool) -> None:
 
 
 def _as_table(value: Any) -> pa.Table:
+    import numpy as np
+    import pyarrow as pa
+
     if isinstance(value, pa.Table):
         return value
     array = np.asarray(value)
@@ -435,6 +459,11 @@ def _as_table(value: Any) -> pa.Table:
 @_guard
 def export(kb_location: KBLocation, ref: str, out: Path, field_name: str | None) -> None:
     """Write an artifact (artifact:HEX, or a record's --field) as Parquet, CSV or JSON."""
+    import numpy as np
+    import pyarrow as pa
+    import pyarrow.csv as pacsv
+    import pyarrow.parquet as pq
+
     suffix = out.suffix.lower()
     if suffix not in (".parquet", ".csv", ".json"):
         raise click.BadParameter("the file must end in .parquet, .csv or .json", param_hint="--out")

@@ -8,7 +8,7 @@ The work itself is :func:`adpart.workflows.run_learning`.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
 
@@ -25,17 +25,9 @@ from adpart.cli.common import (
     run_options,
     split_plugin_options,
 )
-from adpart.store.location import KBLocation
-from adpart.workflows import (
-    LearnRequest,
-    find_learning,
-    record_learning,
-    run_learning,
-    write_learning_outputs,
-)
-from adpart.workflows.reports import folder_name
-from adpart.workflows.resolve import resolve_domain
-from adpart.workflows.store import KnowledgeStore
+
+if TYPE_CHECKING:
+    from adpart.workflows.store import KnowledgeStore
 
 
 @click.command(name="learn", cls=plugin_options_command("learner", "learner"))
@@ -121,6 +113,17 @@ def learn_cmd(
     is deterministic in its settings and seed, so one the knowledge base already holds is not
     recorded twice.
     """
+    from adpart.store.location import KBLocation
+    from adpart.workflows import (
+        LearnRequest,
+        find_learning,
+        record_learning,
+        run_learning,
+        write_learning_outputs,
+    )
+    from adpart.workflows.reports import folder_name
+    from adpart.workflows.resolve import resolve_domain
+
     reg = registry()
     spec = reg.get("learner", learner)
     given = split_plugin_options(spec, plugin_options)

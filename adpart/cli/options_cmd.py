@@ -8,10 +8,7 @@ import click
 
 from adpart.cli.common import echo_json, kb_location_options, registry, settings_options
 from adpart.errors import TaskError
-from adpart.options.subgoal_options import InitiationSettings
-from adpart.store.location import KBLocation
-from adpart.workflows.options import options_for_subgoals
-from adpart.workflows.refs import get_ref
+from adpart.options.settings import InitiationSettings
 
 
 @click.command(name="options")
@@ -58,7 +55,9 @@ def options_cmd(
     iteration on the pseudo-reward task. Its exact multi-time model (R, discounted F) is computed
     by one sparse LU factorisation. Options already stored for these subgoals are reused.
     """
-    from adpart.store import KnowledgeBase
+    from adpart.store import KBLocation, KnowledgeBase
+    from adpart.workflows.options import options_for_subgoals
+    from adpart.workflows.refs import get_ref
 
     kb = KnowledgeBase.open(KBLocation.resolve(kb_path, kb_artifacts))
     try:

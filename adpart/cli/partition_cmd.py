@@ -14,18 +14,12 @@ import click
 from adpart.cli.common import (
     check_criterion,
     echo_json,
+    kb_location_options,
     key_values,
     registry,
     settings_options,
 )
-from adpart.cli.learn import kb_location_options
-from adpart.partition.settings import PartitionSettings
-from adpart.store.location import KBLocation
-from adpart.workflows.partitioning import (
-    DEFAULT_CRITERION,
-    partition_environment,
-    plot_partition,
-)
+from adpart.partition.settings import DEFAULT_CRITERION, PartitionSettings
 
 
 @click.command(name="partition")
@@ -103,7 +97,8 @@ def partition_cmd(
     independent checker and, with a task, theorem 4.5's bound is shown next to the measured
     ||V* - V*_P||. Export the labels with `adpart kb export partition:N --field labels`.
     """
-    from adpart.store import KnowledgeBase
+    from adpart.store import KBLocation, KnowledgeBase
+    from adpart.workflows.partitioning import partition_environment, plot_partition
 
     baseline = _baseline_value(reward_baseline)
     criterion_params = key_values(criterion_opt, "--criterion-opt")

@@ -19,15 +19,12 @@ from adpart.cli.common import (
     registry,
     run_options,
     settings_options,
+    stage_bars,
 )
 from adpart.errors import AdpartError
 from adpart.learning.knowledge import REGIMES
-from adpart.options.subgoal_options import InitiationSettings
-from adpart.partition.settings import PartitionSettings
-from adpart.store.location import KBLocation
-from adpart.workflows.partitioning import DEFAULT_CRITERION
-from adpart.workflows.pipeline_table import comparison_lines
-from adpart.workflows.reports import folder_name
+from adpart.options.settings import InitiationSettings
+from adpart.partition.settings import DEFAULT_CRITERION, PartitionSettings
 
 
 def _check_plugin_params(kind: str, name: str, params: dict[str, Any], option: str,
@@ -221,8 +218,11 @@ def pipeline_cmd(
     step is stored and reused, so a rerun or a resumed crash recomputes nothing. Ends with
     each learner's Kaplan-Meier time to the bound and what it knew (docs/pipeline.md).
     """
-    from adpart.store import KnowledgeBase
+    from adpart.store import KBLocation, KnowledgeBase
     from adpart.workflows.pipeline import PipelineConfig, run_pipeline
+    from adpart.workflows.pipeline_table import comparison_lines
+    from adpart.workflows.progress import progress_bars
+    from adpart.workflows.reports import folder_name
 
     config = PipelineConfig(
         env=env,
@@ -252,7 +252,8 @@ def pipeline_cmd(
     out = out or Path("adpart-pipeline") / folder_name(env)
     kb = KnowledgeBase.open(KBLocation.resolve(kb_path, kb_artifacts))
     try:
-        report = run_pipeline(kb, config, out=out, progress=_say(quiet or as_json))
+        with progress_bars(stage_bars(not (quiet or as_json))):  # a bar inside each stage
+            report = run_pipeline(kb, config, out=out, progress=_say(quiet or as_json))
     finally:
         kb.close()
     summary = report.to_json()
@@ -318,7 +319,7 @@ def transfer_cmd(
     """Learn TASK of ENV on a stored decision layer with the hierarchical learner (last step)."""
     from adpart.learning.comparison import task_row
     from adpart.learning.curves import plot_curves
-    from adpart.store import KnowledgeBase
+    from adpart.store import KBLocation, KnowledgeBase
     from adpart.workflows.learning import (
         LearnRequest,
         find_learning,
@@ -326,7 +327,10 @@ def transfer_cmd(
         record_learning,
         run_learning,
     )
+    from adpart.workflows.pipeline_table import comparison_lines
+    from adpart.workflows.progress import progress_bars
     from adpart.workflows.refs import parse_ref
+    from adpart.workflows.reports import folder_name
 
     hier_params = key_values(hier_opt, "--hier-opt")
     _check_plugin_params("learner", "hierarchical", hier_params, "--hier-opt", "--hier-opt")
@@ -359,7 +363,10 @@ def transfer_cmd(
     try:
         blocks = int(kb.get("partition", parse_ref(partition_ref, "partition")).n_blocks)
         for label, request in requests.items():
-            found = find_learning(kb, request) or record_learning(kb, run_learning(request, kb=kb))
+            found = find_learning(kb, request)
+            if found is None:
+                with progress_bars(stage_bars(not as_json)):  # a bar while it learns
+                    found = record_learning(kb, run_learning(request, kb=kb))
             run = kb.get("run", parse_ref(found["run"], "run"))
             curves[label] = load_curve(kb, run)
             ids[label] = found["run"]

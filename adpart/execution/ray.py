@@ -26,8 +26,6 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
-import numpy as np
-
 from adpart.errors import AdpartError
 from adpart.execution import WORKER_THREAD_ENV, Executor
 from adpart.params import build_settings, setting, settings, settings_params
@@ -83,6 +81,8 @@ class _Shared:
 
 def _externalize(value: Any, put: Callable[[Any], Any], cache: dict[int, _Shared]) -> Any:
     """``value`` with every large array replaced by a :class:`_Shared` (one ``put`` per array)."""
+    import numpy as np  # here, not at import: the executor plugins load for every command
+
     if isinstance(value, np.ndarray) and value.nbytes >= SHARE_MIN_BYTES:
         shared = cache.get(id(value))
         if shared is None:

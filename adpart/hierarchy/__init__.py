@@ -9,27 +9,46 @@
   (:mod:`adpart.workflows.hierarchy` reads them from a knowledge base and stores the layer).
 """
 
-from adpart.hierarchy.estimator import (
-    Estimate,
-    expected_time,
-    flat_time,
-    good_columns,
-    t_conv,
-)
-from adpart.hierarchy.greedy import GreedyResult, Step, column_splits, greedy_hierarchy
-from adpart.hierarchy.layers import (
-    HierarchyInputs,
-    HierarchyResult,
-    all_subgoals_layer,
-    expected_time_layer,
-    layer_result,
-)
-from adpart.hierarchy.tasks import (
-    LearnedTask,
-    discounted_occupancy,
-    option_values,
-    task_from_model,
-)
+from typing import TYPE_CHECKING
+
+from adpart.lazy import lazy_exports
+
+if TYPE_CHECKING:
+    from adpart.hierarchy.estimator import (
+        Estimate,
+        expected_time,
+        flat_time,
+        good_columns,
+        t_conv,
+    )
+    from adpart.hierarchy.greedy import GreedyResult, Step, column_splits, greedy_hierarchy
+    from adpart.hierarchy.layers import (
+        HierarchyInputs,
+        HierarchyResult,
+        all_subgoals_layer,
+        expected_time_layer,
+        layer_result,
+    )
+    from adpart.hierarchy.tasks import (
+        LearnedTask,
+        discounted_occupancy,
+        option_values,
+        task_from_model,
+    )
+
+lazy_exports(__name__, {
+    "adpart.hierarchy.estimator": (
+        "Estimate", "expected_time", "flat_time", "good_columns", "t_conv",
+    ),
+    "adpart.hierarchy.greedy": ("GreedyResult", "Step", "column_splits", "greedy_hierarchy"),
+    "adpart.hierarchy.layers": (
+        "HierarchyInputs", "HierarchyResult", "all_subgoals_layer", "expected_time_layer",
+        "layer_result",
+    ),
+    "adpart.hierarchy.tasks": (
+        "LearnedTask", "discounted_occupancy", "option_values", "task_from_model",
+    ),
+})
 
 __all__ = [
     "Estimate",

@@ -28,12 +28,15 @@ lets the knowledge base store a schedule as a small JSON object (:meth:`Schedule
 from __future__ import annotations
 
 import math
+import numbers
 import re
 from dataclasses import asdict, dataclass
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from adpart.errors import TaskError
+
+if TYPE_CHECKING:
+    import numpy as np
 
 __all__ = ["Schedule", "constant", "exponential", "parse_schedule", "visit_count"]
 
@@ -59,7 +62,7 @@ class Schedule:
     def __post_init__(self) -> None:
         for what, value in (("scale", self.scale), ("rate", self.rate), ("omega", self.omega),
                             ("floor", self.floor)):
-            if not isinstance(value, (int, float, np.floating)) or not math.isfinite(value):
+            if not isinstance(value, numbers.Real) or not math.isfinite(value):
                 raise TaskError(f"schedule {what} = {value!r} must be a finite number")
         if self.scale < 0:
             raise TaskError(f"schedule scale = {self.scale!r} must be >= 0")
@@ -79,6 +82,8 @@ class Schedule:
         Both arguments broadcast; the result is float64. This is the reference the kernels
         reproduce operation for operation (``rate**e`` first, then ``n**(-omega)``).
         """
+        import numpy as np
+
         n = np.asarray(visits, dtype=np.float64)
         e = np.asarray(episode, dtype=np.float64)
         v = self.scale * np.power(self.rate, e)
@@ -94,7 +99,7 @@ class Schedule:
 
     def to_dict(self) -> dict[str, object]:
         """A JSON-ready description for provenance records; ``Schedule(**d)`` inverts it."""
-        return {k: (float(v) if isinstance(v, (int, float, np.floating)) else v)
+        return {k: (float(v) if isinstance(v, numbers.Real) else v)
                 for k, v in asdict(self).items()}
 
     def check_probability(self, what: str) -> Schedule:
@@ -135,7 +140,7 @@ def parse_schedule(text: str | float | Schedule) -> Schedule:
     """
     if isinstance(text, Schedule):
         return text
-    if isinstance(text, (int, float, np.floating)) and not isinstance(text, bool):
+    if isinstance(text, numbers.Real) and not isinstance(text, bool):
         return constant(float(text))
     if not isinstance(text, str):
         raise TaskError(f"cannot read a schedule from {text!r}; give e.g. '0.1', '1/n^0.8'")

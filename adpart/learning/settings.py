@@ -10,15 +10,16 @@ stored provenance are derived from it (:mod:`adpart.params`).
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from adpart.errors import ModelError
 from adpart.learning.schedules import Schedule, parse_schedule
 from adpart.params import hook, setting, settings
 
-__all__ = ["LEARNER_FIELDS", "MAX_SEED", "Run", "fresh_seed", "require_mdp"]
+if TYPE_CHECKING:
+    import numpy as np
+
+__all__ = ["LEARNER_FIELDS", "MAX_SEED", "Run", "SMDPQSettings", "fresh_seed", "require_mdp"]
 
 #: The largest seed: the knowledge base stores seeds as signed 64-bit integers.
 MAX_SEED = 2**63 - 1
@@ -82,6 +83,8 @@ class Run:
 def fresh_seed(seed: int | None) -> int:
     """``seed``, or for a ``fresh`` seed (None) one drawn from OS entropy here, once."""
     if seed is None:
+        import numpy as np
+
         return int(np.random.SeedSequence().entropy) % (MAX_SEED + 1)  # type: ignore[operator]
     return int(seed)
 
@@ -96,3 +99,15 @@ def require_mdp(learner: str, mdp: object) -> object:
             "adpart.envs.registry.get_domain(name).mdp()"
         )
     return mdp
+
+
+@settings
+class SMDPQSettings:
+    """The settings of SMDP Q-learning over options (section 3.1) beyond its run."""
+
+    include_primitives: bool = setting(False)
+    """offer the primitive actions beside the options (their one-step options first)."""
+
+    intra_option: bool = setting(False)
+    """also update every option consistent with each primitive step (intra-option Q-learning,
+    Sutton, Precup & Singh 1999)."""

@@ -55,13 +55,12 @@ from adpart.learning.knowledge import FLAT, OPTION_POLICIES, world
 from adpart.learning.qlearning import BLOCK_ROWS
 from adpart.learning.result import LearnResult
 from adpart.learning.schedules import Schedule
-from adpart.learning.settings import Run, fresh_seed, require_mdp
+from adpart.learning.settings import Run, SMDPQSettings, fresh_seed, require_mdp
 from adpart.mdp.evaluation import greedy_policy
 from adpart.mdp.model import FiniteMDP, SMDPModel
 from adpart.options.models import OptionModel, option_models
 from adpart.options.option import Option, primitive_options
 from adpart.options.smdp import stack_models
-from adpart.params import setting, settings
 
 __all__ = ["SMDPQResult", "SMDPQSettings", "compile_options", "option_set", "smdp_q_learning"]
 
@@ -399,18 +398,6 @@ def drive(
         if progress is not None:
             progress(boundary, episodes)
     return eval_value
-
-
-@settings
-class SMDPQSettings:
-    """The settings of SMDP Q-learning over options (section 3.1) beyond its run."""
-
-    include_primitives: bool = setting(False)
-    """offer the primitive actions beside the options (their one-step options first)."""
-
-    intra_option: bool = setting(False)
-    """also update every option consistent with each primitive step (intra-option Q-learning,
-    Sutton, Precup & Singh 1999)."""
 
 
 def smdp_q_learning(

@@ -52,7 +52,7 @@ from adpart.errors import ModelError, TaskError
 from adpart.mdp.model import FiniteMDP
 from adpart.mdp.solvers import solve
 from adpart.options.option import Option
-from adpart.params import setting, settings
+from adpart.options.settings import INITIATION_CHOICES, InitiationSettings
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -61,7 +61,6 @@ if TYPE_CHECKING:
 UNDISCOUNTED_PSEUDO_GAMMA = 0.99
 #: Solver accuracy of the pseudo-reward task (its values lie in [0, 1]).
 PSEUDO_EPSILON = 1e-10
-INITIATION_CHOICES = ("local", "basin", "reachable")
 #: Relative slack of the ``"local"`` test ``V_g >= gamma**radius``, so that a state exactly
 #: ``radius`` steps away is kept despite the solver's rounding.
 RADIUS_RTOL = 1e-9
@@ -192,18 +191,6 @@ def start_value(mdp: FiniteMDP, subgoal: int, V: np.ndarray,
     state of the basin) it is the one-step look-ahead of the greedy action.
     """
     return _reach_q(mdp, subgoal, V, pseudo_discount(mdp, pseudo_gamma)).max(axis=1)
-
-
-@settings
-class InitiationSettings:
-    """Where an option to a subgoal may start (module docstring; docs/options.md)."""
-
-    initiation: str = setting("local", choices=INITIATION_CHOICES)
-    """where an option to a subgoal may start: its basin within --radius steps (local), its
-    basin (basin), or wherever the subgoal is reachable (reachable)."""
-
-    radius: float = setting(30.0, min=1.0, finite=False)
-    """steps of a local initiation set (>= 1; inf is the basin)."""
 
 
 def resolve_initiation(initiation: str | None, radius: float | None) -> tuple[str, float]:

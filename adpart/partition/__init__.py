@@ -13,27 +13,47 @@
   callers that prepare inputs.
 """
 
-from adpart.partition._validate import (
-    DEFAULT_ATOL,
-    block_rows,
-    check_delta,
-    check_epsilon,
-    masked_rows,
-)
-from adpart.partition.bpsmdp import (
-    BPSMDP,
-    IntervalValues,
-    point_model,
-    point_policy,
-    theorem_4_5_bound,
-    value_gap,
-)
-from adpart.partition.checker import StabilityReport, check_stability
-from adpart.partition.layer import decision_rewards, layer_counts, reachable_states
-from adpart.partition.lumping import exact_lumping
-from adpart.partition.multiphase import MultiPhasePartitioner, phase1, phase2, phase3
-from adpart.partition.partition import Partition, canonical_labels, combine_labels
-from adpart.partition.refine import refine
+from typing import TYPE_CHECKING
+
+from adpart.lazy import lazy_exports
+
+if TYPE_CHECKING:
+    from adpart.partition._validate import (
+        DEFAULT_ATOL,
+        block_rows,
+        check_delta,
+        check_epsilon,
+        masked_rows,
+    )
+    from adpart.partition.bpsmdp import (
+        BPSMDP,
+        IntervalValues,
+        point_model,
+        point_policy,
+        theorem_4_5_bound,
+        value_gap,
+    )
+    from adpart.partition.checker import StabilityReport, check_stability
+    from adpart.partition.layer import decision_rewards, layer_counts, reachable_states
+    from adpart.partition.lumping import exact_lumping
+    from adpart.partition.multiphase import MultiPhasePartitioner, phase1, phase2, phase3
+    from adpart.partition.partition import Partition, canonical_labels, combine_labels
+    from adpart.partition.refine import refine
+
+lazy_exports(__name__, {
+    "adpart.partition._validate": (
+        "DEFAULT_ATOL", "block_rows", "check_delta", "check_epsilon", "masked_rows",
+    ),
+    "adpart.partition.bpsmdp": (
+        "BPSMDP", "IntervalValues", "point_model", "point_policy", "theorem_4_5_bound", "value_gap",
+    ),
+    "adpart.partition.checker": ("StabilityReport", "check_stability"),
+    "adpart.partition.layer": ("decision_rewards", "layer_counts", "reachable_states"),
+    "adpart.partition.lumping": ("exact_lumping",),
+    "adpart.partition.multiphase": ("MultiPhasePartitioner", "phase1", "phase2", "phase3"),
+    "adpart.partition.partition": ("Partition", "canonical_labels", "combine_labels"),
+    "adpart.partition.refine": ("refine",),
+})
 
 __all__ = [
     "BPSMDP",

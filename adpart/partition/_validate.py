@@ -14,9 +14,7 @@ import scipy.sparse as sp
 
 from adpart.errors import ModelError
 from adpart.mdp.model import SMDPModel
-
-#: Masses or rewards closer than this are equal: ``delta = 0`` means "equal up to rounding".
-DEFAULT_ATOL = 1e-9
+from adpart.partition.settings import DEFAULT_ATOL  # noqa: F401 (declared with the settings)
 
 
 def as_model(model: object) -> SMDPModel:

@@ -10,14 +10,20 @@ the :class:`~adpart.partition.multiphase.Criterion` form a partitioner takes.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from adpart.params import setting, settings
-from adpart.partition._validate import DEFAULT_ATOL
-from adpart.partition.partition import Partition
-from adpart.partition.refine import refine
 
-__all__ = ["PartitionSettings", "StabilityCriterion"]
+if TYPE_CHECKING:
+    from adpart.partition.partition import Partition
+
+__all__ = ["DEFAULT_ATOL", "DEFAULT_CRITERION", "PartitionSettings", "StabilityCriterion"]
+
+#: Masses or rewards closer than this are equal: ``delta = 0`` means "equal up to rounding".
+DEFAULT_ATOL = 1e-9
+
+#: The partition-criterion plugin :class:`PartitionSettings` define (:class:`StabilityCriterion`).
+DEFAULT_CRITERION = "bisimulation"
 
 
 @settings
@@ -40,6 +46,8 @@ class StabilityCriterion:
         self.settings, self.atol = settings, atol
 
     def refine(self, partition: Partition, model: Any, **context: Any) -> Partition:
+        from adpart.partition.refine import refine
+
         rewards = context.get("rewards")
         return refine(partition, model, options=context.get("options"),
                       delta=self.settings.delta,

@@ -4,9 +4,36 @@ Third-party packages extend adpart by exposing a module with ``@hookimpl`` funct
 ``adpart`` entry-point group; see ``docs/plugins.md``.
 """
 
-from adpart.plugins.hookspecs import hookimpl
-from adpart.plugins.manager import build_registry, get_registry, make_plugin_manager, reset_registry
-from adpart.plugins.registry import KINDS, Param, PluginError, PluginSpec, PluginWarning, Registry
+from typing import TYPE_CHECKING
+
+from adpart.lazy import lazy_exports
+
+if TYPE_CHECKING:
+    from adpart.plugins.hookspecs import hookimpl
+    from adpart.plugins.manager import (
+        build_registry,
+        get_registry,
+        make_plugin_manager,
+        reset_registry,
+    )
+    from adpart.plugins.registry import (
+        KINDS,
+        Param,
+        PluginError,
+        PluginSpec,
+        PluginWarning,
+        Registry,
+    )
+
+lazy_exports(__name__, {
+    "adpart.plugins.hookspecs": ("hookimpl",),
+    "adpart.plugins.manager": (
+        "build_registry", "get_registry", "make_plugin_manager", "reset_registry",
+    ),
+    "adpart.plugins.registry": (
+        "KINDS", "Param", "PluginError", "PluginSpec", "PluginWarning", "Registry",
+    ),
+})
 
 __all__ = [
     "KINDS",

@@ -108,10 +108,13 @@ def _version(dist: str) -> str:
         return "0+unknown"
 
 
-def build_registry(pm: PluginManager) -> Registry:
-    """Call every registration hook, built-ins first, and collect what they register."""
+def build_registry(pm: PluginManager, kinds: tuple[str, ...] | None = None) -> Registry:
+    """Call every registration hook (of ``kinds``; default all), built-ins first, and collect
+    what they register."""
     registry = Registry()
     for kind, hook_name in KINDS.items():
+        if kinds is not None and kind not in kinds:
+            continue
         impls = getattr(pm.hook, hook_name).get_hookimpls()
         impls.sort(key=lambda impl: pm.sources.get(impl.plugin_name, ("", ""))[0] != "adpart")
         for impl in impls:
@@ -143,3 +146,20 @@ def reset_registry() -> None:
     """Forget the cached registry (tests; after installing a plugin at run time)."""
     global _REGISTRY
     _REGISTRY = None
+    _BUILTIN.clear()
+
+
+_BUILTIN: dict[str, Registry] = {}
+
+
+def builtin_registry(kind: str) -> Registry:
+    """adpart's own plugins of one ``kind``, without importing any other package's.
+
+    What ``--help`` of a command shows for a built-in plugin: a built-in always keeps its name
+    (:meth:`Registry.add` keeps the first of two, and built-ins come first), so its parameters
+    are the same whatever else is installed, and the help need not import third-party plugins
+    (nor the built-ins' implementations, which their modules import only when used).
+    """
+    if kind not in _BUILTIN:
+        _BUILTIN[kind] = build_registry(make_plugin_manager(load_entrypoints=False), (kind,))
+    return _BUILTIN[kind]

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import difflib
+import functools
 import warnings
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
-from adpart.errors import PluginError, UnknownNameError
+from adpart.errors import AdpartError, PluginError, PluginFailure, UnknownNameError
 from adpart.params import Param
 
 #: kind -> the hook that fills it. The kind names are what ``adpart plugins --kind`` accepts.
@@ -21,6 +22,17 @@ KINDS: dict[str, str] = {
     "hierarchy-estimator": "register_hierarchy_estimators",
 }
 
+
+#: kind -> the methods of its contract (:mod:`adpart.plugins.contracts`) that adpart calls on an
+#: instance: a third-party plugin's are guarded (:meth:`PluginSpec.create`).
+CONTRACT_METHODS: dict[str, tuple[str, ...]] = {
+    "environment": ("dynamics", "tasks", "task", "mdp"),
+    "learner": ("learn",),
+    "executor": ("map",),
+    "subgoal-detector": ("detect",),
+    "partition-criterion": ("refine",),
+    "hierarchy-estimator": ("build",),
+}
 
 
 class PluginWarning(UserWarning):
@@ -63,7 +75,57 @@ class PluginSpec:
         }
 
     def create(self, given: dict[str, Any] | None = None) -> Any:
-        return self.factory(**self.resolve_params(given))
+        """An instance built from the checked parameters.
+
+        A third-party plugin's constructor and contract methods (:data:`CONTRACT_METHODS`) are
+        guarded: an exception they raise that is not an :class:`~adpart.errors.AdpartError`
+        becomes a :class:`~adpart.errors.PluginFailure` naming the plugin and its package, so
+        the command line reports it in one line (exit status 2) instead of a traceback through
+        adpart. adpart's own plugins are not wrapped: their bugs are adpart's, and show as such.
+        """
+        values = self.resolve_params(given)
+        if self.package == "adpart":
+            return self.factory(**values)
+        instance = GuardedCall(self, "__init__", self.factory)(**values)
+        for method in CONTRACT_METHODS.get(self.kind, ()):
+            bound = getattr(instance, method, None)
+            if callable(bound):
+                try:
+                    setattr(instance, method, GuardedCall(self, method, bound))
+                except AttributeError:  # __slots__ or a read-only attribute: left unguarded
+                    pass
+        return instance
+
+    @property
+    def origin(self) -> str:
+        """``kind 'name' (package P V)``: how messages name this plugin."""
+        return f"{self.kind} {self.name!r} (package {self.package} {self.version})".rstrip()
+
+
+class GuardedCall:
+    """A plugin method that turns its unexpected exceptions into :class:`PluginFailure`.
+
+    Picklable with its plugin (a process pool may carry an instance to a worker), and it keeps
+    the wrapped method's signature (``inspect.signature`` follows ``__wrapped__``).
+    """
+
+    def __init__(self, spec: PluginSpec, method: str, func: Callable[..., Any]) -> None:
+        self.spec, self.method = spec, method
+        functools.update_wrapper(self, func, updated=())
+
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        try:
+            return self.__wrapped__(*args, **kwargs)
+        except AdpartError:
+            raise
+        except Exception as exc:
+            what = "building it" if self.method == "__init__" else f"{self.method}()"
+            raise PluginFailure(
+                f"{self.spec.origin} failed in {what}: {type(exc).__name__}: {exc}. This is a "
+                f"bug of the plugin, not of your input: report it to {self.spec.package}'s "
+                f"authors or choose another {self.spec.kind} (adpart --debug shows the "
+                "traceback)"
+            ) from exc
 
 
 @dataclass

@@ -13,23 +13,40 @@ For analysis, ``open_kb(path, read_only=True)`` and the table methods::
 
 from __future__ import annotations
 
-from adpart.store.entities import (
-    Artifact,
-    Environment,
-    Option,
-    Partition,
-    Policy,
-    Provenance,
-    Record,
-    Run,
-    SubgoalSet,
-    Task,
-)
-from adpart.store.errors import StoreError
-from adpart.store.kb import KnowledgeBase, open_kb
-from adpart.store.location import KBLocation, default_location
-from adpart.store.maintenance import CheckReport, GcReport
-from adpart.store.schema import SCHEMA_VERSION
+from typing import TYPE_CHECKING
+
+from adpart.lazy import lazy_exports
+
+if TYPE_CHECKING:
+    from adpart.store.entities import (
+        Artifact,
+        Environment,
+        Option,
+        Partition,
+        Policy,
+        Provenance,
+        Record,
+        Run,
+        SubgoalSet,
+        Task,
+    )
+    from adpart.store.errors import StoreError
+    from adpart.store.kb import KnowledgeBase, open_kb
+    from adpart.store.location import KBLocation, default_location
+    from adpart.store.maintenance import CheckReport, GcReport
+    from adpart.store.schema import SCHEMA_VERSION
+
+lazy_exports(__name__, {
+    "adpart.store.entities": (
+        "Artifact", "Environment", "Option", "Partition", "Policy", "Provenance", "Record", "Run",
+        "SubgoalSet", "Task",
+    ),
+    "adpart.store.errors": ("StoreError",),
+    "adpart.store.kb": ("KnowledgeBase", "open_kb"),
+    "adpart.store.location": ("KBLocation", "default_location"),
+    "adpart.store.maintenance": ("CheckReport", "GcReport"),
+    "adpart.store.schema": ("SCHEMA_VERSION",),
+})
 
 __all__ = [
     "SCHEMA_VERSION",

@@ -20,9 +20,6 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from sqlalchemy.engine import make_url
-from sqlalchemy.exc import ArgumentError
-
 from adpart.store.errors import StoreError
 
 DB_FILE = "kb.sqlite"
@@ -86,6 +83,9 @@ class KBLocation:
         given = artifacts or None
         if _URL.match(where) and not where.startswith("file://"):
             artifacts = given or os.environ.get("ADPART_KB_ARTIFACTS") or None
+            from sqlalchemy.engine import make_url  # a URL only: --help never gets here
+            from sqlalchemy.exc import ArgumentError
+
             try:
                 url = make_url(where)
                 url.get_backend_name()

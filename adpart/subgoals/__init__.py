@@ -15,38 +15,65 @@ Library functions, usable without the plugin layer:
 See ``docs/subgoals.md`` for the interpretations chosen.
 """
 
-from adpart.subgoals.count import CountMetric, count_metric
-from adpart.subgoals.discover import discover_exhaustive, discover_monte_carlo
-from adpart.subgoals.literature import (
-    betweenness,
-    local_maxima,
-    transition_graph,
-    visit_frequency,
-)
-from adpart.subgoals.montecarlo import (
-    Trajectories,
-    arrival_counts,
-    bernstein_epsilon,
-    bernstein_samples,
-    sample_arrivals,
-    sample_trajectories,
-)
-from adpart.subgoals.policy import check_policy, policy_matrix, trapped_states, walker_matrix
-from adpart.subgoals.ratios import (
-    RatioSamples,
-    gradient_ratios,
-    samples_per_state,
-    t_test_threshold,
-)
-from adpart.subgoals.result import SubgoalResult
-from adpart.subgoals.reward import reward_variation_states, with_reward_variation
-from adpart.subgoals.settings import (
-    BetweennessSettings,
-    CountSettings,
-    MonteCarloSettings,
-    RewardVariationSettings,
-    VisitFrequencySettings,
-)
+from typing import TYPE_CHECKING
+
+from adpart.lazy import lazy_exports
+
+if TYPE_CHECKING:
+    from adpart.subgoals.count import CountMetric, count_metric
+    from adpart.subgoals.discover import discover_exhaustive, discover_monte_carlo
+    from adpart.subgoals.literature import (
+        betweenness,
+        local_maxima,
+        transition_graph,
+        visit_frequency,
+    )
+    from adpart.subgoals.montecarlo import (
+        Trajectories,
+        arrival_counts,
+        bernstein_epsilon,
+        bernstein_samples,
+        sample_arrivals,
+        sample_trajectories,
+    )
+    from adpart.subgoals.policy import check_policy, policy_matrix, trapped_states, walker_matrix
+    from adpart.subgoals.ratios import (
+        RatioSamples,
+        gradient_ratios,
+        samples_per_state,
+        t_test_threshold,
+    )
+    from adpart.subgoals.result import SubgoalResult
+    from adpart.subgoals.reward import reward_variation_states, with_reward_variation
+    from adpart.subgoals.settings import (
+        BetweennessSettings,
+        CountSettings,
+        MonteCarloSettings,
+        RewardVariationSettings,
+        VisitFrequencySettings,
+    )
+
+lazy_exports(__name__, {
+    "adpart.subgoals.count": ("CountMetric", "count_metric"),
+    "adpart.subgoals.discover": ("discover_exhaustive", "discover_monte_carlo"),
+    "adpart.subgoals.literature": (
+        "betweenness", "local_maxima", "transition_graph", "visit_frequency",
+    ),
+    "adpart.subgoals.montecarlo": (
+        "Trajectories", "arrival_counts", "bernstein_epsilon", "bernstein_samples",
+        "sample_arrivals", "sample_trajectories",
+    ),
+    "adpart.subgoals.policy": ("check_policy", "policy_matrix", "trapped_states", "walker_matrix"),
+    "adpart.subgoals.ratios": (
+        "RatioSamples", "gradient_ratios", "samples_per_state", "t_test_threshold",
+    ),
+    "adpart.subgoals.result": ("SubgoalResult",),
+    "adpart.subgoals.reward": ("reward_variation_states", "with_reward_variation"),
+    "adpart.subgoals.settings": (
+        "BetweennessSettings", "CountSettings", "MonteCarloSettings", "RewardVariationSettings",
+        "VisitFrequencySettings",
+    ),
+})
 
 __all__ = [
     "BetweennessSettings", "CountMetric", "CountSettings", "MonteCarloSettings", "RatioSamples",

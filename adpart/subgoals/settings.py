@@ -85,7 +85,7 @@ class CountSettings:
 
     trajectories: int = setting(30, min=1)
     """sampled paths along which ratios are taken (--ratios paths; the seed's Fig. 4.2 uses 10,
-    too few for the automatic N); count-mc: also its first batch."""
+    too few for the automatic N)."""
 
     n: int = setting(0, min=0, check=_ratio_samples)
     """N of eq. 4.2 (ratio samples per state), 0 or >= 2; 0 = automatic (the mean ratio samples

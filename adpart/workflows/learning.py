@@ -22,6 +22,7 @@ from adpart.learning.curves import LearningCurve
 from adpart.learning.settings import Run
 from adpart.mdp.experience import Experience
 from adpart.plugins import get_registry
+from adpart.workflows.progress import stage_progress
 from adpart.workflows.refs import parse_ref
 from adpart.workflows.resolve import base_environment, resolve_domain
 from adpart.workflows.run_knowledge import run_knowledge
@@ -236,7 +237,9 @@ def run_learning(
 ) -> LearnOutcome:
     """Validate ``request``, learn all its batches (on ``executor`` when there are several).
 
-    ``progress(done, total)`` is reported for a single batch computed in this process. ``kb`` is
+    ``progress(done, total)`` is reported for a single batch computed in this process; without
+    it, the bar a command installed (:func:`adpart.workflows.progress.progress_bars`) counts the
+    episodes of a single batch, or the runs of batches learned one after another. ``kb`` is
     needed when the request names options or a partition.
     """
     spec = get_registry().get("learner", request.learner)
@@ -276,11 +279,20 @@ def run_learning(
         }
         for runs, seed in batches
     ]
+    label = f"{request.learner} on {request.env}/{task.name}"
     if len(jobs) == 1:
-        results = [_learn_batch({**jobs[0], "progress": progress})]
+        with stage_progress(0 if progress else request.episodes, label) as bar:
+            results = [_learn_batch({**jobs[0], "progress": progress or bar})]
     else:
-        with executor or SerialExecutor() as ex:
-            results = ex.map(_learn_batch, jobs)
+        with stage_progress(0 if progress else request.runs, f"{label} (runs)") as bar, \
+                executor or SerialExecutor() as ex:
+            if bar is None or ex.parallel:
+                results = ex.map(_learn_batch, jobs)
+            else:  # one batch after another: the bar counts runs done
+                results = []
+                for job in jobs:
+                    results += ex.map(_learn_batch, [job])
+                    bar(sum(r["Q"].shape[0] for r in results), request.runs)
     return LearnOutcome(
         request=request,
         task_name=task.name,

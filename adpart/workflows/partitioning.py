@@ -51,7 +51,7 @@ from adpart.partition import (
 )
 from adpart.partition.layer import decision_view, layer_counts, resolve_baseline
 from adpart.partition.multiphase import Criterion
-from adpart.partition.settings import PartitionSettings
+from adpart.partition.settings import DEFAULT_CRITERION, PartitionSettings
 from adpart.workflows.options import OptionSet, resolve_option_set
 from adpart.workflows.resolve import EXPERIENCE_MARK, register_domain, resolve_domain
 from adpart.workflows.store import KnowledgeStore
@@ -179,9 +179,6 @@ class _Base:
     def record_of(self, column: int) -> Any:
         return self.option_set.records[column - self.fallback]
 
-
-#: The criterion of :class:`PartitionSettings` (delta-stability and eq. 4.7), built in.
-DEFAULT_CRITERION = "bisimulation"
 
 
 def build_criterion(name: str, params: dict[str, Any] | None, settings: PartitionSettings

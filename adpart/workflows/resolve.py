@@ -42,4 +42,4 @@ def resolve_domain(name: str) -> Domain:
         raise UnknownNameError(
             f"{exc}. Gymnasium environments are named gym:<id>, e.g. gym:Taxi-v4"
         ) from None
-    return spec.factory()
+    return spec.create()  # a third-party environment's own failures named (PluginFailure)

@@ -17,7 +17,6 @@ from adpart.errors import TaskError, UnknownNameError
 from adpart.learning.maxq.parr_rooms import DIRECTIONS, OPPOSITE, PERPENDICULAR, RoomMap
 from adpart.learning.maxq.taskgraph import Subtask, TaskGraph
 from adpart.mdp.model import FiniteMDP
-from adpart.params import setting, settings
 
 __all__ = ["GRAPHS", "NON_GOAL_PSEUDO_REWARD", "get_graph", "graph_for", "parr_graph",
            "taxi_graph"]
@@ -288,11 +287,3 @@ def graph_for(mdp: FiniteMDP) -> str:
     )
 
 
-@settings
-class GraphSettings:
-    """Which task graph MAXQ-Q learns over (Dietterich 2000; dissertation ch. 6)."""
-
-    graph: str | None = setting(None, kind="str", none="auto", choices=tuple(GRAPHS))
-    """Task graph (auto: picked from the MDP's features)."""
-    abstraction: bool = setting(True)
-    """Use the graph's state abstractions (Dietterich's max-node and leaf irrelevance)."""

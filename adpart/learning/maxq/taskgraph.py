@@ -258,11 +258,11 @@ class TaskGraph:
             mdp: the flat model whose states, features and action names the graph refers to.
             abstraction: use the declared state abstractions; ``False`` gives every node a
                 table over its full running state set (Dietterich's "MAXQ without
-                abstraction"); None: :class:`~adpart.learning.maxq.graphs.GraphSettings`'
+                abstraction"); None: :class:`~adpart.learning.maxq.settings.GraphSettings`'
                 default.
         """
         if abstraction is None:
-            from adpart.learning.maxq.graphs import GraphSettings
+            from adpart.learning.maxq.settings import GraphSettings
 
             abstraction = GraphSettings().abstraction
         actions = tuple(mdp.action_names)

@@ -12,17 +12,16 @@ multi-phase partitioner (:class:`~adpart.partition.multiphase.Criterion`).
 
 from __future__ import annotations
 
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from adpart.errors import ModelError
 from adpart.params import Param, build_settings, settings_params
-from adpart.partition import DEFAULT_ATOL, Partition, exact_lumping, refine
-from adpart.partition.multiphase import initial_termination_labels
-from adpart.partition.settings import PartitionSettings, StabilityCriterion
+from adpart.partition.settings import DEFAULT_ATOL, PartitionSettings, StabilityCriterion
 from adpart.plugins.hookspecs import hookimpl
 from adpart.plugins.registry import Registrar
+
+if TYPE_CHECKING:
+    from adpart.partition import Partition
 
 
 class BisimulationCriterion(StabilityCriterion):
@@ -55,6 +54,8 @@ class RewardCriterion:
         self.epsilon = build_settings(PartitionSettings, values).reward_epsilon
 
     def refine(self, partition: Partition, model: object, **context: Any) -> Partition:
+        from adpart.partition import refine
+
         # delta = 1 makes every mass criterion hold (masses lie in [0, 1]), so only eq. 4.7 splits
         return refine(partition, model, options=context.get("options"), delta=1.0,
                       epsilon=self.epsilon, rewards=context.get("rewards"),
@@ -69,6 +70,10 @@ class TerminationCriterion:
     params = ()
 
     def refine(self, partition: Partition, model: object, **context: Any) -> Partition:
+        import numpy as np
+
+        from adpart.partition.multiphase import initial_termination_labels
+
         smdp = model.as_smdp() if hasattr(model, "as_smdp") else model
         term = context.get("termination")
         if term is None:
@@ -102,6 +107,8 @@ class ExactLumpingCriterion:
         self.use_rewards = rewards
 
     def refine(self, partition: Partition, model: object, **context: Any) -> Partition:
+        from adpart.partition import exact_lumping
+
         return exact_lumping(model, initial=partition, options=context.get("options"),
                              use_rewards=self.use_rewards, rewards=context.get("rewards"))
 

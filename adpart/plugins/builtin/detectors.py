@@ -11,24 +11,11 @@ settings (:func:`~adpart.params.settings_dict`).
 from __future__ import annotations
 
 import time
+from typing import TYPE_CHECKING
 
-import numpy as np
-
-from adpart.mdp.model import FiniteMDP
-from adpart.params import build_settings, settings_dict, settings_params
+from adpart.params import build_settings, settings_dict, settings_params, with_help
 from adpart.plugins.hookspecs import hookimpl
 from adpart.plugins.registry import Registrar
-from adpart.subgoals.discover import discover_exhaustive, discover_monte_carlo
-from adpart.subgoals.literature import (
-    betweenness,
-    local_maxima,
-    top_states,
-    transition_graph,
-    visit_frequency,
-)
-from adpart.subgoals.policy import check_mdp, check_policy
-from adpart.subgoals.result import SubgoalResult
-from adpart.subgoals.reward import with_reward_variation
 from adpart.subgoals.settings import (
     BetweennessSettings,
     CountSettings,
@@ -36,6 +23,12 @@ from adpart.subgoals.settings import (
     RewardVariationSettings,
     VisitFrequencySettings,
 )
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from adpart.mdp.model import FiniteMDP
+    from adpart.subgoals.result import SubgoalResult
 
 
 class CountExhaustive:
@@ -52,6 +45,8 @@ class CountExhaustive:
         self.settings = build_settings(CountSettings, values)
 
     def detect(self, mdp: FiniteMDP, policy: np.ndarray, rng: np.random.Generator) -> SubgoalResult:
+        from adpart.subgoals.discover import discover_exhaustive
+
         return discover_exhaustive(mdp, policy, rng, self.settings)
 
 
@@ -64,12 +59,17 @@ class CountMonteCarlo:
 
     name = "count-mc"
     description = "Monte Carlo count metric in batches (def. 4.4, eq. 4.3, theorem 4.3)"
-    params = settings_params(MonteCarloSettings)
+    params = with_help(
+        settings_params(MonteCarloSettings),
+        trajectories="trajectories of the first batch, and the sampled paths along which "
+        "ratios are taken (--ratios paths).")
 
     def __init__(self, **values: object) -> None:
         self.settings = build_settings(MonteCarloSettings, values)
 
     def detect(self, mdp: FiniteMDP, policy: np.ndarray, rng: np.random.Generator) -> SubgoalResult:
+        from adpart.subgoals.discover import discover_monte_carlo
+
         return discover_monte_carlo(mdp, policy, rng, self.settings)
 
 
@@ -92,6 +92,12 @@ class RewardVariation:
         self.settings = build_settings(RewardVariationSettings, values)
 
     def detect(self, mdp: FiniteMDP, policy: np.ndarray, rng: np.random.Generator) -> SubgoalResult:
+        import numpy as np
+
+        from adpart.subgoals.policy import check_mdp, check_policy
+        from adpart.subgoals.result import SubgoalResult
+        from adpart.subgoals.reward import with_reward_variation
+
         t0 = time.perf_counter()
         factory = _BASES[self.settings.base]
         if factory is None:
@@ -124,6 +130,17 @@ class Betweenness:
     def detect(self, mdp: FiniteMDP, policy: np.ndarray | None, rng: np.random.Generator) -> (
         SubgoalResult
     ):
+        import numpy as np
+
+        from adpart.subgoals.literature import (
+            betweenness,
+            local_maxima,
+            top_states,
+            transition_graph,
+        )
+        from adpart.subgoals.policy import check_mdp
+        from adpart.subgoals.result import SubgoalResult
+
         t0 = time.perf_counter()
         s = self.settings
         mdp = check_mdp(mdp)
@@ -155,6 +172,9 @@ class VisitFrequency:
     def detect(self, mdp: FiniteMDP, policy: np.ndarray | None, rng: np.random.Generator) -> (
         SubgoalResult
     ):
+        from adpart.subgoals.literature import top_states, visit_frequency
+        from adpart.subgoals.result import SubgoalResult
+
         t0 = time.perf_counter()
         s = self.settings
         scores, ok = visit_frequency(mdp, rng, s)

@@ -12,20 +12,16 @@ interpretations.
 from __future__ import annotations
 
 import time
+from typing import TYPE_CHECKING
 
 from adpart.errors import PluginError
-from adpart.hierarchy.layers import (
-    HierarchyInputs,
-    HierarchyResult,
-    all_subgoals_layer,
-    expected_time_layer,
-    flat_estimate,
-    layer_result,
-)
 from adpart.hierarchy.settings import EstimateSettings, ExpectedTimeSettings
 from adpart.params import build_settings, settings_dict, settings_params
 from adpart.plugins.hookspecs import hookimpl
 from adpart.plugins.registry import Registrar
+
+if TYPE_CHECKING:
+    from adpart.hierarchy.layers import HierarchyInputs, HierarchyResult
 
 
 class ExpectedLearningTime:
@@ -42,6 +38,8 @@ class ExpectedLearningTime:
         self.settings = build_settings(ExpectedTimeSettings, values)
 
     def build(self, inputs: HierarchyInputs) -> HierarchyResult:
+        from adpart.hierarchy.layers import expected_time_layer, flat_estimate, layer_result
+
         t0 = time.perf_counter()
         s, e = self.settings, self.settings.estimate
         inputs = inputs.with_threshold(e.threshold, e.threshold_scale)
@@ -70,6 +68,8 @@ class AllSubgoals:
                               "number in [0, 1] (--delta 0.3)")
 
     def build(self, inputs: HierarchyInputs) -> HierarchyResult:
+        from adpart.hierarchy.layers import all_subgoals_layer, layer_result
+
         t0 = time.perf_counter()
         e = self.settings
         inputs = inputs.select_options(inputs.to_subgoal).with_threshold(

@@ -7,14 +7,16 @@ naming ``pip install 'adpart[ray]'``.
 
 from __future__ import annotations
 
-from adpart.execution import LocalExecutor, SerialExecutor
-from adpart.execution.ray import RayExecutor
 from adpart.plugins.hookspecs import hookimpl
 from adpart.plugins.registry import Registrar
 
 
 @hookimpl
 def register_executors(register: Registrar) -> None:
+    # imported here: a command's --help reads the registry of another kind, not these
+    from adpart.execution import LocalExecutor, SerialExecutor
+    from adpart.execution.ray import RayExecutor
+
     register(LocalExecutor)
     register(SerialExecutor)
     register(RayExecutor)

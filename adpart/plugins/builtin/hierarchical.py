@@ -11,25 +11,27 @@ keywords of :meth:`learn` (``options=`` a list of :class:`adpart.options.Option`
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 from adpart.errors import TaskError
 from adpart.learning.hierarchical_settings import HierarchicalSettings
-from adpart.learning.result import LearnResult
-from adpart.learning.settings import Run
-from adpart.learning.smdp_q import SMDPQSettings
-from adpart.mdp.model import FiniteMDP
-from adpart.options.option import Option
+from adpart.learning.settings import Run, SMDPQSettings
 from adpart.params import build_settings, settings_params
-from adpart.partition.partition import Partition
 from adpart.plugins.builtin.learners import LEARNER_PARAMS, RunLearner
 from adpart.plugins.hookspecs import hookimpl
 from adpart.plugins.registry import Registrar
+
+if TYPE_CHECKING:
+    from adpart.learning.result import LearnResult
+    from adpart.mdp.model import FiniteMDP
+    from adpart.options.option import Option
+    from adpart.partition.partition import Partition
 
 
 class SMDPQLearner(RunLearner):
     """SMDP Q-learning over options, K runs in lock-step, scored exactly.
 
-    Its parameters are :class:`~adpart.learning.smdp_q.SMDPQSettings`' fields and the run
+    Its parameters are :class:`~adpart.learning.settings.SMDPQSettings`' fields and the run
     settings every learner takes.
     """
 

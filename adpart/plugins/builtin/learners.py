@@ -8,13 +8,13 @@ from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 from adpart.learning.settings import LEARNER_FIELDS, Run
-from adpart.mdp.model import FiniteMDP
 from adpart.params import build_settings, settings_params
 from adpart.plugins.hookspecs import hookimpl
 from adpart.plugins.registry import Registrar
 
 if TYPE_CHECKING:
     from adpart.mdp.experience import Experience
+    from adpart.mdp.model import FiniteMDP
 
 #: The parameters every sample-based learner takes: the update's fields of
 #: :class:`~adpart.learning.settings.Run` (one declaration, one --help text).
