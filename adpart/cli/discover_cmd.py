@@ -105,6 +105,9 @@ def discover_cmd(
             values=result.scores,
             marked=result.mask,
             title=f"{env}: {detector} scores, subgoals marked",
+            task=_drawable_task(env, task.name),
+            value_label=f"{detector} score",
+            mark_label="subgoals",
         )
         out["plot"] = str(plot)
     if as_json:
@@ -121,3 +124,15 @@ def discover_cmd(
         if key in stats:
             click.echo(f"{key}: {stats[key]}")
     click.echo(f"stored as {found.record.ref}")
+
+
+def _drawable_task(env: str, name: str) -> str | None:
+    """``name`` if ``env`` resolves it (a named task or ``goal:...``), so the map letters its
+    goal; else None (the domain's default task)."""
+    from adpart.errors import AdpartError
+
+    try:
+        resolve_domain(env).task(name)
+    except AdpartError:
+        return None
+    return name

@@ -112,7 +112,7 @@ def learn_cmd(
     Writes to the output folder:
       curve.parquet   one row per (run, episode): steps, decisions, return, value gap
       policy.parquet  the greedy policy of every run: run, state, action, value
-      curve.png       mean value gap over runs with a min-max band
+      curve.png       value gap of every run, their median and quartiles, the success bound
       summary.json    what was run and how it ended
 
     \b
