@@ -120,10 +120,19 @@ def learn_cmd(
     policy per run (Q and greedy policy) and one run with the curve; their ids are printed. A run
     is deterministic in its settings and seed, so one the knowledge base already holds is not
     recorded twice.
+
+    Where the learner takes them, --alpha defaults to 1 on an environment whose every move is
+    deterministic (else the learner's 1/n^0.8) and --max-steps to max(1000, 2 x states), as in
+    `adpart pipeline`.
     """
+    from adpart.workflows.pipeline import episode_defaults, learner_defaults
+
     reg = registry()
     spec = reg.get("learner", learner)
-    given = split_plugin_options(spec, plugin_options)
+    # the environment's defaults, as the pipeline's (alpha 1 where every move is deterministic,
+    # episodes long enough to cross the map), under what the command line gives
+    given = {**learner_defaults(learner, episode_defaults(env)),
+             **split_plugin_options(spec, plugin_options)}
     spec.resolve_params(given)  # every value checked (nan, ranges, schedules) before any work
     request = LearnRequest(
         env=env,

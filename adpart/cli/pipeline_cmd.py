@@ -319,9 +319,12 @@ def transfer_cmd(
         record_learning,
         run_learning,
     )
+    from adpart.workflows.pipeline import episode_defaults, learner_defaults
     from adpart.workflows.refs import parse_ref
 
-    hier_params = key_values(hier_opt, "--hier-opt")
+    defaults = episode_defaults(env)  # the pipeline's, for both learners
+    hier_params = {**learner_defaults("hierarchical", defaults),
+                   **key_values(hier_opt, "--hier-opt")}
     _check_plugin_params("learner", "hierarchical", hier_params, "--hier-opt")
     out = out or Path("adpart-transfer") / folder_name(env, task)
     requests = {
@@ -342,6 +345,7 @@ def transfer_cmd(
             env=env,
             task=task,
             learner="q-learning",
+            params=learner_defaults("q-learning", defaults),
             runs=runs,
             episodes=episodes,
             seed=seed,
@@ -361,7 +365,9 @@ def transfer_cmd(
     finally:
         kb.close()
     figure = plot_curves(
-        curves, out / "transfer.png", metric="value_gap", title=f"{env}/{task} on {partition_ref}",
+        curves, out / "transfer.png", metric="value_gap",
+        title=(f"{env}/{task}: value gap of the greedy policy\n"
+               f"hierarchical on {partition_ref} ({blocks} blocks) vs flat, {runs} runs each"),
         bound=rows[0]["bound"], bound_label="success bound (5% of |V*|)",
     )
     summary = {
