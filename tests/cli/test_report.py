@@ -16,6 +16,7 @@ import shlex
 from html.parser import HTMLParser
 from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
@@ -34,14 +35,30 @@ def demo_pipeline_args() -> list[str]:
     return shlex.split(line.replace("\\\n", " "))
 
 
+#: the Figure objects the demo's pipeline drew, by the PNG name they were saved as
+DRAWN: dict[str, object] = {}
+
+
 @pytest.fixture(scope="module")
 def pipeline_run(tmp_path_factory) -> tuple[Path, Path, Path]:
-    """``(kb, out folder, report.html)`` of the demo's pipeline at small settings."""
+    """``(kb, out folder, report.html)`` of the demo's pipeline at small settings; the figures
+    it saved are kept in :data:`DRAWN` (read back, not looked at as pixels)."""
+    from matplotlib.figure import Figure
+
     root = tmp_path_factory.mktemp("report")
     kb, out = root / "kb", root / "pipeline"
     runner = CliRunner()
-    res = runner.invoke(cli, [*demo_pipeline_args(), *SMALLER, "--kb", str(kb), "--out",
-                              str(out), "-q"])
+    save = Figure.savefig
+
+    def keep(fig, path, *args, **kwargs):
+        if isinstance(path, (str, Path)):
+            DRAWN[Path(path).name] = fig
+        return save(fig, path, *args, **kwargs)
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(Figure, "savefig", keep)
+        res = runner.invoke(cli, [*demo_pipeline_args(), *SMALLER, "--kb", str(kb), "--out",
+                                  str(out), "-q"])
     assert res.exit_code == 0, res.output
     res = runner.invoke(cli, ["report", str(out), "--kb", str(kb)])
     assert res.exit_code == 0, res.output
@@ -174,3 +191,48 @@ def test_the_docs_page_names_every_section_and_is_in_the_site():
     assert listed == list(SECTIONS)
     assert "report.md" in (ROOT / "mkdocs.yml").read_text()
     assert "$ adpart report run" in page
+
+
+def test_the_demos_figures_read_back(pipeline_run):
+    """Every figure the demo's pipeline wrote: the value-gap axis with its 0, the bound at the
+    rows' bound, a thin line per run of every learner, the regime in the title; the maps letter
+    each task's own goal and name every marker."""
+    from adpart.workflows.resolve import resolve_domain
+
+    _, out, _ = pipeline_run
+    summary = json.loads((out / "summary.json").read_text())
+    assert {Path(f).name for f in summary["figures"]} <= set(DRAWN)
+    domain = resolve_domain("three-floor")
+    feats = domain.dynamics().features
+    for task in summary["config"]["tasks"]:
+        ax = DRAWN[f"{task}.png"].axes[0]
+        rows = [r for r in summary["tasks"] if r["task"] == task and r["learner"] != "planner"]
+        assert ax.get_yscale() == "symlog" and ax.get_ylim()[0] < 0
+        ax.figure.canvas.draw()
+        assert {t.get_loc(): t.label1.get_text() for t in ax.yaxis.get_major_ticks()}[0] == "0"
+        (bound,) = [line for line in ax.get_lines() if line.get_gid() == "bound"]
+        assert list(bound.get_ydata()) == pytest.approx([rows[0]["bound"]] * 2)
+        runs = [line for line in ax.get_lines() if line.get_gid() == "run"]
+        legend = [t.get_text() for t in ax.get_legend().get_texts()]
+        medians = [int(m) for t in legend for m in re.findall(r"\(median of (\d+)\)", t)]
+        assert medians and all(m == summary["config"]["runs"] for m in medians)
+        assert len(runs) == sum(medians)  # every run of every learner drawn
+        assert f"three-floor/{task}" in ax.get_title() and "learned-model" in ax.get_title()
+        layer = any(r["learner"] == "hierarchical" for r in rows)
+        assert any("hierarchical" in t for t in legend) == layer
+    for name, fig in DRAWN.items():
+        if not name.startswith(("layer_", "subgoals_")):
+            continue
+        task = name.split("_", 1)[1].removesuffix(".png")
+        goal = np.flatnonzero(domain.task(task).terminal)
+        cells = {(int(feats["x"][g]), int(feats["y"][g]), int(feats["floor"][g])) for g in goal}
+        lettered = {(round(t.get_position()[0]), round(t.get_position()[1]), floor)
+                    for floor, ax in enumerate(a for a in fig.axes
+                                               if a.get_title().startswith("floor"))
+                    for t in ax.texts if t.get_gid() == "G"}
+        assert lettered == cells, name
+        (legend,) = fig.legends
+        names = [t.get_text() for t in legend.get_texts()]
+        assert f"goal of {task}" in names and "stairs up" in names
+        if name.startswith("subgoals_"):
+            assert "subgoals" in names
