@@ -54,7 +54,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "List installed plugins: kind, name, source package and parameters."),
     "report": (
         "adpart.cli.report_cmd:report_cmd",
-        "Write one self-contained HTML page of the pipeline run in FOLDER."),
+        "Write one self-contained HTML page of the pipeline or experiment run in FOLDER."),
     "sweep": (
         "adpart.cli.sweep:sweep_cmd",
         ("Run the grid of experiments in CONFIG (TOML), storing each cell in the knowledge "

@@ -1,4 +1,4 @@
-"""``adpart report``: one self-contained HTML page of a pipeline run."""
+"""``adpart report``: one self-contained HTML page of a pipeline or experiment run."""
 
 from __future__ import annotations
 
@@ -17,19 +17,24 @@ from adpart.store.location import KBLocation
 @kb_location_options
 def report_cmd(ref: str, out: Path | None, kb_path: str | None, kb_artifacts: str | None
                ) -> None:
-    """Write one self-contained HTML page of the pipeline run in FOLDER.
+    """Write one self-contained HTML page of the pipeline or experiment run in FOLDER.
 
     \b
-    FOLDER is what `adpart pipeline --out` wrote (its summary.json names the stored ids); the
-    curves, maps and provenance come from the knowledge base (--kb). The page holds the tasks
-    and regime, the comparison table with CIs, every run's curve with the bound, the subgoal
-    and layer maps, the blocks during learning, provenance and the command that reruns it.
-    Images are embedded and nothing is loaded at view time (docs/report.md).
+    FOLDER is what `adpart pipeline --out` (or `adpart experiment --out`) wrote. A pipeline's
+    page takes the stored ids from its summary.json and the curves, maps and provenance from
+    the knowledge base (--kb): the tasks and regime, the comparison table with CIs, every run's
+    curve with the bound, the subgoal and layer maps, the blocks during learning, provenance
+    and the command that reruns it. An experiment's page is built from its folder. Images are
+    embedded and nothing is loaded at view time (docs/report.md).
     """
-    from adpart.store import KnowledgeBase
-    from adpart.workflows.pipeline_report import load_summary, write_report
+    from adpart.workflows.pipeline_report import is_pipeline, load_summary, write_report
 
-    load_summary(ref)  # a wrong FOLDER is refused before the knowledge base is opened
+    _, summary = load_summary(ref)  # a wrong FOLDER is refused before anything is opened
+    if not is_pipeline(summary):
+        click.echo(f"wrote {write_report(None, ref, out)}")
+        return
+    from adpart.store import KnowledgeBase
+
     location = KBLocation.resolve(kb_path, kb_artifacts)
     kb = KnowledgeBase.open(location, read_only=True)
     try:

@@ -1,4 +1,4 @@
-"""One self-contained HTML page per pipeline run (``adpart report``).
+"""One self-contained HTML page per pipeline (or experiment) run (``adpart report``).
 
 A pipeline run is recorded in two places: its output folder's ``summary.json`` (the settings,
 the stages with the ids of what each stored, and the comparison rows) and the knowledge base
@@ -15,6 +15,10 @@ before and after refinement, its firings, the map of its median run's final laye
 provenance (versions, settings, seeds, ids); and the command that reruns it. Figures are
 embedded as base64 PNG and the style sheet is inline; the page loads nothing and runs no
 script, so it opens offline from a file or an attachment.
+
+An experiment's folder (``adpart experiment --out``) gets a page of its own
+(:func:`experiment_html`): the dissertation's figures beside the measured findings, every figure
+it wrote, its numbers and the command that reruns it, from the folder alone.
 """
 
 from __future__ import annotations
@@ -37,7 +41,8 @@ from adpart.workflows.learning import load_curve
 from adpart.workflows.refs import parse_ref
 from adpart.workflows.store import KnowledgeStore
 
-__all__ = ["SECTIONS", "load_summary", "pipeline_command", "report_html", "write_report"]
+__all__ = ["EXPERIMENT_SECTIONS", "SECTIONS", "experiment_html", "is_experiment", "is_pipeline",
+           "load_summary", "pipeline_command", "report_html", "write_report"]
 
 #: The page's sections (``<h2>`` headings, in order); docs/report.md lists the same.
 SECTIONS = ("Tasks and regime", "Comparison", "Learning curves", "Subgoals and layers",
@@ -60,22 +65,32 @@ code{font-size:.85rem}details{margin:.2rem 0}.note{color:#555;font-size:.9rem}
 
 
 def load_summary(ref: str | Path) -> tuple[Path, dict[str, Any]]:
-    """``(folder, summary)`` of a pipeline run: ``ref`` is the folder ``adpart pipeline --out``
-    wrote, or its ``summary.json``; anything else is a :class:`TaskError` naming the fix."""
+    """``(folder, summary)`` of a pipeline or experiment run: ``ref`` is the folder ``adpart
+    pipeline --out`` or ``adpart experiment --out`` wrote, or its ``summary.json``; anything else
+    is a :class:`TaskError` naming the fix."""
     path = Path(ref)
     summary_path = path / "summary.json" if path.is_dir() else path
+    fix = "give the folder `adpart pipeline --out` or `adpart experiment --out` wrote"
     if not summary_path.is_file():
-        raise TaskError(f"no pipeline summary at {summary_path}: give the folder `adpart "
-                        "pipeline --out` wrote (it holds summary.json)")
+        raise TaskError(f"no pipeline summary at {summary_path}: {fix} (it holds summary.json)")
     try:
         summary = json.loads(summary_path.read_text())
     except (OSError, ValueError) as exc:
-        raise TaskError(f"cannot read {summary_path} as JSON ({exc}); give the folder `adpart "
-                        "pipeline --out` wrote") from None
-    if not isinstance(summary, dict) or not {"config", "stages", "tasks"} <= summary.keys():
-        raise TaskError(f"{summary_path} is not a pipeline summary (no config, stages and "
-                        "tasks); give the folder `adpart pipeline --out` wrote")
+        raise TaskError(f"cannot read {summary_path} as JSON ({exc}); {fix}") from None
+    if not isinstance(summary, dict) or not (is_pipeline(summary) or is_experiment(summary)):
+        raise TaskError(f"{summary_path} is neither a pipeline summary (config, stages, tasks) "
+                        f"nor an experiment's (name, findings, figures); {fix}")
     return summary_path.parent, summary
+
+
+def is_pipeline(summary: dict[str, Any]) -> bool:
+    """Whether ``summary`` is what ``adpart pipeline`` writes."""
+    return {"config", "stages", "tasks"} <= summary.keys()
+
+
+def is_experiment(summary: dict[str, Any]) -> bool:
+    """Whether ``summary`` is what ``adpart experiment`` writes."""
+    return {"name", "findings", "figures"} <= summary.keys()
 
 
 def pipeline_command(config: dict[str, Any]) -> str:
@@ -110,19 +125,75 @@ def pipeline_command(config: dict[str, Any]) -> str:
     return shlex.join(words)
 
 
-def write_report(kb: KnowledgeStore, ref: str | Path, out: Path | None = None, *,
+def write_report(kb: KnowledgeStore | None, ref: str | Path, out: Path | None = None, *,
                  kb_label: str = "") -> Path:
-    """Write the page of the pipeline run at ``ref`` (:func:`load_summary`) to ``out``
-    (default ``report.html`` in its folder); return the path written."""
+    """Write the page of the run at ``ref`` (:func:`load_summary`) to ``out`` (default
+    ``report.html`` in its folder); return the path written. A pipeline's page reads ``kb``;
+    an experiment's (:func:`experiment_html`) only its folder."""
     folder, summary = load_summary(ref)
     target = out or folder / "report.html"
-    html = report_html(kb, summary, source=str(folder), kb_label=kb_label)
+    if is_pipeline(summary):
+        if kb is None:
+            raise TaskError("a pipeline's page reads its knowledge base: give --kb")
+        html = report_html(kb, summary, source=str(folder), kb_label=kb_label)
+    else:
+        html = experiment_html(folder, summary)
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
         target.write_text(html, encoding="utf-8")
     except OSError as exc:
         raise TaskError(f"cannot write {target}: {exc.strerror}; choose another --out") from None
     return target
+
+
+#: An experiment's page's sections, in order.
+EXPERIMENT_SECTIONS = ("What the dissertation reports", "What we measured", "Figures",
+                       "Provenance", "Rerun")
+
+
+def experiment_html(folder: Path, summary: dict[str, Any]) -> str:
+    """The page of an ``adpart experiment`` run: the seed's figures beside the measured
+    findings, every figure it wrote (embedded from the folder), the numbers and the command
+    that reruns it."""
+    body = [f"<h1>{escape(summary.get('title') or summary['name'])}</h1>",
+            (f"<p class=note>experiment {escape(summary['name'])} in {escape(str(folder))}, "
+             f"{float(summary.get('seconds') or 0):.1f} s</p>")]
+    body += _section("What the dissertation reports", [
+        "<ul>" + "".join(f"<li>{escape(x)}</li>" for x in summary.get("seed_reports", []))
+        + "</ul>"])
+    body += _section("What we measured", [
+        "<ul>" + "".join(f"<li>{escape(x)}</li>" for x in summary["findings"]) + "</ul>"])
+    figures = []
+    for name in summary["figures"]:
+        path = folder / Path(name).name
+        if path.suffix == ".png" and path.is_file():
+            data = base64.b64encode(path.read_bytes()).decode("ascii")
+            figures.append(f"<figure><img alt='{escape(path.stem, quote=True)}' "
+                           f"src='data:image/png;base64,{data}'><figcaption>"
+                           f"{escape(path.name)}</figcaption></figure>")
+        else:
+            figures.append(f"<p>{escape(path.name)}: not in {escape(str(folder))}</p>")
+    body += _section("Figures", figures or ["<p>No figures.</p>"])
+    versions = ", ".join(_versions())
+    numbers = json.dumps(summary.get("data", {}), sort_keys=True, indent=1, default=str)
+    body += _section("Provenance", [
+        (f"<p>Settings {escape(json.dumps(summary.get('settings', {}), sort_keys=True))}; "
+         f"page made with Python {escape(platform.python_version())}, {escape(versions)}.</p>"),
+        (f"<details><summary>every number (summary.json)</summary><pre><code>"
+         f"{escape(numbers)}</code></pre></details>")])
+    words = ["adpart", "experiment", summary["name"], "--out", str(folder)]
+    settings = summary.get("settings") or {}
+    for key in ("runs", "seed"):
+        if key in settings:
+            words += [f"--{key}", str(settings[key])]
+    if settings.get("quick"):
+        words.append("--quick")
+    body += _section("Rerun", [f"<pre><code>{escape(shlex.join(words))}</code></pre>"])
+    title = escape(f"adpart report: experiment {summary['name']}")
+    return ("<!DOCTYPE html>\n<html lang=en><head><meta charset=utf-8>"
+            f"<meta name=viewport content='width=device-width, initial-scale=1'>"
+            f"<title>{title}</title><style>{_STYLE}</style></head><body>\n"
+            + "\n".join(body) + "\n</body></html>\n")
 
 
 def report_html(kb: KnowledgeStore, summary: dict[str, Any], *, source: str = "",
@@ -410,12 +481,7 @@ def _provenance(kb: KnowledgeStore, config: dict[str, Any], stages: list[dict[st
                       "" if seed is None else str(seed),
                       (f"<details><summary>{len(p.parameters)} settings</summary>"
                        f"<code>{escape(params)}</code></details>")])
-    versions = []
-    for name in _PACKAGES:
-        try:
-            versions.append(f"{name} {importlib_metadata.version(name)}")
-        except importlib_metadata.PackageNotFoundError:
-            continue
+    versions = _versions()
     settings = json.dumps(config, sort_keys=True, indent=1)
     return [
         _table(["record", "plugin", "plugin version", "adpart", "created", "seed", "settings"],
@@ -425,3 +491,14 @@ def _provenance(kb: KnowledgeStore, config: dict[str, Any], stages: list[dict[st
         (f"<details><summary>the pipeline's settings (summary.json)</summary><pre><code>"
          f"{escape(settings)}</code></pre></details>"),
     ]
+
+
+def _versions() -> list[str]:
+    """``name version`` of each of :data:`_PACKAGES` installed here."""
+    versions = []
+    for name in _PACKAGES:
+        try:
+            versions.append(f"{name} {importlib_metadata.version(name)}")
+        except importlib_metadata.PackageNotFoundError:
+            continue
+    return versions

@@ -21,7 +21,7 @@ import pytest
 from click.testing import CliRunner
 
 from adpart.cli import cli
-from adpart.workflows.pipeline_report import SECTIONS
+from adpart.workflows.pipeline_report import EXPERIMENT_SECTIONS, SECTIONS
 
 ROOT = Path(__file__).resolve().parents[2]
 SMALLER = ["--runs", "2", "--episodes", "30", "--first-episodes", "60", "--eval-every", "10"]
@@ -144,20 +144,23 @@ def test_a_folder_without_a_pipeline_summary_is_refused(tmp_path):
     res = CliRunner().invoke(cli, ["report", str(tmp_path), "--kb", str(tmp_path / "kb")])
     assert res.exit_code == 2
     assert "no pipeline summary at" in res.output and "adpart pipeline --out" in res.output
+    (tmp_path / "summary.json").write_text('{"something": 1}')
+    res = CliRunner().invoke(cli, ["report", str(tmp_path), "--kb", str(tmp_path / "kb")])
+    assert res.exit_code == 2 and "neither a pipeline summary" in res.output
     assert "Traceback" not in res.output
     assert not (tmp_path / "kb").exists()  # refused before the knowledge base is opened
 
 
-def test_the_page_renders_in_headless_chromium(pipeline_run):
-    """A real browser: the page loads from the file, the console has no error, every image
-    decodes (naturalWidth > 0); a screenshot is written beside the page."""
+def open_in_chromium(page: Path, shot: Path) -> dict:
+    """Open ``page`` in headless Chromium; its title, headings, images' natural widths and
+    console errors, and a screenshot at ``shot``. Skips where Chromium or its driver is
+    missing."""
     if not CHROMIUM.exists() or not CHROMEDRIVER.exists():
         pytest.skip(f"needs {CHROMIUM} and {CHROMEDRIVER} (apt-get install chromium "
                     "chromium-driver)")
     webdriver = pytest.importorskip("selenium.webdriver", reason="needs selenium (the dev extra)")
     from selenium.webdriver.chrome.service import Service
 
-    _, out, page = pipeline_run
     options = webdriver.ChromeOptions()
     options.binary_location = str(CHROMIUM)
     for flag in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
@@ -168,21 +171,57 @@ def test_the_page_renders_in_headless_chromium(pipeline_run):
                               options=options)
     try:
         driver.get(page.as_uri())
-        assert driver.execute_script("return document.readyState") == "complete"
-        assert driver.title.startswith("adpart report: three-floor")
-        widths = driver.execute_script(
-            "return Array.from(document.images).map(i => i.complete ? i.naturalWidth : 0)")
-        assert len(widths) >= 4 and min(widths) > 0, widths
-        headings = driver.execute_script(
-            "return Array.from(document.querySelectorAll('h2')).map(h => h.textContent)")
-        assert headings == list(SECTIONS)
-        errors = [e for e in driver.get_log("browser") if e["level"] == "SEVERE"]
-        assert errors == []
-        shot = out / "report.png"
+        seen = {
+            "ready": driver.execute_script("return document.readyState"),
+            "title": driver.title,
+            "widths": driver.execute_script(
+                "return Array.from(document.images).map(i => i.complete ? i.naturalWidth : 0)"),
+            "headings": driver.execute_script(
+                "return Array.from(document.querySelectorAll('h2')).map(h => h.textContent)"),
+            "errors": [e for e in driver.get_log("browser") if e["level"] == "SEVERE"],
+        }
         assert driver.save_screenshot(str(shot))
-        assert shot.read_bytes()[:4] == b"\x89PNG"
     finally:
         driver.quit()
+    assert shot.read_bytes()[:4] == b"\x89PNG"
+    return seen
+
+
+def test_the_page_renders_in_headless_chromium(pipeline_run):
+    """A real browser: the page loads from the file, the console has no error, every image
+    decodes (naturalWidth > 0); a screenshot is written beside the page."""
+    _, out, page = pipeline_run
+    seen = open_in_chromium(page, out / "report.png")
+    assert seen["ready"] == "complete"
+    assert seen["title"].startswith("adpart report: three-floor")
+    assert len(seen["widths"]) >= 4 and min(seen["widths"]) > 0, seen["widths"]
+    assert seen["headings"] == list(SECTIONS)
+    assert seen["errors"] == []
+
+
+def test_an_experiments_page(tmp_path):
+    """`adpart report` on an experiment's folder: the seed's figures beside ours, every figure
+    it wrote embedded, the command that reruns it with its settings; no knowledge base."""
+    out = tmp_path / "exp"
+    runner = CliRunner()
+    res = runner.invoke(cli, ["experiment", "subgoals-two-rooms", "--quick", "--runs", "3",
+                              "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    res = runner.invoke(cli, ["report", str(out), "--kb", str(tmp_path / "kb")])
+    assert res.exit_code == 0, res.output
+    assert not (tmp_path / "kb").exists()
+    page = out / "report.html"
+    parsed = _Page()
+    parsed.feed(page.read_text())
+    summary = json.loads((out / "summary.json").read_text())
+    assert parsed.headings == list(EXPERIMENT_SECTIONS)
+    assert len(parsed.images) == len(summary["figures"]) >= 1
+    assert all(src.startswith("data:image/png;base64,") for src in parsed.images)
+    assert parsed.scripts == 0 and parsed.external == []
+    assert (f"adpart experiment subgoals-two-rooms --out {out} --runs 3 --seed 0 --quick"
+            in page.read_text())
+    seen = open_in_chromium(page, out / "report.png")
+    assert min(seen["widths"]) > 0 and seen["errors"] == []
 
 
 def test_the_docs_page_names_every_section_and_is_in_the_site():
