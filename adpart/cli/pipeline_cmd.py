@@ -310,7 +310,7 @@ def transfer_cmd(
 ) -> None:
     """Learn TASK of ENV on a stored decision layer with the hierarchical learner (last step)."""
     from adpart.learning.comparison import task_row
-    from adpart.learning.curves import plot_curves
+    from adpart.learning.curves import SUCCESS_FRACTION, plot_curves
     from adpart.store import KnowledgeBase
     from adpart.workflows.learning import (
         LearnRequest,
@@ -361,14 +361,14 @@ def transfer_cmd(
             curves[label] = load_curve(kb, run)
             ids[label] = found["run"]
             extra = {"initial_blocks": blocks} if label == "hierarchical" else {}
-            rows.append(task_row(task, label, curves[label], 0.05, extra))
+            rows.append(task_row(task, label, curves[label], SUCCESS_FRACTION, extra))
     finally:
         kb.close()
     figure = plot_curves(
         curves, out / "transfer.png", metric="value_gap",
         title=(f"{env}/{task}: value gap of the greedy policy\n"
                f"hierarchical on {partition_ref} ({blocks} blocks) vs flat, {runs} runs each"),
-        bound=rows[0]["bound"], bound_label="success bound (5% of |V*|)",
+        bound=rows[0]["bound"], bound_label=f"success bound ({SUCCESS_FRACTION:.0%} of |V*|)",
     )
     summary = {
         "env": env,
