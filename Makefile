@@ -35,7 +35,8 @@ DEMO   := demo-output
 # The main job on the embedded default knowledge base ($$ADPART_KB, else ~/.local/share/adpart/kb):
 # flat Q-learning on two-rooms and three-floor (curves, policies, summaries), then
 # the transfer pipeline on three-floor - learn reach-goal flat, discover subgoals, learn options,
-# partition, learn reach-top-west on the decision layer vs flat - with figures in demo-output/.
+# partition, learn reach-top-west on the decision layer vs flat - with figures in demo-output/
+# and its page, demo-output/pipeline/report.html (adpart report).
 # A second `make demo` reuses everything the knowledge base already holds.
 demo: $(BASE)
 	$(ADPART) learn two-rooms --runs 10 --episodes 300 --alpha 1 --epsilon 0.5 --eval-every 25 \
@@ -45,6 +46,7 @@ demo: $(BASE)
 	$(ADPART) env show three-floor --task reach-goal --out $(DEMO)/three-floor-vstar.png --json
 	$(ADPART) pipeline three-floor --tasks reach-goal,reach-top-west --runs 20 --episodes 500 \
 		--eval-every 1 --out $(DEMO)/pipeline
+	$(ADPART) report $(DEMO)/pipeline
 	$(ADPART) kb info
 
 # One BLAS thread per test worker: two workers already fill the two cores, and threaded BLAS

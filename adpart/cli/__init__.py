@@ -52,6 +52,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "plugins": (
         "adpart.cli.plugins_cmd:plugins_cmd",
         "List installed plugins: kind, name, source package and parameters."),
+    "report": (
+        "adpart.cli.report_cmd:report_cmd",
+        "Write one self-contained HTML page of the pipeline or experiment run in FOLDER."),
     "sweep": (
         "adpart.cli.sweep:sweep_cmd",
         ("Run the grid of experiments in CONFIG (TOML), storing each cell in the knowledge "

@@ -104,6 +104,9 @@ def discover_cmd(
             values=result.scores,
             marked=result.mask,
             title=f"{env}: {detector} scores, subgoals marked",
+            task=_drawable_task(env, task.name),
+            value_label=f"{detector} score",
+            mark_label="subgoals",
         )
         out["plot"] = str(plot)
     if as_json:
@@ -120,3 +123,16 @@ def discover_cmd(
         if key in stats:
             click.echo(f"{key}: {stats[key]}")
     click.echo(f"stored as {found.record.ref}")
+
+
+def _drawable_task(env: str, name: str) -> str | None:
+    """``name`` if ``env`` resolves it (a named task or ``goal:...``), so the map letters its
+    goal; else None (the domain's default task)."""
+    from adpart.errors import AdpartError
+    from adpart.workflows.resolve import resolve_domain
+
+    try:
+        resolve_domain(env).task(name)
+    except AdpartError:
+        return None
+    return name

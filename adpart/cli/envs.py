@@ -70,7 +70,8 @@ def env_show(name: str, out: Path | None, task: str | None, as_json: bool) -> No
             values = solve(domain.mdp(task), 1e-6).V
         out.parent.mkdir(parents=True, exist_ok=True)
         title = f"{name}" + (f" - V* of {task}" if task else "")
-        domain.render(str(out), values=values, title=title, task=task)
+        domain.render(str(out), values=values, title=title, task=task,
+                      value_label=f"V* of {task} (optimal value)" if task else "value")
         info["png"] = str(out)
     if as_json:
         echo_json(info)

@@ -104,7 +104,7 @@ def learn_cmd(
     Writes to the output folder:
       curve.parquet   one row per (run, episode): steps, decisions, return, value gap
       policy.parquet  the greedy policy of every run: run, state, action, value
-      curve.png       mean value gap over runs with a min-max band
+      curve.png       value gap of every run, their median and quartiles, the success bound
       summary.json    what was run and how it ended
 
     \b
@@ -112,6 +112,10 @@ def learn_cmd(
     policy per run (Q and greedy policy) and one run with the curve; their ids are printed. A run
     is deterministic in its settings and seed, so one the knowledge base already holds is not
     recorded twice.
+
+    Where the learner takes them, --alpha defaults to 1 on an environment whose every move is
+    deterministic (else the learner's 1/n^0.8) and --max-steps to max(1000, 2 x states), as in
+    `adpart pipeline`.
     """
     from adpart.store.location import KBLocation
     from adpart.workflows import (
@@ -121,12 +125,16 @@ def learn_cmd(
         run_learning,
         write_learning_outputs,
     )
+    from adpart.workflows.pipeline import episode_defaults, learner_defaults
     from adpart.workflows.reports import folder_name
     from adpart.workflows.resolve import resolve_domain
 
     reg = registry()
     spec = reg.get("learner", learner)
-    given = split_plugin_options(spec, plugin_options)
+    # the environment's defaults, as the pipeline's (alpha 1 where every move is deterministic,
+    # episodes long enough to cross the map), under what the command line gives
+    given = {**learner_defaults(learner, episode_defaults(env)),
+             **split_plugin_options(spec, plugin_options)}
     spec.resolve_params(given)  # every value checked (nan, ranges, schedules) before any work
     request = LearnRequest(
         env=env,

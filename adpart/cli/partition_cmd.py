@@ -125,7 +125,8 @@ def partition_cmd(
         title = f"{env}: {outcome.final.n_blocks} blocks (delta={outcome.delta:g}" + (
             f", epsilon={outcome.epsilon:g}, {outcome.task})" if outcome.task else ")"
         )
-        summary["plot"] = plot_partition(env, outcome.final.labels, str(plot_path), title=title)
+        summary["plot"] = plot_partition(env, outcome.final.labels, str(plot_path), title=title,
+                                         task=task)
     if as_json:
         echo_json(summary)
         return

@@ -318,7 +318,7 @@ def transfer_cmd(
 ) -> None:
     """Learn TASK of ENV on a stored decision layer with the hierarchical learner (last step)."""
     from adpart.learning.comparison import task_row
-    from adpart.learning.curves import plot_curves
+    from adpart.learning.curves import SUCCESS_FRACTION, plot_curves
     from adpart.store import KBLocation, KnowledgeBase
     from adpart.workflows.learning import (
         LearnRequest,
@@ -327,12 +327,15 @@ def transfer_cmd(
         record_learning,
         run_learning,
     )
+    from adpart.workflows.pipeline import episode_defaults, learner_defaults
     from adpart.workflows.pipeline_table import comparison_lines
     from adpart.workflows.progress import progress_bars
     from adpart.workflows.refs import parse_ref
     from adpart.workflows.reports import folder_name
 
-    hier_params = key_values(hier_opt, "--hier-opt")
+    defaults = episode_defaults(env)  # the pipeline's, for both learners
+    hier_params = {**learner_defaults("hierarchical", defaults),
+                   **key_values(hier_opt, "--hier-opt")}
     _check_plugin_params("learner", "hierarchical", hier_params, "--hier-opt", "--hier-opt")
     out = out or Path("adpart-transfer") / folder_name(env, task)
     requests = {
@@ -353,6 +356,7 @@ def transfer_cmd(
             env=env,
             task=task,
             learner="q-learning",
+            params=learner_defaults("q-learning", defaults),
             runs=runs,
             episodes=episodes,
             seed=seed,
@@ -371,12 +375,14 @@ def transfer_cmd(
             curves[label] = load_curve(kb, run)
             ids[label] = found["run"]
             extra = {"initial_blocks": blocks} if label == "hierarchical" else {}
-            rows.append(task_row(task, label, curves[label], 0.05, extra))
+            rows.append(task_row(task, label, curves[label], SUCCESS_FRACTION, extra))
     finally:
         kb.close()
     figure = plot_curves(
-        curves, out / "transfer.png", metric="value_gap", title=f"{env}/{task} on {partition_ref}",
-        bound=rows[0]["bound"], bound_label="success bound (5% of |V*|)",
+        curves, out / "transfer.png", metric="value_gap",
+        title=(f"{env}/{task}: value gap of the greedy policy\n"
+               f"hierarchical on {partition_ref} ({blocks} blocks) vs flat, {runs} runs each"),
+        bound=rows[0]["bound"], bound_label=f"success bound ({SUCCESS_FRACTION:.0%} of |V*|)",
     )
     summary = {
         "env": env,

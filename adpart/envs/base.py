@@ -329,15 +329,18 @@ class Domain(ABC):
         labels: np.ndarray | None = None,
         title: str | None = None,
         task: Task | str | None = None,
+        value_label: str = "value",
+        mark_label: str = "marked states",
     ) -> Figure:
         """Draw the domain, optionally with a value per state, marked states or a label per state.
 
         Overlays on factored domains are reduced to one value per cell (the max over the other
         features for ``values``; any for ``marked``; the first state's label for ``labels``).
-        ``task`` (default: the default task) gives the goal (G) and start (S) letters. Saves a
-        PNG when ``path`` is given and returns the matplotlib Figure.
+        ``task`` (default: the default task) gives the goal (G) and start (S) letters;
+        ``value_label`` names the colour bar, ``mark_label`` the marked cells in the legend.
+        Saves a PNG when ``path`` is given and returns the matplotlib Figure.
         """
         from adpart.envs.render import render_domain
 
         return render_domain(self, path, values=values, marked=marked, labels=labels, title=title,
-                             task=task)
+                             task=task, value_label=value_label, mark_label=mark_label)

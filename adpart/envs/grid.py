@@ -463,21 +463,27 @@ class GridDomain(Domain):
             raise MapError(f"({x}, {y}) on floor {floor} is not a free cell of {self.name}")
         return int(self.grid.cell_index[floor, y, x])
 
-    def draw_extras(self, ax: Axes, floor: int) -> None:
+    def draw_extras(self, ax: Axes, floor: int) -> list[tuple[str, str, str]]:
         """Mark the stairs (up/down arrows) and letter the object-site cells; the start and goal
-        letters come from the task drawn (:func:`adpart.envs.render.render_domain`)."""
+        letters come from the task drawn (:func:`adpart.envs.render.render_domain`). Returns
+        the legend entries ``(symbol, colour, meaning)`` of what it drew on this floor."""
         chars = self.grid.chars[floor]
         F = self.grid.shape[0]
         small = max(chars.shape) <= 40
+        meanings = {"↕": "stairs up and down", "↑": "stairs up", "↓": "stairs down"}
+        entries: dict[str, tuple[str, str, str]] = {}
         for y, x in np.argwhere(chars == STAIR):
             up = floor + 1 < F and self.grid.chars[floor + 1, y, x] == STAIR
             down = floor > 0 and self.grid.chars[floor - 1, y, x] == STAIR
             mark = {(True, True): "↕", (True, False): "↑", (False, True): "↓"}[(up, down)]
             ax.text(x, y, mark, ha="center", va="center", color="tab:red",
-                    fontsize=8 if small else 5, fontweight="bold")
+                    fontsize=8 if small else 5, fontweight="bold", gid="stairs")
+            entries[mark] = (mark, "tab:red", meanings[mark])
         if not small:
-            return
+            return list(entries.values())
         for char in SITES:
             for y, x in np.argwhere(chars == char):
                 ax.text(x, y, char, ha="center", va="center", color="tab:blue", fontsize=8,
-                        fontweight="bold")
+                        fontweight="bold", gid="site")
+                entries[char] = (char, "tab:blue", f"object site {char}")
+        return list(entries.values())

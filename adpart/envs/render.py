@@ -9,13 +9,17 @@ by the first state's label. This is how the dissertation's figures show value fu
 
 Walls come from ``domain.layout()`` (a ``(floors, H, W)`` bool array of free cells) when the
 domain defines it; otherwise every cell no state occupies is drawn as a wall. A domain may add
-drawing of its own through ``domain.draw_extras(ax, floor)`` (e.g. thin walls, stair arrows).
-The figure is built without pyplot (no global state, no GUI backend needed).
+drawing of its own through ``domain.draw_extras(ax, floor)`` (e.g. thin walls, stair arrows),
+which may return legend entries ``(symbol, colour, meaning)`` for what it drew. Blocks are
+coloured so that no two touching blocks share a colour (:func:`adpart.plotting.map_colouring`),
+and every marker on the map has a legend entry below it: the marked states, the task's goal and
+start letters and the domain's own symbols. The figure is built without pyplot (no global
+state, no GUI backend needed).
 """
 
 from __future__ import annotations
 
-import colorsys
+from collections.abc import Iterable
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -25,7 +29,7 @@ from matplotlib.figure import Figure
 
 from adpart.envs.base import Task
 from adpart.errors import AdpartError, ModelError
-from adpart.plotting import map_figure
+from adpart.plotting import block_adjacency, distinct_colours, map_colouring, map_figure
 
 if TYPE_CHECKING:
     from adpart.envs.base import Domain
@@ -45,14 +49,13 @@ def _overlay(arr: np.ndarray | None, S: int, what: str) -> np.ndarray | None:
 
 
 def label_colours(n: int) -> np.ndarray:
-    """``(n, 3)`` distinct RGB colours: tab20 for up to 20 labels, golden-ratio hues beyond."""
-    if n <= 20:
+    """``(n, 3)`` colours for ``n`` map colours: Set3's 12 light colours (letters and borders
+    read on each), :func:`adpart.plotting.distinct_colours` beyond."""
+    if n <= 12:
         from matplotlib import colormaps
 
-        return np.asarray(colormaps["tab20"](np.arange(n)))[:, :3]
-    hues = (np.arange(n) * 0.618033988749895) % 1.0
-    light = 0.45 + 0.25 * ((np.arange(n) * 7) % 3) / 2
-    return np.array([colorsys.hls_to_rgb(h, li, 0.75) for h, li in zip(hues, light, strict=True)])
+        return np.asarray(colormaps["Set3"](np.arange(n)))[:, :3]
+    return distinct_colours(n)
 
 
 def _boundaries(lab: np.ndarray) -> np.ndarray:
@@ -100,6 +103,8 @@ def render_domain(
     labels: np.ndarray | None = None,
     title: str | None = None,
     task: Task | str | None = None,
+    value_label: str = "value",
+    mark_label: str = "marked states",
 ) -> Figure:
     """Draw ``domain`` with optional overlays; save a PNG at ``path`` if given.
 
@@ -108,12 +113,15 @@ def render_domain(
         path: where to write the PNG (None: only return the figure).
         values: ``(S,)`` numbers shown as a colour map with a colour bar (max per cell).
         marked: ``(S,)`` bool, cells with any marked state get a marker (e.g. subgoals).
-        labels: ``(S,)`` int, one colour per label (e.g. partition blocks), with block borders.
+        labels: ``(S,)`` int, a colour per label (e.g. partition blocks) such that touching
+            blocks differ, with block borders.
         title: the figure's title (default: the domain's name).
         task: the task whose goal (``G``: its terminal cells) and start (``S``: the cells it
             starts from) are lettered, white on a black outline so they read on any colour;
             default the domain's default task. Letters are left out when a task has more than
             :data:`MAX_LETTERED` such cells (a factored task ends or starts almost anywhere).
+        value_label: the colour bar's label (what ``values`` are: "V*", "count score").
+        mark_label: the legend's entry for the ``marked`` cells ("subgoals").
 
     Returns:
         The matplotlib Figure.
@@ -155,11 +163,12 @@ def render_domain(
         uniq, dense = np.unique(labs.astype(np.int64), return_inverse=True)
         cell_lab = np.full(F * H * W, -1, dtype=np.int64)
         cell_lab[cell[first]] = dense[first]
-        colours = label_colours(uniq.size)
-        coloured = cell_lab >= 0
-        flat = base.reshape(-1, 3)
-        flat[coloured] = colours[cell_lab[coloured]]
         cell_lab = cell_lab.reshape(F, H, W)
+        colour_of = map_colouring(uniq.size, block_adjacency(cell_lab), palette=12)
+        colours = label_colours(int(colour_of.max()) + 1)
+        coloured = cell_lab.reshape(-1) >= 0
+        flat = base.reshape(-1, 3)
+        flat[coloured] = colours[colour_of[cell_lab.reshape(-1)[coloured]]]
     cell_val = None
     if vals is not None:
         cell_val = np.full(F * H * W, -np.inf)
@@ -172,6 +181,7 @@ def render_domain(
         cell_mark = cell_mark.reshape(F, H, W)
 
     letters = _task_letters(domain, task, cell, (F, H, W))
+    legend: dict[str, tuple[str, str]] = {}  # meaning -> (symbol, colour)
     image = None
     small = max(W, H) <= 40
     for f, ax in enumerate(axes):
@@ -190,15 +200,19 @@ def render_domain(
         if cell_mark is not None:
             my, mx = np.nonzero(cell_mark[f])
             ax.scatter(mx, my, s=(40 if small else 6), marker="o", c=MARK_COLOUR,
-                       edgecolors="black", linewidths=0.4, zorder=3)
+                       edgecolors="black", linewidths=0.4, zorder=3, gid="marked")
+            if my.size:
+                legend[mark_label] = ("o", MARK_COLOUR)
         extras = getattr(domain, "draw_extras", None)
         if callable(extras):
-            extras(ax, f)
+            for symbol, colour, meaning in _entries(extras(ax, f)):
+                legend.setdefault(meaning, (symbol, colour))
         for letter, cells in letters.items():
             for y_, x_ in np.argwhere(cells[f]):
                 ax.text(x_, y_, letter, ha="center", va="center", color="white", gid=letter,
                         fontsize=9 if small else 6, fontweight="bold", zorder=4,
                         path_effects=[patheffects.withStroke(linewidth=2.2, foreground="black")])
+                legend.setdefault(_letter_meaning(letter, domain, task), (letter, "black"))
         if F > 1:
             ax.set_title(f"floor {f}", fontsize=9)
         ax.set_xlim(-0.5, W - 0.5)
@@ -206,9 +220,36 @@ def render_domain(
         ax.set_xticks([])
         ax.set_yticks([])
     if image is not None:
-        fig.colorbar(image, ax=list(axes), shrink=0.8, label="value")
+        fig.colorbar(image, ax=list(axes), shrink=0.8, label=value_label)
+    if legend:
+        _legend(fig, legend)
     fig.suptitle(title if title is not None else domain.name, fontsize=11)
     if path is not None:
         fig.savefig(path, dpi=110, format="png")
     return fig
 
+
+
+def _entries(drawn: Iterable[tuple[str, str, str]] | None) -> list[tuple[str, str, str]]:
+    """The legend entries a domain's ``draw_extras`` returned (None: it names none)."""
+    return [] if drawn is None else [tuple(e) for e in drawn]  # type: ignore[misc]
+
+
+def _letter_meaning(letter: str, domain: Domain, task: Task | str | None) -> str:
+    name = domain.task(task).name  # resolved before, by _task_letters
+    return f"goal of {name}" if letter == "G" else f"start of {name}"
+
+
+def _legend(fig: Figure, entries: dict[str, tuple[str, str]]) -> None:
+    """One legend below the panels: a proxy marker per meaning (gid ``map-legend``)."""
+    from matplotlib.lines import Line2D
+
+    handles = []
+    for meaning, (symbol, colour) in entries.items():
+        marker = "o" if symbol == "o" else f"${symbol}$"
+        handles.append(Line2D([], [], ls="none", marker=marker, color=colour, label=meaning,
+                              markeredgecolor="black" if symbol == "o" else colour,
+                              markersize=7 if symbol == "o" else 9))
+    legend = fig.legend(handles=handles, loc="outside lower center", fontsize=8,
+                        ncol=min(4, len(handles)), frameon=False)
+    legend.set_gid("map-legend")

@@ -52,6 +52,8 @@ class ExperimentReport:
     findings: list[str] = field(default_factory=list)
     seed_reports: list[str] = field(default_factory=list)
     seconds: float = 0.0
+    #: the shared settings it ran with (runs, seed, quick), so `adpart report` can rerun it
+    settings: dict[str, Any] = field(default_factory=dict)
 
     def write(self, out: Path) -> dict[str, str]:
         out.mkdir(parents=True, exist_ok=True)
@@ -59,6 +61,7 @@ class ExperimentReport:
             "name": self.name,
             "title": self.title,
             "seconds": round(self.seconds, 3),
+            "settings": self.settings,
             "figures": self.figures,
             "seed_reports": self.seed_reports,
             "findings": self.findings,
@@ -148,4 +151,5 @@ def run_experiment(name: str, config: ExperimentConfig) -> tuple[ExperimentRepor
     start = time.perf_counter()
     report = exp.run(config)
     report.seconds = time.perf_counter() - start
+    report.settings = {"runs": config.runs, "seed": config.seed, "quick": config.quick}
     return report, report.write(config.out)

@@ -208,7 +208,13 @@ def _json_default(value: object) -> object:
 _X_AXES = ("episode", "steps", "decisions")
 _BANDS = ("quartiles", "minmax", "sd")
 #: Runs up to which every run is also drawn as a thin line under the band.
-PER_RUN_LINES = 12
+PER_RUN_LINES = 100
+#: The success bound's default fraction of ``|V*(start)|`` (a run has learned a task once its
+#: greedy policy's value gap stays within it; the pipeline's ``gap_fraction``).
+SUCCESS_FRACTION = 0.05
+#: Value gaps within this fraction of ``max(1, |V*(start)|)`` are rounding, drawn as 0: exact
+#: evaluations of the optimal policy differ from ``V*`` by ~1e-15 (either sign).
+ROUNDING = 1e-9
 
 
 def curve_figure(
@@ -220,9 +226,9 @@ def curve_figure(
     logy: bool | None = None,
     title: str | None = None,
     bound: float | None = None,
-    bound_label: str = "bound",
+    bound_label: str | None = None,
 ) -> Any:
-    """The figure :func:`plot_curves` saves: the median over runs of ``metric`` with a band.
+    """The figure :func:`plot_curves` saves: every run, their median and a band, the bound.
 
     Args:
         curve: one curve, or ``{label: curve}`` to compare learners on one axes.
@@ -234,18 +240,21 @@ def curve_figure(
         band: ``quartiles`` (default: the median and the 25-75% band, so a two-way split of the
             runs shows instead of hiding in a mean), ``minmax`` (median, range over runs) or
             ``sd`` (mean +- one standard deviation). With at most :data:`PER_RUN_LINES` runs
-            every run is also drawn, thin.
-        logy: logarithmic y axis; by default only for ``value_gap``. A gap of 0 (an optimal
-            policy) cannot be drawn on a log axis: it is drawn at a floor a decade below the
-            smallest positive gap, and the legend says so.
-        title: the axes title (default: the metric and the band).
-        bound: draw this value as a dashed horizontal line labelled ``bound_label`` (e.g. the
-            success bound 5% of ``|V*|`` on a value-gap figure).
+            every run is also drawn, thin (gid ``run``), so a minority that succeeds shows.
+        logy: for ``value_gap`` (the default there) the value-gap axis of
+            :func:`adpart.plotting.gap_axis`: symmetric-log with an explicit ``0`` at the bottom
+            and its linear part up to a tenth of the bound, gaps within :data:`ROUNDING` of 0
+            drawn as 0; for another metric a log axis.
+        title: the axes title (default: the environment and task, the metric, and the learner
+            and what it knew, from the curves' metadata).
+        bound: the dashed horizontal line (gid ``bound``) labelled ``bound_label``; by default
+            on a value-gap figure the success bound, :data:`SUCCESS_FRACTION` of ``|V*|`` at the
+            start (``curve.metadata["v_star_start"]`` of the first curve).
 
     Returns:
         A :class:`matplotlib.figure.Figure` (no pyplot state; save it or read its artists).
     """
-    from adpart.plotting import new_figure
+    from adpart.plotting import gap_axis, gap_threshold, legend_below, new_figure
 
     curves = {"": curve} if isinstance(curve, LearningCurve) else dict(curve)
     if not curves:
@@ -259,7 +268,13 @@ def curve_figure(
         raise TaskError(f"x axis {x!r} is not one of {list(_X_AXES)}")
     if band not in _BANDS:
         raise TaskError(f"band {band!r} is not one of {list(_BANDS)}")
-    logy = metric == "value_gap" if logy is None else logy
+    gaps = metric == "value_gap"
+    logy = gaps if logy is None else logy
+    first = next(iter(curves.values()))
+    v_star = float(first.metadata.get("v_star_start", np.nan))
+    if bound is None and gaps and np.isfinite(v_star):
+        bound = max(1e-9, SUCCESS_FRACTION * abs(v_star))
+        bound_label = bound_label or f"success bound ({SUCCESS_FRACTION:.0%} of |V*(start)|)"
     series = []
     for label, c in curves.items():
         values = c.matrix(metric).astype(np.float64)
@@ -268,18 +283,13 @@ def curve_figure(
         if metric in ("eval_value", "value_gap"):
             keep = c.evaluated_episodes() - 1
             xs, values = xs[keep], values[:, keep]
-        series.append((label or f"{c.n_runs} runs", xs, values))
-    floor = None
-    if logy:
-        positive = np.concatenate([v[v > 0] for _, _, v in series] + [np.array([np.inf])])
-        if np.isfinite(positive.min()) and any((v <= 0).any() for _, _, v in series):
-            floor = 10.0 ** np.floor(np.log10(positive.min()) - 1)
-        if not np.isfinite(positive.min()):
-            logy = False  # nothing positive to draw on a log axis
-    fig, ax = new_figure((7.0, 4.2))
+        if gaps:
+            scale = float(c.metadata.get("v_star_start", np.nan))
+            scale = max(1.0, abs(scale)) if np.isfinite(scale) else 1.0
+            values = np.where(np.abs(values) <= ROUNDING * scale, 0.0, values)
+        series.append((_series_label(label, c, len(curves)), xs, values))
+    fig, ax = new_figure((7.0, 4.8))
     for label, xs, values in series:
-        if floor is not None:
-            values = np.maximum(values, floor)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns stay NaN
             if band == "sd":
@@ -291,30 +301,72 @@ def curve_figure(
                 q = (25, 75) if band == "quartiles" else (0, 100)
                 lo, hi = np.nanpercentile(values, q, axis=0)
         what = "mean" if band == "sd" else "median"
-        (line,) = ax.plot(xs, centre, label=f"{label} ({what} of {values.shape[0]})", lw=1.8)
-        if values.shape[0] <= PER_RUN_LINES:
+        runs = values.shape[0]
+        (line,) = ax.plot(xs, centre, label=f"{label} ({what} of {runs})", lw=1.8, gid="centre",
+                          zorder=3)
+        if runs <= PER_RUN_LINES:
             for row in values:
-                ax.plot(xs, row, color=line.get_color(), lw=0.6, alpha=0.3, gid="run")
+                ax.plot(xs, row, color=line.get_color(), lw=0.6, alpha=0.35, gid="run",
+                        zorder=2)
         ax.fill_between(xs, lo, hi, color=line.get_color(), alpha=0.15, lw=0)
-    if bound is not None:
-        ax.axhline(bound, color="0.2", ls="--", lw=1.0, label=bound_label, gid="bound")
-    if logy:
+    if bound is not None and np.isfinite(bound):
+        ax.axhline(bound, color="0.2", ls="--", lw=1.0, label=bound_label or "bound",
+                   gid="bound", zorder=4)
+    if logy and gaps:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            top = max([float(np.nanmax(v)) for _, _, v in series if np.isfinite(v).any()],
+                      default=1.0)
+        gap_axis(ax, gap_threshold(bound, top), top)
+    elif logy:
         ax.set_yscale("log")
-        from matplotlib.ticker import LogFormatterSciNotation
-
-        ax.yaxis.set_minor_formatter(LogFormatterSciNotation(labelOnlyBase=False,
-                                                             minor_thresholds=(2, 0.4)))
-    if floor is not None:
-        ax.plot([], [], " ", label=f"a gap of 0 is drawn at {floor:.0e}")
     ax.set_xlabel({"episode": "episode", "steps": "primitive steps (mean over runs)",
                    "decisions": "decisions (mean over runs)"}[x])
-    ax.set_ylabel(metric.replace("_", " "))
-    band_text = {"quartiles": "25-75% of runs", "minmax": "min-max over runs",
-                 "sd": "mean +- 1 sd over runs"}[band]
-    ax.set_title(title or f"{metric.replace('_', ' ')} (band: {band_text})", fontsize="medium")
-    ax.legend(loc="best", fontsize="small")
+    ax.set_ylabel(metric.replace("_", " ") + (" (0 = optimal)" if gaps else ""))
+    band_text = {"quartiles": "band: 25-75% of runs", "minmax": "band: min-max over runs",
+                 "sd": "band: mean +- 1 sd over runs"}[band]
+    ax.set_title(title or _default_title(curves, metric), fontsize="medium")
+    ax.plot([], [], " ", label=band_text + ("; thin lines: single runs"
+                                            if any(v.shape[0] <= PER_RUN_LINES
+                                                   for _, _, v in series) else ""))
+    legend_below(ax, columns=1 if len(series) > 2 else 2)
     fig.tight_layout()
     return fig
+
+
+def _series_label(label: str, c: LearningCurve, n_series: int) -> str:
+    """A legend label naming the learner (unless the caller's label does) and, with one curve,
+    what it knew."""
+    learner = str(c.metadata.get("learner", ""))
+    text = label or learner or f"{c.n_runs} runs"
+    if learner and learner not in text:
+        text = f"{text}: {learner}"
+    known = c.metadata.get("knowledge")
+    if n_series > 1 and known:
+        from adpart.learning.knowledge import Knowledge
+
+        k = Knowledge.from_dict(known)
+        text += f" [dynamics {k.dynamics}, rewards {k.rewards}]"
+    return text
+
+
+def _default_title(curves: Mapping[str, LearningCurve], metric: str) -> str:
+    """``ENV/TASK: METRIC of the greedy policy`` and, for one curve, its learner and regime."""
+    first = next(iter(curves.values()))
+    where = str(first.metadata.get("mdp", "")) or "learning curve"
+    text = f"{where}: {metric.replace('_', ' ')}" + (
+        " of the greedy policy" if metric in ("value_gap", "eval_value") else "")
+    known = first.metadata.get("knowledge")
+    if len(curves) == 1:
+        learner = str(first.metadata.get("learner", ""))
+        if known:
+            from adpart.learning.knowledge import Knowledge
+
+            k = Knowledge.from_dict(known)
+            learner += f" (dynamics {k.dynamics}, rewards {k.rewards})"
+        if learner:
+            text += f"\n{learner}, {first.n_runs} runs"
+    return text
 
 
 def plot_curves(

@@ -132,7 +132,14 @@ class LearnOutcome:
         return None
 
     def summary(self) -> dict[str, Any]:
+        from adpart.learning.curves import ROUNDING
+
         gaps = self.curve.matrix("value_gap")[:, -1]
+        # a gap within rounding of 0 is 0 (an exact evaluation of the optimal policy differs
+        # from V* by ~1e-15 of either sign): the summary says 0, not -8.9e-17
+        v_star = float("nan") if self.v_star_start is None else float(self.v_star_start)
+        scale = max(1.0, abs(v_star)) if np.isfinite(v_star) else 1.0
+        gaps = np.where(np.abs(gaps) <= ROUNDING * scale, 0.0, gaps)
         return {
             "env": self.request.env,
             "task": self.task_name,

@@ -656,13 +656,16 @@ def partition_environment(
 
 
 def plot_partition(
-    env_name: str, labels: np.ndarray, path: str, *, title: str | None = None
+    env_name: str, labels: np.ndarray, path: str, *, title: str | None = None,
+    task: str | None = None,
 ) -> str:
-    """Draw a partition on the domain's map, a colour per block (as Fig. 4.5); return the path."""
+    """Draw a partition on the domain's map (as Fig. 4.5), touching blocks in different
+    colours, with ``task``'s goal and start lettered (default: the domain's default task);
+    return the path."""
 
     domain = resolve_domain(env_name)
     try:
-        domain.render(path, labels=np.asarray(labels), title=title)
+        domain.render(path, labels=np.asarray(labels), title=title, task=task)
     except OSError as exc:
         raise TaskError(
             f"cannot write the plot to {path}: {exc.strerror}; choose another --plot"

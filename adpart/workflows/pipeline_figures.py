@@ -33,8 +33,9 @@ def _maps(kb: KnowledgeStore, report: PipelineReport, config: PipelineConfig, ou
                 mask = np.zeros(domain.n_states, dtype=bool)
                 mask[stage.detail["subgoals"]] = True
                 path = out / f"subgoals_{folder_name(stage.task or config.env)}.png"
-                domain.render(str(path), marked=mask, task=stage.task, title=(
-                    f"{config.env}: {int(mask.sum())} subgoals in the policy of {stage.task}"))
+                domain.render(str(path), marked=mask, task=stage.task, mark_label="subgoals",
+                              title=(f"{config.env}: {int(mask.sum())} subgoals in the policy "
+                                     f"of {stage.task} ({config.detector})"))
             elif stage.stage in ("partition", "hierarchy") and stage.task not in own:
                 record = kb.get("partition", parse_ref(stage.result, "partition"))
                 labels = kb.load(record, "labels")
@@ -85,7 +86,8 @@ def write_figures(kb: KnowledgeStore, report: PipelineReport, config: PipelineCo
                 curves,
                 path,
                 metric="value_gap",
-                title=f"{config.env}/{task}: value gap of the greedy policy",
+                title=(f"{config.env}/{task}: value gap of the greedy policy\n"
+                       f"{config.runs} runs per learner, {config.regime} regime"),
                 bound=rows[0]["bound"] if rows else None,
                 bound_label=f"success bound ({config.gap_fraction:.0%} of |V*|)",
             )

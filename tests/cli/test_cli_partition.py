@@ -337,3 +337,26 @@ def test_phases_run_on_the_tasks_model_and_report_the_layer(kb_with_options):
     bad = run("partition", "two-rooms", "--options", subgoal_set, "--task", "reach-goal",
               "--reward-baseline", "median", *common)
     assert bad.exit_code == 2 and "use mode, min, none or a number" in bad.output
+
+
+def test_the_plot_marks_the_goal_of_the_task_partitioned_for(tmp_path, monkeypatch):
+    """`partition --task goal:x=9,y=5 --plot` letters G at (9, 5), not at the map's default
+    goal (8, 1); read back from the figure drawn."""
+    from adpart.envs import render
+
+    drawn = []
+    original = render.render_domain
+
+    def keep(*args, **kwargs):
+        drawn.append(original(*args, **kwargs))
+        return drawn[-1]
+
+    monkeypatch.setattr(render, "render_domain", keep)
+    run_json("partition", "two-rooms", "--options", "primitive", "--task", "goal:x=9,y=5",
+             "--kb", str(tmp_path / "kb"), "--plot", str(tmp_path / "blocks.png"))
+    (fig,) = drawn
+    goals = [tuple(int(v) for v in t.get_position()) for t in fig.axes[0].texts
+             if t.get_gid() == "G"]
+    assert goals == [(9, 5)]
+    (legend,) = fig.legends
+    assert "goal of goal:x=9,y=5" in [t.get_text() for t in legend.get_texts()]

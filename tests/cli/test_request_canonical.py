@@ -30,7 +30,11 @@ def test_a_run_learned_by_the_cli_is_found_by_another_spelling(tmp_path):
                                    "--out", str(tmp_path / "out")])
     assert out.exit_code == 0, out.output
     with KnowledgeBase.open(kb_dir) as kb:
+        # `adpart learn` took two-rooms' own alpha (1: every move is deterministic)
         found = find_learning(kb, LearnRequest("two-rooms", task="reach-goal", runs=2,
-                                               episodes=20, params={"max_steps": "1000"}))
+                                               episodes=20,
+                                               params={"max_steps": "1000", "alpha": 1}))
         assert found is not None and found["run"] == "run:1"
+        assert find_learning(kb, LearnRequest("two-rooms", runs=2, episodes=20,
+                                              params={"max_steps": "1000"})) is None
         assert find_learning(kb, LearnRequest("two-rooms", runs=2, episodes=21)) is None

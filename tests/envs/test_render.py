@@ -68,9 +68,80 @@ def test_labels_use_the_first_state_of_each_cell(tmp_path) -> None:
     labels[d.cell_state(x=8, y=1)] = 7
     fig = render_domain(d, labels=labels)
     rgb = fig.axes[0].images[0].get_array()
-    colours = label_colours(2)
-    assert np.allclose(rgb[1, 8], colours[1]) and np.allclose(rgb[5, 0], colours[0])
+    assert not np.allclose(rgb[1, 8], rgb[5, 0])  # the one-cell block stands out
+    assert np.allclose(rgb[1, 7], rgb[5, 0])  # its neighbour belongs to the big block
     assert np.allclose(rgb[0, 5], rgb[1, 5])  # walls keep the wall colour
+
+
+def _touching_pairs(grid: np.ndarray) -> set[tuple[int, int]]:
+    """Independent of the renderer: every pair of labels on neighbouring cells."""
+    pairs = set()
+    F, H, W = grid.shape
+    for f in range(F):
+        for y in range(H):
+            for x in range(W):
+                for dy, dx in ((0, 1), (1, 0)):
+                    if y + dy < H and x + dx < W:
+                        a, b = grid[f, y, x], grid[f, y + dy, x + dx]
+                        if a >= 0 and b >= 0 and a != b:
+                            pairs.add((min(a, b), max(a, b)))
+    return pairs
+
+
+def test_touching_blocks_never_share_a_colour():
+    """The 48-block layer problem: many blocks, a short palette. Read each floor's pixels back
+    and check that no two neighbouring cells of different blocks have one colour."""
+    from adpart.envs.domains.three_floor import ThreeFloor
+
+    d = ThreeFloor()
+    f = d.dynamics().features
+    x, y, fl = (np.asarray(f[k], dtype=np.int64) for k in ("x", "y", "floor"))
+    labels = (x // 4) * 100 + (y // 3) * 10 + fl  # rectangles: ~50 blocks, many neighbours
+    fig = render_domain(d, labels=labels)
+    panels = [ax for ax in fig.axes if ax.get_title().startswith("floor")]
+    free = d.layout()
+    grid = np.full(free.shape, -1, dtype=np.int64)
+    grid[fl, y, x] = labels
+    for floor, ax in enumerate(panels):
+        rgb = ax.images[0].get_array()
+        for a, b in _touching_pairs(grid[floor:floor + 1]):
+            ya, xa = np.argwhere(grid[floor] == a)[0]
+            yb, xb = np.argwhere(grid[floor] == b)[0]
+            assert not np.allclose(rgb[ya, xa], rgb[yb, xb]), (floor, a, b)
+    assert len(np.unique(labels)) > 12  # more blocks than the palette's colours
+
+
+def test_map_colouring_is_proper_and_spreads_small_partitions():
+    from adpart.plotting import block_adjacency, map_colouring
+
+    rng = np.random.default_rng(3)
+    grid = rng.integers(0, 30, size=(1, 12, 12))
+    pairs = _touching_pairs(grid)
+    assert {tuple(p) for p in block_adjacency(grid).tolist()} == pairs
+    colour = map_colouring(30, block_adjacency(grid))
+    assert all(colour[a] != colour[b] for a, b in pairs)
+    few = map_colouring(5, np.array([[0, 1], [1, 2]]))
+    assert len(set(few.tolist())) == 5  # up to the palette's size every block has its own
+
+
+def test_every_marker_has_a_legend_entry():
+    """Subgoal dots, the goal and start letters and the stairs arrows are named below the map;
+    the colour bar names what the values are."""
+    from adpart.envs.domains.three_floor import ThreeFloor
+
+    d = ThreeFloor()
+    marked = np.zeros(d.n_states, dtype=bool)
+    marked[:3] = True
+    fig = d.render(marked=marked, values=np.arange(d.n_states, dtype=float),
+                   task="reach-top-west", value_label="count score", mark_label="subgoals")
+    (legend,) = [lg for lg in fig.legends if lg.get_gid() == "map-legend"]
+    names = [t.get_text() for t in legend.get_texts()]
+    for name in ("subgoals", "goal of reach-top-west", "start of reach-top-west", "stairs up",
+                 "stairs down"):
+        assert name in names, names
+    drawn = {t.get_text() for ax in fig.axes for t in ax.texts if t.get_gid() == "stairs"}
+    assert drawn <= {"↑", "↓", "↕"} and drawn
+    assert any(ax.get_ylabel() == "count score" for ax in fig.axes)  # the colour bar
 
 
 def test_many_labels_get_distinct_colours() -> None:

@@ -173,26 +173,60 @@ def test_start_values_store_is_bounded_and_still_exact(rng):
     assert len(score._store) == 2
 
 
+def _gap_curve(gap: np.ndarray, **metadata) -> LearningCurve:
+    z = np.zeros_like(gap)
+    return LearningCurve.from_matrices(steps=z, decisions=z, returns=z, discounted_returns=z,
+                                       eval_value=-gap, value_gap=gap, metadata=metadata)
+
+
+def _tick_labels(ax) -> dict[float, str]:
+    ax.figure.canvas.draw()  # Agg: tick labels are formatted on draw
+    return {float(t.get_loc()): t.label1.get_text() for t in ax.yaxis.get_major_ticks()}
+
+
 def test_the_figure_shows_medians_quartiles_runs_and_the_bound():
     """Read back what was drawn: the centre line is the median over runs (not the mean, which
     hides a two-way split), each run is a thin line, the bound is a dashed line at its value,
-    and a gap of 0 sits at the floor the legend names."""
+    and a gap of 0 sits at the tick labelled 0 of a symmetric-log axis."""
     from adpart.learning.curves import curve_figure
 
     gap = np.array([[5.0, 2.0, 0.0, 0.0], [5.0, 4.0, 3.0, 3.0], [5.0, 2.0, 0.5, 0.0]])
-    z = np.zeros_like(gap)
-    c = LearningCurve.from_matrices(steps=z, decisions=z, returns=z, discounted_returns=z,
-                                    eval_value=-gap, value_gap=gap)
-    fig = curve_figure({"layer": c}, bound=1.0, bound_label="success bound")
+    fig = curve_figure({"layer": _gap_curve(gap)}, bound=1.0, bound_label="success bound")
     ax = fig.axes[0]
     by_label = {line.get_label(): line for line in ax.get_lines()}
-    floor = 10.0 ** np.floor(np.log10(0.5) - 1)  # a decade below the smallest positive gap
     median = by_label["layer (median of 3)"]
-    np.testing.assert_allclose(median.get_ydata(), np.median(np.maximum(gap, floor), axis=0))
+    np.testing.assert_allclose(median.get_ydata(), np.median(gap, axis=0))
     runs = [line for line in ax.get_lines() if line.get_gid() == "run"]
-    assert len(runs) == 3
+    assert sorted(map(tuple, (r.get_ydata() for r in runs))) == sorted(map(tuple, gap))
     bound = by_label["success bound"]
     assert bound.get_gid() == "bound" and set(bound.get_ydata()) == {1.0}
     assert bound.get_linestyle() == "--"
-    assert f"a gap of 0 is drawn at {floor:.0e}" in by_label
-    assert ax.get_yscale() == "log"
+    assert ax.get_yscale() == "symlog"
+    assert ax.yaxis.get_transform().linthresh == pytest.approx(0.1)  # a decade below the bound
+    low, high = ax.get_ylim()
+    assert low < 0 < 0.1 * 0.5 and high >= 5.0
+    assert _tick_labels(ax)[0.0] == "0"
+
+
+def test_the_zero_floor_is_the_same_whatever_the_rounding():
+    """Optimal runs evaluate to gaps of +-1e-15 (rounding) or exactly 0: both are drawn at the
+    tick labelled 0, and the axis spans the decades from a tenth of the bound to the largest
+    gap, not the decades of the rounding (the old log axis put 0 at 1e-17 or at 1)."""
+    from adpart.learning.curves import curve_figure
+
+    shapes = []
+    for zero in (0.0, 1.8e-15, -8.9e-17):
+        gap = np.array([[90.0, 50.0, zero, zero], [90.0, 90.0, 3.0, zero]])
+        fig = curve_figure(_gap_curve(gap, v_star_start=-12.7, mdp="three-floor/reach-goal",
+                                      learner="q-learning"))
+        ax = fig.axes[0]
+        (median,) = [line for line in ax.get_lines() if line.get_gid() == "centre"]
+        assert median.get_ydata()[-1] == 0.0
+        bound = [line for line in ax.get_lines() if line.get_gid() == "bound"]
+        assert list(bound[0].get_ydata()) == pytest.approx([0.05 * 12.7] * 2)  # the default bound
+        shapes.append((ax.get_ylim(), tuple(_tick_labels(ax).items())))
+        title = ax.get_title()
+        assert "three-floor/reach-goal" in title and "q-learning" in title
+    assert shapes[0] == shapes[1] == shapes[2]
+    (_, high), ticks = shapes[0]
+    assert dict(ticks)[0.0] == "0" and high / (0.05 * 12.7 / 10) < 1e4  # 3-4 decades, not 17
