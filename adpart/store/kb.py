@@ -174,6 +174,7 @@ class KnowledgeBase(Queries, Tables, Maintenance):
         self.db_url = db_url
         self.read_only = read_only
         self._tx: Session | None = None
+        self.upgrade_damaged: list[str] = []
         try:
             self.engine = self._make_engine(db_url, read_only=read_only)
         except (SQLAlchemyError, ImportError) as exc:
@@ -368,13 +369,17 @@ class KnowledgeBase(Queries, Tables, Maintenance):
         return found[0]
 
     def upgrade(self) -> tuple[int, int]:
-        """Migrate the database to this adpart's schema version; returns (from, to)."""
+        """Migrate the database to this adpart's schema version; returns (from, to).
+
+        Rows whose hash did not hold before the upgrade keep it (still damaged, named by reads
+        and ``check``); their names are in ``upgrade_damaged`` afterwards."""
         try:
             with self.engine.execution_options(adpart_write=True).begin() as conn:
                 if self.is_postgresql:
                     _pg_lock(conn, _SCHEMA_LOCK, shared=False)
                     _pg_lock(conn, _STORE_LOCK, shared=False)
-                result = upgrade_schema(conn, self.label)
+                self.upgrade_damaged = []
+                result = upgrade_schema(conn, self.label, self.upgrade_damaged)
                 verify_tables(conn, self.label)
                 kb_id = identity_of(conn)
                 self.artifacts.refuse_other_owner(kb_id, self.label)
