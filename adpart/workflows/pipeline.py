@@ -45,7 +45,12 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from adpart.errors import TaskError
-from adpart.learning.comparison import best_observed_run, task_row, time_ratio
+from adpart.learning.comparison import (
+    SUCCESS_FRACTION,
+    best_observed_run,
+    task_row,
+    time_ratio,
+)
 from adpart.learning.curves import LearningCurve
 from adpart.learning.hierarchical_settings import HierarchicalSettings
 from adpart.learning.knowledge import PLANNER, REGIMES, Knowledge
@@ -132,7 +137,7 @@ class PipelineConfig:
     hierarchical_params: dict[str, Any] = field(default_factory=dict)
     baseline: bool = True
     model_baseline: bool = True
-    gap_fraction: float = 0.05
+    gap_fraction: float = SUCCESS_FRACTION
     hierarchy: str | None = None
     hierarchy_params: dict[str, Any] = field(default_factory=dict)
     flat_learner: str = "q-learning"
