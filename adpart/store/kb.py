@@ -139,7 +139,8 @@ def open_kb(location: str | os.PathLike[str] | KBLocation | None = None, *,
 
     ``open_kb(path, read_only=True)`` is the way to read one from a script or notebook: nothing
     is created, a missing knowledge base is a :class:`StoreError` naming the fix, and the tables
-    come from ``kb.records_table(...)``, ``kb.curves_table(...)`` and ``kb.partition_table(...)``.
+    come from ``kb.records_table(...)``, ``kb.runs_table(...)``, ``kb.curves_table(...)`` and
+    ``kb.partition_table(...)``.
     Use it as a context manager (``with open_kb(...) as kb:``) to close it when done.
     """
     return KnowledgeBase.open(location, artifacts=artifacts, read_only=read_only)
@@ -158,7 +159,8 @@ class KnowledgeBase(Queries, Tables, Maintenance):
       ``find_environment(name_or_hash)``;
     - ``load(record, field)``: an artifact's payload, verified against its hash;
     - queries: ``options_for``, ``partitions_using``, ``runs_for``, ``learned_tasks``, ``lineage``;
-    - tables (``pyarrow.Table``, ``.to_pandas()``): ``records_table``, ``curves_table``,
+    - tables (``pyarrow.Table``, ``.to_pandas()``): ``records_table`` (``records_page``),
+      ``runs_table`` (each run's time to the success bound), ``curves_table``,
       ``partition_table``;
     - maintenance: ``info``, ``check``, ``gc``, ``upgrade``.
 
