@@ -306,3 +306,29 @@ def test_concurrent_first_opens_create_the_schema_once(where):
 @pytest.mark.slow
 def test_concurrent_first_opens_create_the_schema_once_on_any_backend(where):
     _first_opens(where)
+
+
+# ---------------------------------------------------------------------- the row hash's encoding
+def test_the_row_encoding_is_compact_sorted_json_and_one_instant_one_hash():
+    from zoneinfo import ZoneInfo
+
+    from adpart.store import integrity
+    from adpart.store.models import SqlRun
+
+    values = [1, "é\x00\"", None, True, 1.5, float("nan"), float("-inf"), -0.0, 1e300,
+              {"b": [1.0, 2], "a": {"z": None, "y": "x"}}, [3, [4]]]
+    assert integrity._encode(values) == json.dumps(values, sort_keys=True,
+                                                   separators=(",", ":"))
+    table = SqlRun.__table__
+    naive = datetime(2026, 12, 6, 21, 30, 0, 123456)  # SQLite gives UTC times without a zone
+    row = {c: None for c in integrity.hashed_columns(table)}
+    row.update(id=3, task_id=1, learner="q", metrics={"gap": 0.25}, parameters={},
+               created_at=naive, schema_version=4)
+    digest = integrity.row_digest(table, row)
+    for same in (naive.replace(tzinfo=timezone.utc),  # PostgreSQL, any session time zone
+                 naive.replace(tzinfo=timezone.utc).astimezone(ZoneInfo("America/Lima"))):
+        assert integrity.row_digest(table, {**row, "created_at": same}) == digest
+    for column, other in (("created_at", naive.replace(microsecond=123457)), ("id", 4),
+                          ("metrics", {"gap": 0.35}), ("learner", "Q"), ("seed", 0),
+                          ("schema_version", 4.0), ("parameters", {"a": True})):
+        assert integrity.row_digest(table, {**row, column: other}) != digest, column
