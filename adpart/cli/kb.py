@@ -165,6 +165,7 @@ def kb() -> None:
       adpart kb info
       adpart kb ls option --env two-rooms
       adpart kb ls run --where alpha=0.5 --json
+      adpart kb runs --env three-floor
       adpart kb show partition:3 --json
       adpart kb export policy:5 --field q --out q.csv
       adpart kb check
@@ -227,14 +228,32 @@ _LS_COLUMNS = (("ID", "ref", 22), ("KIND", "kind", 11), ("ENV", "env", 20), ("TA
                ("SUMMARY", "summary", 60), ("CREATED", "created", 16), ("SIZE", "size", 9))
 
 
-def _ls_rows(table: pa.Table) -> list[list[str]]:
+def _shared_settings(records: list[dict[str, Any]]) -> list[str]:
+    """The ``KEY=VALUE`` words every listed run's summary has (none for fewer than two runs):
+    left out of the table's cells, so what is left tells the runs apart."""
+    words = [rec["summary"].split()[1:] for rec in records
+             if rec["kind"] == "run" and rec["summary"]]
+    if len(words) < 2:
+        return []
+    common = set(words[0]).intersection(*words[1:])
+    return [w for w in words[0] if w in common and "=" in w]
+
+
+def _ls_rows(table: pa.Table) -> tuple[list[list[str]], list[str]]:
+    """The cells of `kb ls`, and the settings every run shares (left out of their cells)."""
+    records = table.select([c for _, c, _ in _LS_COLUMNS]).to_pylist()
+    shared = set(_shared_settings(records))
     rows = []
-    for rec in table.select([c for _, c, _ in _LS_COLUMNS]).to_pylist():
+    for rec in records:
         created = rec["created"].strftime("%Y-%m-%d %H:%M") if rec["created"] else None
+        summary = rec["summary"]
+        if rec["kind"] == "run" and shared and summary:
+            first, *rest = summary.split()
+            summary = " ".join([first, *(w for w in rest if w not in shared)])
         rows.append([_cell(rec["ref"], 22), rec["kind"], _cell(rec["env"], 20),
-                     _cell(rec["task"], 20), _cell(rec["summary"], 60), _cell(created, 16),
+                     _cell(rec["task"], 20), _cell(summary, 60), _cell(created, 16),
                      _size(rec["size"])])
-    return rows
+    return rows, _shared_settings(records)
 
 
 def _print_table(headers: list[str], rows: list[list[str]], right: set[int]) -> None:
@@ -249,39 +268,62 @@ def _print_table(headers: list[str], rows: list[list[str]], right: set[int]) -> 
         click.echo(line(row))
 
 
+#: how many records `kb ls` prints unless --limit or --all says otherwise
+LS_PAGE = 50
+
+
 @kb.command("ls")
 @click.argument("kind_arg", metavar="[KIND]", required=False, default=None)
 @click.option("--kind", "kind_opt", metavar="KIND",
               help="Only records of this kind (run, policy, partition, ...; also the argument)")
 @click.option("--env", "env", metavar="NAME|ID", help="Only records of this environment")
 @click.option("--task", "task", metavar="NAME|ID", help="Only records of this task")
+@click.option("--learner", metavar="NAME", help="Only runs and policies of this learner")
 @click.option("--where", "where", metavar="KEY=VALUE", multiple=True,
               help="Only records whose parameter KEY equals VALUE (repeatable; e.g. alpha=0.5, "
                    "episodes=300)")
 @click.option("--limit", type=click.IntRange(min=1), default=None,
-              help="At most this many records")
+              help=f"At most this many records (the table: {LS_PAGE} unless --all; --json: all "
+                   "unless --limit)")
+@click.option("--all", "show_all", is_flag=True, help="Print every matching record")
 @click.option("--json", "as_json", is_flag=True,
               help="Print the records as a JSON list of objects (the columns of records_table)")
 @kb_option(read_only=True)
 @_guard
 def ls(kb_location: KBLocation, kind_arg: str | None, kind_opt: str | None, env: str | None,
-       task: str | None, where: tuple[str, ...], limit: int | None, as_json: bool) -> None:
+       task: str | None, learner: str | None, where: tuple[str, ...], limit: int | None,
+       show_all: bool, as_json: bool) -> None:
     """List records as a table (every kind but artifacts when no KIND is given).
+
+    The table shows the first 50 matching records and a line saying how many more there are
+    (--limit N for another page size, --all for every one). A run's SUMMARY shows its learner and
+    the settings that differ between the listed runs; those they all share are on one line
+    below the table (--json has every record's whole summary).
 
     \b
     Examples:
       adpart kb ls run --env two-rooms --where alpha=0.5
       adpart kb ls --kind partition --limit 5
+      adpart kb ls run --learner hierarchical --all
       adpart kb ls run --json > runs.json
     """
     if kind_arg and kind_opt and _kind(kind_arg) != _kind(kind_opt):
         raise KBError(f"KIND {kind_arg!r} and --kind {kind_opt!r} disagree; give one of them")
+    if show_all and limit is not None:
+        raise KBError("--all and --limit disagree; give one of them")
     name = kind_opt or kind_arg
     damaged: list[str] = []
+    page = None if show_all or (as_json and limit is None) else (limit or LS_PAGE)
     with _open(kb_location, read_only=True) as base:
         try:
-            table = base.records_table(_kind(name) if name else None, env=env, task=task,
-                                       where=_where_items(where), limit=limit, damaged=damaged)
+            filters = {"env": env, "task": task, "learner": learner,
+                       "where": _where_items(where)}
+            kind = _kind(name) if name else None
+            if page is None:
+                table = base.records_table(kind, damaged=damaged, **filters)
+                total = table.num_rows
+            else:
+                table, total = base.records_page(kind, limit=page, damaged=damaged, **filters)
         except AdpartError as exc:
             hint = ""
             if where and "parameter" in str(exc):
@@ -290,9 +332,93 @@ def ls(kb_location: KBLocation, kind_arg: str | None, kind_opt: str | None, env:
     if as_json:
         click.echo(strict_json(json_rows(table)))
     elif table.num_rows == 0:
-        click.echo("no records match" if (env or task or where) else "no records")
+        click.echo("no records match" if (env or task or learner or where) else "no records")
     else:
-        _print_table([h for h, _, _ in _LS_COLUMNS], _ls_rows(table), right={6})
+        rows, shared = _ls_rows(table)
+        _print_table([h for h, _, _ in _LS_COLUMNS], rows, right={6})
+        if shared:
+            click.echo(f"every run above also has: {' '.join(shared)}")
+        if total > table.num_rows:
+            click.echo(f"... {total - table.num_rows} more of {total} records (--limit N or "
+                       "--all to see them, filters to narrow them)")
+    _report_damage(damaged)
+
+
+#: the columns of `kb runs`: (header, runs_table column)
+_RUNS_COLUMNS = (("RUN", "run"), ("#", "replicate"), ("ENV", "env"), ("TASK", "task"),
+                 ("LEARNER", "learner"), ("EPISODES", "episodes"),
+                 ("TO BOUND", "episodes_to_bound"), ("STEPS", "steps_to_bound"),
+                 ("BOUND", "bound"), ("FINAL GAP", "final_gap"))
+
+
+def _runs_rows(table: pa.Table) -> list[list[str]]:
+    rows = []
+    for rec in table.to_pylist():
+        if rec["replicate"] is None:
+            to_bound, steps = "not stored", "-"
+        elif rec["censored"]:  # never within the bound: where it was last seen outside
+            to_bound, steps = f">{rec['episodes_to_bound']}", f">{rec['steps_to_bound']}"
+        else:
+            to_bound, steps = str(rec["episodes_to_bound"]), str(rec["steps_to_bound"])
+        bound, gap = rec["bound"], rec["final_gap"]
+        rows.append([rec["run"], _cell(rec["replicate"], 4), _cell(rec["env"], 20),
+                     _cell(rec["task"], 20), _cell(rec["learner"], 20),
+                     _cell(rec["episodes"], 9), to_bound, steps,
+                     "-" if bound is None else f"{bound:.4g}",
+                     "-" if gap is None else f"{gap:.3g}"])
+    return rows
+
+
+@kb.command("runs")
+@click.option("--env", "env", metavar="NAME|ID", help="Only runs of this environment")
+@click.option("--task", "task", metavar="NAME|ID", help="Only runs of this task")
+@click.option("--learner", metavar="NAME", help="Only runs of this learner")
+@click.option("--where", "where", metavar="KEY=VALUE", multiple=True,
+              help="Only run records whose parameter KEY equals VALUE (repeatable)")
+@click.option("--limit", type=click.IntRange(min=1), default=None,
+              help=f"At most this many rows (the table: {LS_PAGE} unless --all; --json: all "
+                   "unless --limit)")
+@click.option("--all", "show_all", is_flag=True, help="Print every matching run")
+@click.option("--json", "as_json", is_flag=True,
+              help="Print the rows as a JSON list of objects (the columns of runs_table)")
+@kb_option(read_only=True)
+@_guard
+def runs(kb_location: KBLocation, env: str | None, task: str | None, learner: str | None,
+         where: tuple[str, ...], limit: int | None, show_all: bool, as_json: bool) -> None:
+    """Each learning run's episodes and steps to the success bound, one line per run.
+
+    A run record of K runs prints K lines (# is the run's index). TO BOUND is the first
+    evaluated episode from which the run's value gap stays within BOUND (5 % of |V*| at the
+    start); >N: the run never stayed within it up to its last evaluation, N (censored).
+
+    \b
+    Examples:
+      adpart kb runs --env three-floor
+      adpart kb runs --task reach-top-west --learner hierarchical --json
+    """
+    if show_all and limit is not None:
+        raise KBError("--all and --limit disagree; give one of them")
+    damaged: list[str] = []
+    page = None if show_all or (as_json and limit is None) else (limit or LS_PAGE)
+    with _open(kb_location, read_only=True) as base:
+        try:
+            table = base.runs_table(env=env, task=task, learner=learner,
+                                    where=_where_items(where), damaged=damaged)
+        except AdpartError as exc:
+            raise KBError(str(exc)) from exc
+    total = table.num_rows
+    if page is not None:
+        table = table.slice(0, page)
+    if as_json:
+        click.echo(strict_json(json_rows(table)))
+    elif table.num_rows == 0:
+        click.echo("no runs match" if (env or task or learner or where) else "no runs")
+    else:
+        _print_table([h for h, _ in _RUNS_COLUMNS], _runs_rows(table),
+                     right={1, 5, 6, 7, 8, 9})
+        if total > table.num_rows:
+            click.echo(f"... {total - table.num_rows} more of {total} runs (--limit N or --all "
+                       "to see them, filters to narrow them)")
     _report_damage(damaged)
 
 
@@ -641,8 +767,14 @@ def upgrade(kb_location: KBLocation) -> None:
     """Migrate the knowledge base to this adpart's schema version."""
     with _open(kb_location, verify=False) as base:
         start, end = base.upgrade()
+        damaged = base.upgrade_damaged
     click.echo(
         f"schema version {start} -> {end}"
         if start != end
         else f"schema version {end}: already current"
     )
+    if damaged:
+        shown = ", ".join(damaged[:5]) + (f", ... ({len(damaged)} in all)"
+                                          if len(damaged) > 5 else "")
+        click.echo(f"{len(damaged)} row(s) were damaged before the upgrade and stay named as "
+                   f"damaged: {shown}; `adpart kb check` lists them")

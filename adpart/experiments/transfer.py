@@ -44,7 +44,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from adpart.experiments.base import ExperimentConfig, ExperimentReport, experiment
-from adpart.learning.comparison import survival_sentence, time_ratio
+from adpart.learning.comparison import SUCCESS_FRACTION, survival_sentence, time_ratio
 from adpart.learning.hierarchical_settings import HierarchicalSettings
 from adpart.learning.settings import Run
 from adpart.params import build_settings
@@ -57,7 +57,7 @@ if TYPE_CHECKING:
 #: hierarchical learner refines the stored layer with: the same.
 PARTITION = PartitionSettings()
 DELTA, EPSILON = PARTITION.delta, PARTITION.reward_epsilon
-GAP_FRACTION = 0.05
+GAP_FRACTION = SUCCESS_FRACTION
 #: urban's first task. ``navigate`` is the seed's, but flat Q-learning never reaches its goal in
 #: 1,000 episodes here (the value gap stays at that of never arriving), so its learned policy has
 #: no subgoals to find; ``navigate-2`` (another destination, same dynamics) is learned flat.

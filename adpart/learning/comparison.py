@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from adpart.learning.curves import LearningCurve, episodes_within
+from adpart.learning.curves import SUCCESS_FRACTION, LearningCurve, episodes_within
 from adpart.learning.knowledge import Knowledge
 from adpart.learning.transfer_metrics import (
     km_median,
@@ -21,9 +21,10 @@ from adpart.learning.transfer_metrics import (
     metrics_from_curve,
 )
 
-__all__ = ["TIE_TOLERANCE", "best_final_run", "best_observed_run", "episodes_to_bound", "measured",
-           "ratio_of_medians_ci", "success_bound", "survival_sentence", "task_row",
-           "time_ratio"]
+__all__ = ["SUCCESS_FRACTION", "TIE_TOLERANCE", "best_final_run", "best_observed_run",
+           "episodes_to_bound", "measured", "per_run_to_bound", "ratio_of_medians_ci",
+           "success_bound", "survival_sentence", "task_row", "time_ratio"]
+
 
 #: Final gaps closer than this fraction of the value scale (``max(1, |V*(start)|)``) are a tie:
 #: exact evaluations of equally good policies differ by rounding (1.8e-15 on three-floor), and
@@ -109,6 +110,37 @@ def success_bound(curve: LearningCurve, fraction: float) -> float:
     curve carries no ``V*``)."""
     v_star = float(curve.metadata.get("v_star_start", np.nan))
     return max(1e-9, fraction * abs(v_star)) if np.isfinite(v_star) else np.inf
+
+
+def per_run_to_bound(curve: LearningCurve, fraction: float = SUCCESS_FRACTION
+                     ) -> dict[str, Any] | None:
+    """Each run's time to the success bound, as the pipeline's table and the comparisons
+    measure it, in plain data (what a stored run keeps in ``metrics["per_run"]``).
+
+    The bound is :func:`success_bound`; the times are those of :func:`~adpart.learning.
+    transfer_metrics.metrics_from_curve` (the rule of :func:`~adpart.learning.curves.
+    episodes_within`), the same numbers :func:`task_row`, :func:`time_ratio` and the
+    comparisons' Kaplan-Meier medians are made of. Keys: ``fraction``, ``bound``, then one list
+    entry per run: ``episodes_to_bound`` and ``steps_to_bound`` (the first evaluated episode from
+    which the gap stays within the bound, and the primitive steps up to the end of it; for a
+    ``censored`` run, one that never stays within it, the last evaluation and the steps up to
+    it: a survival estimator's censoring time), ``censored`` and ``final_gap`` (the gap at the
+    last episode; None where it is NaN). None when the curve carries no ``V*`` (no bound) or
+    no evaluated episode.
+    """
+    bound = success_bound(curve, fraction)
+    if not np.isfinite(bound) or curve.evaluated_episodes().size == 0:
+        return None
+    m = metrics_from_curve(curve, bound)
+    final = curve.matrix("value_gap")[:, -1]
+    return {
+        "fraction": float(fraction),
+        "bound": float(bound),
+        "episodes_to_bound": [int(t) for t in m.time_episodes],
+        "steps_to_bound": [int(t) for t in m.time_steps],
+        "censored": [bool(c) for c in m.censored],
+        "final_gap": [float(g) if np.isfinite(g) else None for g in final],
+    }
 
 
 def best_final_run(curve: LearningCurve) -> int:

@@ -210,7 +210,9 @@ _BANDS = ("quartiles", "minmax", "sd")
 #: Runs up to which every run is also drawn as a thin line under the band.
 PER_RUN_LINES = 100
 #: The success bound's default fraction of ``|V*(start)|`` (a run has learned a task once its
-#: greedy policy's value gap stays within it; the pipeline's ``gap_fraction``).
+#: greedy policy's value gap stays within it): the one default of the pipeline's
+#: ``gap_fraction``, the comparisons, the figures' bound and every stored run's per-run figures
+#: (:func:`adpart.learning.comparison.success_bound`).
 SUCCESS_FRACTION = 0.05
 #: Value gaps within this fraction of ``max(1, |V*(start)|)`` are rounding, drawn as 0: exact
 #: evaluations of the optimal policy differ from ``V*`` by ~1e-15 (either sign).

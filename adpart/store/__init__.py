@@ -9,6 +9,7 @@ For analysis, ``open_kb(path, read_only=True)`` and the table methods::
     with open_kb("~/.local/share/adpart/kb", read_only=True) as kb:
         runs = kb.records_table("run", env="two-rooms", where={"alpha": 1}).to_pandas()
         curves = kb.curves_table(kb.records_table("run", env="two-rooms")).to_pandas()
+        to_bound = kb.runs_table(env="three-floor").to_pandas()  # a row per run
 """
 
 from __future__ import annotations

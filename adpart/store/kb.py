@@ -139,7 +139,8 @@ def open_kb(location: str | os.PathLike[str] | KBLocation | None = None, *,
 
     ``open_kb(path, read_only=True)`` is the way to read one from a script or notebook: nothing
     is created, a missing knowledge base is a :class:`StoreError` naming the fix, and the tables
-    come from ``kb.records_table(...)``, ``kb.curves_table(...)`` and ``kb.partition_table(...)``.
+    come from ``kb.records_table(...)``, ``kb.runs_table(...)``, ``kb.curves_table(...)`` and
+    ``kb.partition_table(...)``.
     Use it as a context manager (``with open_kb(...) as kb:``) to close it when done.
     """
     return KnowledgeBase.open(location, artifacts=artifacts, read_only=read_only)
@@ -158,7 +159,8 @@ class KnowledgeBase(Queries, Tables, Maintenance):
       ``find_environment(name_or_hash)``;
     - ``load(record, field)``: an artifact's payload, verified against its hash;
     - queries: ``options_for``, ``partitions_using``, ``runs_for``, ``learned_tasks``, ``lineage``;
-    - tables (``pyarrow.Table``, ``.to_pandas()``): ``records_table``, ``curves_table``,
+    - tables (``pyarrow.Table``, ``.to_pandas()``): ``records_table`` (``records_page``),
+      ``runs_table`` (each run's time to the success bound), ``curves_table``,
       ``partition_table``;
     - maintenance: ``info``, ``check``, ``gc``, ``upgrade``.
 
@@ -174,6 +176,7 @@ class KnowledgeBase(Queries, Tables, Maintenance):
         self.db_url = db_url
         self.read_only = read_only
         self._tx: Session | None = None
+        self.upgrade_damaged: list[str] = []
         try:
             self.engine = self._make_engine(db_url, read_only=read_only)
         except (SQLAlchemyError, ImportError) as exc:
@@ -368,13 +371,17 @@ class KnowledgeBase(Queries, Tables, Maintenance):
         return found[0]
 
     def upgrade(self) -> tuple[int, int]:
-        """Migrate the database to this adpart's schema version; returns (from, to)."""
+        """Migrate the database to this adpart's schema version; returns (from, to).
+
+        Rows whose hash did not hold before the upgrade keep it (still damaged, named by reads
+        and ``check``); their names are in ``upgrade_damaged`` afterwards."""
         try:
             with self.engine.execution_options(adpart_write=True).begin() as conn:
                 if self.is_postgresql:
                     _pg_lock(conn, _SCHEMA_LOCK, shared=False)
                     _pg_lock(conn, _STORE_LOCK, shared=False)
-                result = upgrade_schema(conn, self.label)
+                self.upgrade_damaged = []
+                result = upgrade_schema(conn, self.label, self.upgrade_damaged)
                 verify_tables(conn, self.label)
                 kb_id = identity_of(conn)
                 self.artifacts.refuse_other_owner(kb_id, self.label)

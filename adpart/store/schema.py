@@ -17,17 +17,25 @@ from sqlalchemy import Connection, func, inspect, select, text, update
 
 from adpart import __version__
 from adpart.store.errors import StoreError
-from adpart.store.integrity import ROW_SHA, row_digest
+from adpart.store.integrity import ROW_SHA, row_digest, row_digest_v3, row_name
 from adpart.store.models import HASHED_TABLES, Base, SqlIdentity, SqlSchema, partition_parents
 
 #: the schema version this adpart reads and writes
 #: (2: every metadata row carries ``row_sha``, its content hash, checked by ``adpart kb check``;
-#: 3: a run may reference its experience, the transitions its runs took: ``runs.experience_sha``)
-SCHEMA_VERSION = 3
+#: 3: a run may reference its experience, the transitions its runs took: ``runs.experience_sha``;
+#: 4: row hashes in the encoding the json module's C encoder makes in one call per row, about a
+#: third of the cost of schema 3's per-value one: :func:`adpart.store.integrity.row_digest`)
+SCHEMA_VERSION = 4
 
 
-def stamp_all_rows(conn: Connection) -> None:
-    """(Re)compute the content hash of every row of every hashed table."""
+def stamp_all_rows(conn: Connection, *, check: Callable[..., str] | None = None) -> list[str]:
+    """(Re)compute the content hash of every row of every hashed table.
+
+    With ``check`` (the row hash the database was written with), a row whose stored hash does
+    not match it keeps that hash: it was damaged before the upgrade and stays named as damaged
+    (by reads and ``adpart kb check``) instead of being stamped valid. Returns those rows' names.
+    """
+    kept: list[str] = []
     links: dict[int, list[int]] = {}
     for child, parent in conn.execute(select(partition_parents.c.child_id,
                                              partition_parents.c.parent_id)):
@@ -36,12 +44,16 @@ def stamp_all_rows(conn: Connection) -> None:
         key = [c for c in table.primary_key.columns]
         for row in conn.execute(select(table)).mappings().all():
             parents = links.get(int(row["id"]), []) if table.name == "partitions" else None
+            if check is not None and check(table, row, parents) != row[ROW_SHA]:
+                kept.append(row_name(table, row))
+                continue
             where = None
             for column in key:
                 term = column == row[column.name]
                 where = term if where is None else where & term
             conn.execute(update(table).where(where).values(
                 {ROW_SHA: row_digest(table, row, parents)}))
+    return kept
 
 
 def _add_row_hashes(conn: Connection) -> None:
@@ -57,9 +69,20 @@ def _add_run_experience(conn: Connection) -> None:
     conn.execute(text("ALTER TABLE runs ADD COLUMN experience_sha VARCHAR(64)"))
 
 
+def _reencode_row_hashes(conn: Connection) -> None:
+    """Schema 3 -> 4: the row hashes' encoding changed; no column did. Every row is re-stamped
+    once the last step has run, after its schema-3 hash was checked (:data:`CHECKED_BY`)."""
+
+
 #: MIGRATIONS[v] upgrades a version-v database to version v + 1 inside one transaction
 MIGRATIONS: dict[int, Callable[[Connection], None]] = {1: _add_row_hashes,
-                                                       2: _add_run_experience}
+                                                       2: _add_run_experience,
+                                                       3: _reencode_row_hashes}
+
+#: the row hash a database of version v was written with, over the current columns, checked
+#: before its rows are re-stamped (versions 1-2 lack a column the hashes now cover: their rows
+#: are re-stamped unchecked, as those upgrades always did)
+CHECKED_BY: dict[int, Callable[..., str]] = {3: row_digest_v3}
 
 
 def read_version(conn: Connection, location: str) -> tuple[int, str] | None:
@@ -157,10 +180,12 @@ def create_schema(conn: Connection) -> None:
     identity_of(conn)
 
 
-def upgrade_schema(conn: Connection, location: str) -> tuple[int, int]:
+def upgrade_schema(conn: Connection, location: str, damaged: list[str] | None = None,
+                   ) -> tuple[int, int]:
     """Apply the migration steps from the stored version up to :data:`SCHEMA_VERSION`.
 
     Returns (from_version, to_version). An empty database is created at the current version.
+    Rows found damaged before the upgrade (:func:`stamp_all_rows`) are named in ``damaged``.
     """
     found = read_version(conn, location)
     if found is None:
@@ -179,5 +204,7 @@ def upgrade_schema(conn: Connection, location: str) -> tuple[int, int]:
         version += 1
         conn.execute(SqlSchema.__table__.update().values(version=version, written_by=__version__))
     if version != start:  # every row's hash, over the columns of the schema it now has
-        stamp_all_rows(conn)
+        kept = stamp_all_rows(conn, check=CHECKED_BY.get(start))
+        if damaged is not None:
+            damaged.extend(kept)
     return start, version

@@ -28,7 +28,13 @@ from sqlalchemy import select
 
 from adpart.store import entities as E
 from adpart.store.errors import StoreError
-from adpart.store.integrity import ROW_SHA, changed_message, row_digest, row_name
+from adpart.store.integrity import (
+    ROW_SHA,
+    changed_message,
+    hashed_columns,
+    row_name,
+    values_digest,
+)
 from adpart.store.models import SqlArtifact
 from adpart.store.queries import UNREADABLE
 
@@ -49,6 +55,32 @@ BASE_COLUMNS: dict[str, pa.DataType] = {
     "created": pa.timestamp("us", tz="UTC"),
     "size": pa.int64(),
 }
+
+#: the columns of :meth:`Tables.runs_table`, in order: one row per run of a run record
+RUN_COLUMNS: dict[str, pa.DataType] = {
+    "run": pa.string(),
+    "run_id": pa.int64(),
+    "replicate": pa.int64(),
+    "env": pa.string(),
+    "environment_id": pa.int64(),
+    "task": pa.string(),
+    "task_id": pa.int64(),
+    "learner": pa.string(),
+    "partition_id": pa.int64(),
+    "seed": pa.int64(),
+    "episodes": pa.int64(),
+    "fraction": pa.float64(),
+    "bound": pa.float64(),
+    "episodes_to_bound": pa.int64(),
+    "steps_to_bound": pa.int64(),
+    "censored": pa.bool_(),
+    "final_gap": pa.float64(),
+    "created": pa.timestamp("us", tz="UTC"),
+}
+#: the run metrics key holding each run's figures (``per_run_to_bound``), kept out of the
+#: ``metrics.*`` columns of records_table: runs_table has a row per run for them
+PER_RUN = "per_run"
+_PER_RUN_LISTS = ("episodes_to_bound", "steps_to_bound", "censored", "final_gap")
 
 #: provenance parameters that are bookkeeping, not settings (kept out of ``params.*``)
 _BOOKKEEPING = ("request", "policies", "q_columns")
@@ -77,14 +109,19 @@ def flat_params(record: E.Record) -> dict[str, Any]:
 
 
 def _key_params(record: E.Record) -> dict[str, Any]:
-    """The few parameters that tell runs apart (the ``summary`` column): those given to the
-    learner and the request's size, or the record's own parameters when it has no request."""
+    """The few parameters that tell runs apart (the ``summary`` column): the request's size and
+    seed, those given to the learner and the options or layer it ran on, or the record's own
+    parameters when it has no request."""
     params = record.provenance.parameters if not isinstance(record, E.Artifact) else {}
     request = params.get("request")
     if not isinstance(request, Mapping):
         return _flatten({k: v for k, v in params.items() if k not in _BOOKKEEPING})
-    out = _flatten(dict(request.get("params") or {}))
-    for key in ("runs", "episodes", "options", "partition"):
+    # the request's size and seed first, so a cut cell still tells runs=10 from runs=20
+    out = {key: request[key] for key in ("runs", "episodes", "seed")
+           if request.get(key) is not None}
+    for key, value in _flatten(dict(request.get("params") or {})).items():
+        out.setdefault(key, value)
+    for key in ("options", "partition"):
         if request.get(key) is not None:
             out[key] = request[key]
     return out
@@ -221,6 +258,24 @@ def _summary(record: E.Record) -> str:
     return shown
 
 
+def _whole(value: Any) -> int | None:
+    return value if isinstance(value, int) and not isinstance(value, bool) else None
+
+
+def _per_run(run: E.Run) -> dict[str, Any] | None:
+    """A run record's stored per-run figures, or None when it has none (or they are not the
+    shape ``per_run_to_bound`` writes: lists of one length, a finite bound)."""
+    data = run.metrics.get(PER_RUN)
+    if not isinstance(data, Mapping):
+        return None
+    lists = [data.get(name) for name in _PER_RUN_LISTS]
+    if not all(isinstance(v, list) for v in lists) or len({len(v) for v in lists}) != 1:  # type: ignore[arg-type]
+        return None
+    if _number(data.get("bound")) is None or _number(data.get("fraction")) is None:
+        return None
+    return data
+
+
 def _parse_ref(value: str, kind: str) -> int | None:
     match = _REF.match(value)
     if match is None:
@@ -231,8 +286,8 @@ def _parse_ref(value: str, kind: str) -> int | None:
 
 
 class Tables:
-    """``records_table``, ``curves_table`` and ``partition_table``: the knowledge base as
-    ``pyarrow.Table`` objects (``.to_pandas()``, ``polars.from_arrow``)."""
+    """``records_table``, ``runs_table``, ``curves_table`` and ``partition_table``: the
+    knowledge base as ``pyarrow.Table`` objects (``.to_pandas()``, ``polars.from_arrow``)."""
 
     # ------------------------------------------------------------------ selection
     def _environment_ids(self, env: Any) -> set[int]:
@@ -274,13 +329,14 @@ class Tables:
         return found
 
     def select_records(self, kind: str | Sequence[str] | None = None, *, env: Any = None,
-                       task: Any = None, where: Mapping[str, Any] | None = None,
-                       limit: int | None = None, damaged: list[str] | None = None,
-                       ) -> list[E.Record]:
+                       task: Any = None, learner: str | None = None,
+                       where: Mapping[str, Any] | None = None, limit: int | None = None,
+                       damaged: list[str] | None = None) -> list[E.Record]:
         """The records :meth:`records_table` shows, as frozen records (same filters)."""
         if damaged is not None:
             with self.tolerating_damage(damaged):
-                return self.select_records(kind, env=env, task=task, where=where, limit=limit)
+                return self.select_records(kind, env=env, task=task, learner=learner,
+                                           where=where, limit=limit)
         kinds = self._kinds(kind)
         if limit is not None and (not isinstance(limit, int) or limit < 1):
             raise StoreError(f"limit must be a positive whole number, not {limit!r}")
@@ -297,6 +353,8 @@ class Tables:
                 if env_ids is not None and env_id not in env_ids:
                     continue
                 if task_ids is not None and task_id not in task_ids:
+                    continue
+                if learner is not None and getattr(record, "learner", None) != learner:
                     continue
                 out.append(record)
         if where:
@@ -342,8 +400,9 @@ class Tables:
 
     # ------------------------------------------------------------------ tables
     def records_table(self, kind: str | Sequence[str] | None = None, *, env: Any = None,
-                      task: Any = None, where: Mapping[str, Any] | None = None,
-                      limit: int | None = None, damaged: list[str] | None = None) -> pa.Table:
+                      task: Any = None, learner: str | None = None,
+                      where: Mapping[str, Any] | None = None, limit: int | None = None,
+                      damaged: list[str] | None = None) -> pa.Table:
         """Records as a table, one row each, oldest first within each kind.
 
         Args:
@@ -352,6 +411,7 @@ class Tables:
             env: an environment name, id, ``environment:N`` or record: only its records.
             task: a task name, id, ``task:N`` or record: only its records (runs, policies,
                 partitions of that task).
+            learner: a learner plugin's name: only the runs and policies it made.
             where: ``{parameter: value}``, all of which must hold (numbers compare by value,
                 strings from the command line are read as JSON first: ``"1"`` matches 1). Names
                 are those of the ``params.*`` columns (:func:`flat_params`).
@@ -366,9 +426,75 @@ class Tables:
         """
         if damaged is not None:
             with self.tolerating_damage(damaged):
-                return self.records_table(kind, env=env, task=task, where=where, limit=limit)
-        records = self.select_records(kind, env=env, task=task, where=where, limit=limit)
+                return self.records_table(kind, env=env, task=task, learner=learner,
+                                          where=where, limit=limit)
+        records = self.select_records(kind, env=env, task=task, learner=learner, where=where,
+                                      limit=limit)
         return self._records_to_table(records)
+
+    def records_page(self, kind: str | Sequence[str] | None = None, *, limit: int,
+                     damaged: list[str] | None = None, **filters: Any) -> tuple[pa.Table, int]:
+        """The first ``limit`` rows of :meth:`records_table` (same filters) and how many records
+        match in all: what ``adpart kb ls`` prints a page of. Every matching record is read and
+        verified (a damaged one is named even off the page); only the page becomes a table."""
+        if damaged is not None:
+            with self.tolerating_damage(damaged):
+                return self.records_page(kind, limit=limit, **filters)
+        records = self.select_records(kind, **filters)
+        return self._records_to_table(records[:limit]), len(records)
+
+    def runs_table(self, *, env: Any = None, task: Any = None, learner: str | None = None,
+                   where: Mapping[str, Any] | None = None, limit: int | None = None,
+                   damaged: list[str] | None = None) -> pa.Table:
+        """Every run of the selected run records as a row: its time to the success bound.
+
+        A run record holds ``K`` runs (replicates) of one learning request; each is a row, with
+        the figures the run stored when it was learned (``metrics["per_run"]``, from
+        :func:`adpart.learning.comparison.per_run_to_bound`: the pipeline's and the
+        comparisons' own definition of episodes to the bound). Filters as
+        :meth:`records_table` (``learner``: the learner plugin's name); ``limit``: at most this
+        many rows.
+
+        Columns: :data:`RUN_COLUMNS`. ``episodes_to_bound`` and ``steps_to_bound`` are the first
+        evaluated episode from which the run's value gap stays within ``bound`` (``fraction``
+        of ``|V*(start)|``) and the primitive steps up to its end; where ``censored`` is true
+        the run never stayed within it and they are where it was last seen outside (the
+        budget): pass ``(episodes_to_bound, censored)`` to a survival estimator, or drop the
+        censored rows before a mean. A run record written before these figures were stored
+        (or on a task with no ``V*``) is one row with ``replicate`` and the figures null.
+        """
+        if damaged is not None:
+            with self.tolerating_damage(damaged):
+                return self.runs_table(env=env, task=task, learner=learner, where=where,
+                                       limit=limit)
+        if limit is not None and (not isinstance(limit, int) or limit < 1):
+            raise StoreError(f"limit must be a positive whole number, not {limit!r}")
+        records = self.select_records("run", env=env, task=task, learner=learner, where=where)
+        envs = {e.id: e for e in self.records("environment")}
+        tasks = {t.id: t for t in self.records("task")}
+        rows: list[dict[str, Any]] = []
+        for run in records:
+            env_id, task_id = self._owner(run, tasks)
+            base = {"run": run.ref, "run_id": run.id,
+                    "env": envs[env_id].name if env_id in envs else None,
+                    "environment_id": env_id,
+                    "task": tasks[task_id].name if task_id in tasks else None,
+                    "task_id": task_id, "learner": run.learner, "partition_id": run.partition_id,
+                    "seed": run.seed, "episodes": _whole(run.metrics.get("episodes")),
+                    "created": run.provenance.created_at}
+            per_run = _per_run(run)
+            if per_run is None:
+                rows.append({**base, "replicate": None})
+                continue
+            for k in range(len(per_run["censored"])):
+                rows.append({**base, "replicate": k, "fraction": per_run["fraction"],
+                             "bound": per_run["bound"],
+                             **{name: per_run[name][k] for name in _PER_RUN_LISTS}})
+            if limit is not None and len(rows) >= limit:
+                break
+        rows = rows[:limit] if limit is not None else rows
+        return pa.table({name: pa.array([r.get(name) for r in rows], type)
+                         for name, type in RUN_COLUMNS.items()})
 
     def _records_to_table(self, records: list[E.Record]) -> pa.Table:
         envs = {e.id: e for e in self.records("environment")}
@@ -380,7 +506,8 @@ class Tables:
         for record in records:
             env_id, task_id = self._owner(record, tasks)
             params = flat_params(record)
-            metrics = _flatten(record.metrics) if isinstance(record, E.Run) else {}
+            metrics = (_flatten({k: v for k, v in record.metrics.items() if k != PER_RUN})
+                       if isinstance(record, E.Run) else {})
             param_keys.update(dict.fromkeys(params))
             metric_keys.update(dict.fromkeys(metrics))
             if isinstance(record, E.Artifact):
@@ -411,22 +538,30 @@ class Tables:
     def _artifact_sizes(self) -> dict[str, int]:
         """sha256 -> bytes of every artifact row whose row hash holds (the ``size`` column).
 
-        Read as plain rows (no ORM objects: a listing touches every artifact row); a damaged
-        row is reported like any other and its size left out.
+        Read as plain tuples of the hashed columns and the hash (no ORM objects or mappings: a
+        listing touches every artifact row) and verified in one pass; a damaged row is reported
+        like any other and its size left out.
         """
         table = SqlArtifact.__table__
+        names = hashed_columns(table)
+        sha_at, bytes_at = names.index("sha256"), names.index("bytes")
+        query = select(*(table.c[n] for n in names), table.c[ROW_SHA])
         try:
             with self._session() as s:
-                rows = list(s.execute(select(table)).mappings().all())
+                rows = s.execute(query).all()
         except (StoreError, *UNREADABLE):  # a row the driver cannot decode: one by one
             with self.tolerating_damage(self._damage if self._damage is not None else []):
                 return {a.sha256: a.bytes for a in self.records("artifact")}
         sizes: dict[str, int] = {}
+        verify = self._verify_rows
         for row in rows:
-            if self._verify_rows and row_digest(table, row) != row[ROW_SHA]:
-                self._damaged(changed_message(row_name(table, row), table.name))
+            values = tuple(row)
+            if verify and values_digest(table, values[:-1]) != values[-1]:
+                self._damaged(changed_message(row_name(table, dict(zip(names, values[:-1],
+                                                                       strict=True))),
+                                              table.name))
                 continue
-            sizes[row["sha256"]] = row["bytes"]
+            sizes[values[sha_at]] = values[bytes_at]
         return sizes
 
     def curves_table(self, runs: Any = None, *, env: Any = None, task: Any = None,

@@ -18,6 +18,7 @@ import numpy as np
 
 from adpart.errors import PluginError, TaskError
 from adpart.execution import Executor, SerialExecutor
+from adpart.learning.comparison import per_run_to_bound
 from adpart.learning.curves import LearningCurve
 from adpart.learning.settings import Run
 from adpart.mdp.experience import Experience
@@ -479,6 +480,9 @@ def _record_learning(kb: KnowledgeStore, outcome: LearnOutcome) -> dict[str, Any
             metrics[key] = list(outcome.curve.metadata[key])
     if "initial_blocks" in outcome.curve.metadata:
         metrics["initial_blocks"] = int(outcome.curve.metadata["initial_blocks"])
+    per_run = per_run_to_bound(outcome.curve)  # the pipeline's and comparisons' definition
+    if per_run is not None:
+        metrics["per_run"] = per_run
     if outcome.experience is not None:
         metrics["experience"] = {k: v for k, v in outcome.experience.summary().items()
                                  if k != "sources"}

@@ -55,7 +55,8 @@ def test_the_documented_cli_example_prints_what_the_page_shows(example):
     printed = {" ".join(args[:2]) + (" --json" if "--json" in args else ""): out
                for args, out in outputs}
     # kb ls run: a header and one aligned line per run, the step size in the summary
-    lines = printed["kb ls"].splitlines()
+    lines, shared = printed["kb ls"].splitlines()[:-1], printed["kb ls"].splitlines()[-1]
+    assert shared.startswith("every run above also has: runs=2 episodes=20 seed=0")
     assert lines[0].split() == ["ID", "KIND", "ENV", "TASK", "SUMMARY", "CREATED", "SIZE"]
     assert [ln.split()[:4] for ln in lines[1:]] == [
         ["run:1", "run", "two-rooms", "reach-goal"], ["run:2", "run", "two-rooms", "reach-goal"]]

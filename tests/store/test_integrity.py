@@ -2,19 +2,24 @@
 
 from __future__ import annotations
 
+import hashlib
+import json
+import math
 import sqlite3
 import subprocess
 import sys
 import textwrap
+from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from sqlalchemy import create_engine, text
+from sqlalchemy import create_engine, select, text, update
 
 from adpart.cli.kb import kb as kb_group
 from adpart.store import SCHEMA_VERSION, StoreError
+from adpart.store.models import HASHED_TABLES, partition_parents
 from adpart.workflows import record_learning, run_learning
 from adpart.workflows.learning import LearnRequest
 
@@ -154,28 +159,68 @@ def test_check_runs_the_engines_integrity_check(where, populated, table):
     assert "integrity check" in result.output or f"table {table} cannot be read" in result.output
 
 
-#: What each schema added, newest first: undone to make an older knowledge base again.
-ADDED = {3: ["ALTER TABLE runs DROP COLUMN experience_sha"],
+#: What each schema added, newest first: undone to make an older knowledge base again (4
+#: changed only the row hashes' encoding: the rows are stamped as schema 3 did, below).
+ADDED = {4: [], 3: ["ALTER TABLE runs DROP COLUMN experience_sha"],
          2: [f"ALTER TABLE {table} DROP COLUMN row_sha" for table in (
              "artifacts", "environments", "tasks", "policies", "subgoal_sets", "subgoals",
              "options", "partition_options", "partitions", "runs")]}
 
 
-def _upgraded_from(where, kb, version: int) -> None:
-    """Make ``kb`` a schema-``version`` knowledge base again, see it refused, upgrade it."""
+def _stamp_as_schema_3(conn) -> None:
+    """Every row's hash as schema 3 wrote it: the canonical JSON object of each value wrapped
+    as ``{"float": repr}``, ``{"datetime": UTC ISO}`` (written out here, not taken from
+    adpart)."""
+    parents: dict[int, list[int]] = {}
+    for child, parent in conn.execute(select(partition_parents.c.child_id,
+                                             partition_parents.c.parent_id)):
+        parents.setdefault(child, []).append(parent)
+
+    def plain(value):
+        if isinstance(value, bool | int | str) or value is None:
+            return value
+        if isinstance(value, float):
+            return {"float": repr(value) if math.isfinite(value) else str(value)}
+        if isinstance(value, datetime):
+            utc = value.replace(tzinfo=timezone.utc) if value.tzinfo is None else value
+            return {"datetime": utc.astimezone(timezone.utc).isoformat()}
+        if isinstance(value, dict):
+            return {str(k): plain(v) for k, v in value.items()}
+        return [plain(v) for v in value]
+
+    for table in HASHED_TABLES:
+        names = [c.name for c in table.columns if c.name != "row_sha"]
+        for row in conn.execute(select(table)).mappings().all():
+            payload = {"table": table.name, "columns": {n: plain(row[n]) for n in names}}
+            if table.name == "partitions":
+                payload["parents"] = sorted(parents.get(row["id"], []))
+            digest = hashlib.sha256(json.dumps(payload, sort_keys=True,
+                                               separators=(",", ":")).encode()).hexdigest()
+            key = [table.c[c.name] == row[c.name] for c in table.primary_key.columns]
+            conn.execute(update(table).where(*key).values(row_sha=digest))
+
+
+def _upgraded_from(where, kb, version: int, damage: str | None = None) -> str:
+    """Make ``kb`` a schema-``version`` knowledge base again (``damage``: an SQL statement
+    run on it then), see it refused, upgrade it; return what ``kb upgrade`` printed."""
     kb.close()
     engine = create_engine(where.db_url)
     with engine.begin() as conn:
         for newer in range(SCHEMA_VERSION, version, -1):
             for statement in ADDED[newer]:
                 conn.execute(text(statement))
+        if version == 3:
+            _stamp_as_schema_3(conn)
         conn.execute(text(f"UPDATE adpart_schema SET version = {version}"))
+        if damage is not None:
+            conn.execute(text(damage))
     engine.dispose()
     with pytest.raises(StoreError, match="run `adpart kb upgrade`"):
         where.open()
     result = CliRunner().invoke(kb_group, ["upgrade", *where.cli])
     assert result.exit_code == 0, result.output
     assert f"{version} -> {SCHEMA_VERSION}" in result.output
+    return result.output
 
 
 def test_an_old_schema_is_upgraded_with_row_hashes(where, populated):
@@ -201,6 +246,34 @@ def test_a_schema_2_knowledge_base_is_upgraded_with_run_experience(where, popula
         again = kb.put_run(task, "q-learning", experience=table)
         assert kb.load(again, "experience").column("count").to_pylist() == [5, 1]
         assert kb.check().ok
+
+def test_a_schema_3_knowledge_base_is_upgraded_to_the_new_row_hashes(where, populated):
+    kb, rec = populated
+    _upgraded_from(where, kb, 3)
+    with where.open() as kb:
+        report = kb.check()
+        assert report.ok, report.problems
+        assert report.rows_checked >= 10
+        for name, record in rec.items():
+            kind = "partition" if name == "p1" else name
+            assert kb.get(kind, record.id) == record
+
+
+def test_a_row_damaged_before_the_upgrade_stays_damaged_after_it(where, populated):
+    kb, rec = populated
+    run = rec["run"]
+    # a value changed under schema 3: its schema-3 hash no longer holds; the upgrade must not
+    # stamp the changed row valid
+    output = _upgraded_from(where, kb, 3, damage="UPDATE runs SET seed = 7 WHERE id = "
+                                                 f"{run.id}")
+    assert f"run:{run.id}" in output and "stay named as damaged" in output
+    with where.open() as kb:
+        with pytest.raises(StoreError, match=rf"run:{run.id} is damaged.*row hash mismatch"):
+            kb.get("run", run.id)
+        report = kb.check()
+        assert [p for p in report.problems if f"run:{run.id} is damaged" in p], report.problems
+        assert kb.get("policy", rec["policy"].id) == rec["policy"]  # the rest was re-stamped
+
 
 # ---------------------------------------------------------------------- concurrent first opens
 OPENER = """
@@ -233,3 +306,29 @@ def test_concurrent_first_opens_create_the_schema_once(where):
 @pytest.mark.slow
 def test_concurrent_first_opens_create_the_schema_once_on_any_backend(where):
     _first_opens(where)
+
+
+# ---------------------------------------------------------------------- the row hash's encoding
+def test_the_row_encoding_is_compact_sorted_json_and_one_instant_one_hash():
+    from zoneinfo import ZoneInfo
+
+    from adpart.store import integrity
+    from adpart.store.models import SqlRun
+
+    values = [1, "é\x00\"", None, True, 1.5, float("nan"), float("-inf"), -0.0, 1e300,
+              {"b": [1.0, 2], "a": {"z": None, "y": "x"}}, [3, [4]]]
+    assert integrity._encode(values) == json.dumps(values, sort_keys=True,
+                                                   separators=(",", ":"))
+    table = SqlRun.__table__
+    naive = datetime(2026, 12, 6, 21, 30, 0, 123456)  # SQLite gives UTC times without a zone
+    row = {c: None for c in integrity.hashed_columns(table)}
+    row.update(id=3, task_id=1, learner="q", metrics={"gap": 0.25}, parameters={},
+               created_at=naive, schema_version=4)
+    digest = integrity.row_digest(table, row)
+    for same in (naive.replace(tzinfo=timezone.utc),  # PostgreSQL, any session time zone
+                 naive.replace(tzinfo=timezone.utc).astimezone(ZoneInfo("America/Lima"))):
+        assert integrity.row_digest(table, {**row, "created_at": same}) == digest
+    for column, other in (("created_at", naive.replace(microsecond=123457)), ("id", 4),
+                          ("metrics", {"gap": 0.35}), ("learner", "Q"), ("seed", 0),
+                          ("schema_version", 4.0), ("parameters", {"a": True})):
+        assert integrity.row_digest(table, {**row, column: other}) != digest, column
