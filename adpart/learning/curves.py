@@ -478,8 +478,9 @@ class StartValues:
     (its sparse LU where the push would cost more, and for every undiscounted model); so every
     value agrees with :func:`start_values`' LU within 1e-9 (tested), not bit for bit. At 10^5
     states (``benchmarks/bench_qlearning.py``) this took the end-to-end call's scoring from one
-    LU per distinct policy to a fraction of the kernel's time. The dict replaces the int64 row hashes of :func:`distinct_rows` here: policies are stored in the
-    learner's smallest action dtype (int8: ``S`` bytes), and no ``(K, S)`` int64 copy is made.
+    LU per distinct policy to a fraction of the kernel's time. The dict replaces the int64 row
+    hashes of :func:`distinct_rows` here: policies are stored in the learner's smallest action
+    dtype (int8: ``S`` bytes), and no ``(K, S)`` int64 copy is made.
     The store keeps the most recently used policies up to ``store_bytes``.
     """
 

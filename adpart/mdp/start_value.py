@@ -217,17 +217,9 @@ def _prepare():
 
 @functools.cache
 def _kernel():
-    """The push kernel, compiled by numba on first use (``cache=True``)."""
+    """The push kernel, compiled by numba on first use (``cache=True``; one function calling no
+    other compiled one, so that numba's cache can hold it)."""
     import numba
-
-    @numba.njit(cache=True, nogil=True, boundscheck=False)
-    def residual(indptr, indices, data, R_t, policy, V, r, s, S):
-        """``r(s) = R_pi(s) + F_pi(s, .) V - V(s)``."""
-        row = policy[s] * S + s
-        acc = 0.0
-        for k in range(indptr[row], indptr[row + 1]):
-            acc += data[k] * V[indices[k]]
-        r[s] = acc + R_t[policy[s], s] - V[s]
 
     @numba.njit(cache=True, nogil=True, boundscheck=False)
     def start_value_push(indptr, indices, data, R_t, col_ptr, col_row, col_val, diag, policy,
@@ -288,7 +280,11 @@ def _kernel():
             s = members[i]
             if carry and policy[s] == last[s]:
                 continue
-            residual(indptr, indices, data, R_t, policy, V, r, s, S)
+            row = policy[s] * S + s
+            acc = 0.0
+            for k in range(indptr[row], indptr[row + 1]):
+                acc += data[k] * V[indices[k]]
+            r[s] = acc + R_t[policy[s], s] - V[s]
             if abs(r[s]) > theta:
                 fifo[tail] = s
                 tail += 1
@@ -337,7 +333,11 @@ def _kernel():
             total = 0.0
             for i in range(n):
                 s = members[i]
-                residual(indptr, indices, data, R_t, policy, V, r, s, S)
+                row = policy[s] * S + s
+                acc = 0.0
+                for k in range(indptr[row], indptr[row + 1]):
+                    acc += data[k] * V[indices[k]]
+                r[s] = acc + R_t[policy[s], s] - V[s]
                 total += mu[s] * V[s]
                 last[s] = policy[s]
                 if abs(r[s]) > theta:
