@@ -97,9 +97,10 @@ class StartValueSolver:
         L = self._layout
         if self._rho < 1.0 - _UNDISCOUNTED:
             value, status, n, work = _kernel()(
-                L.indptr, L.indices, L.data, self._R_t, L.col_ptr, L.col_row, L.col_val,
-                L.diag, pol, self._last, self._carry, self._mu, self.V, self._known,
-                self._fresh, *self._work, self._full, self._tol * (1.0 - self._rho),
+                (L.indptr, L.indices, L.data, self._R_t),
+                (L.col_ptr, L.col_row, L.col_val, L.diag), pol, self._last, self._mu,
+                (self.V, self._known, self._work[0]), self._work[1:],
+                (self._carry, self._fresh, self._full), self._tol * (1.0 - self._rho),
                 self._budget)
             self.work += work
             self._carry = self._full and status == _DONE
@@ -222,16 +223,23 @@ def _kernel():
     import numba
 
     @numba.njit(cache=True, nogil=True, boundscheck=False)
-    def start_value_push(indptr, indices, data, R_t, col_ptr, col_row, col_val, diag, policy,
-                         last, carry, mu, V, known, fresh, r, reach, members, fifo, queued,
-                         full, theta, budget):
+    def start_value_push(model, preds, policy, last, mu, values, work_arrays, flags, theta,
+                         budget):
         """Steps 1-4 of the module docstring; returns ``(value, status, n_reachable, work)``
         with the reachable states in ``members[:n]`` (status 0 done, 1 over budget) and the
         push work in units of the reachable rows' nonzeros. With ``carry``, ``r`` is exact for
         ``V`` and the policy ``last`` on every state (the last call ended done, with every
         state reachable) and only the states whose action changed are recomputed; ``last``
         becomes ``policy`` when done. ``fresh``: every state has a value already (``known``).
+        Arrays by role: ``model`` = (indptr, indices, data, R_t), ``preds`` = (col_ptr, col_row,
+        col_val, diag), ``values`` = (V, known, r), ``work_arrays`` = (reach, members, fifo,
+        queued), ``flags`` = (carry, fresh, full).
         """
+        indptr, indices, data, R_t = model
+        col_ptr, col_row, col_val, diag = preds
+        V, known, r = values
+        reach, members, fifo, queued = work_arrays
+        carry, fresh, full = flags
         S = R_t.shape[1]
         n = 0
         if full:
