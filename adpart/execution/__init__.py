@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import sys
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable
 from concurrent.futures import ProcessPoolExecutor
@@ -83,7 +84,7 @@ class LocalExecutor(Executor):
             )
             context = multiprocessing.get_context(method)
             self._pool = ProcessPoolExecutor(
-                max_workers=self.workers, mp_context=context, initializer=_one_thread_per_worker)
+                max_workers=self.workers, mp_context=context, initializer=one_thread_per_worker)
         return self._pool
 
     def map(self, fn: Callable[[T], R], items: Iterable[T]) -> list[R]:
@@ -110,9 +111,41 @@ WORKER_THREAD_ENV: dict[str, str] = {
 }
 
 
-def _one_thread_per_worker() -> None:
-    """Give each pool worker one numba (and OpenMP/BLAS) thread: the workers fill the cores."""
+def one_thread_per_worker() -> None:
+    """Give this worker process one numba, OpenMP and BLAS thread: the workers fill the cores.
+
+    The environment (:data:`WORKER_THREAD_ENV`) covers the libraries the worker has not loaded
+    yet. Those it has loaded read it too early: a forkserver preloads the driver's ``__main__``,
+    so a script that imports adpart (and with it numba and numpy) at the top hands every worker
+    numba with one thread per core and BLAS's own pool (a sweep cell measured 3-10x slower under
+    load). For them the limits are set in place: ``numba.set_num_threads(1)`` (numba's thread
+    count of this thread, the one the pool runs tasks on; ``NUMBA_NUM_THREADS`` then stays what
+    numba read, its pool's size) and threadpoolctl's limit on every loaded BLAS and OpenMP
+    library.
+    """
     os.environ.update(WORKER_THREAD_ENV)
+    numba = sys.modules.get("numba")
+    if numba is not None:
+        # numba re-reads its variables whenever it compiles and refuses a thread count other
+        # than the one its pool was sized by: keep the one it read at import
+        os.environ["NUMBA_NUM_THREADS"] = str(numba.config.NUMBA_NUM_THREADS)
+        numba.set_num_threads(1)
+    if "numpy" in sys.modules or "scipy" in sys.modules:
+        from threadpoolctl import threadpool_limits
+
+        threadpool_limits(1)
+
+
+def worker_threads(_item: object = None) -> dict[str, object]:
+    """This process's thread settings: numba's count, each loaded BLAS/OpenMP library's, and
+    the environment's (what :func:`one_thread_per_worker` sets). Takes (and ignores) an item,
+    so that ``executor.map(worker_threads, range(n))`` asks n tasks (tests, benchmarks)."""
+    import numba
+    from threadpoolctl import threadpool_info
+
+    return {"numba": numba.get_num_threads(),
+            "pools": sorted({int(p["num_threads"]) for p in threadpool_info()}),
+            "env": {k: os.environ.get(k) for k in WORKER_THREAD_ENV}}
 
 
 def run_with(executor: Executor, fn: Callable[[Any], Any], items: Iterable[Any]) -> list[Any]:

@@ -41,6 +41,7 @@ import numpy as np
 from adpart.errors import ModelError, TaskError
 from adpart.mdp.evaluation import policy_evaluation
 from adpart.mdp.solvers import solve
+from adpart.mdp.start_value import StartValueSolver
 
 __all__ = [
     "COLUMNS",
@@ -524,10 +525,16 @@ class StartValues:
     evaluation (late in learning most runs' policies repeat, and different runs converge to the
     same one). The look-up is a dict keyed by the policy's bytes, so a hit is an exact match
     (hash, then full comparison), never a collision; the policies not found are grouped the same
-    way and solved once each by :func:`_start_value`, the function :func:`start_values` uses, so
-    every value is the one :func:`start_values` returns for the same policies, bit for bit. This
-    replaces the int64 row hashes of :func:`distinct_rows` here: policies are stored in the
-    learner's smallest action dtype (int8: ``S`` bytes), and no ``(K, S)`` int64 copy is made.
+    way and solved once each by one :class:`adpart.mdp.start_value.StartValueSolver`, which
+    solves only the states reachable from ``mu`` under the policy, starting from the values of the
+    policy it solved last (the previous evaluation's, or another run's), and stops when the
+    start value is within :data:`adpart.mdp.start_value.START_VALUE_TOL` (1e-10) of the exact one
+    (its sparse LU where the push would cost more, and for every undiscounted model); so every
+    value agrees with :func:`start_values`' LU within 1e-9 (tested), not bit for bit. At 10^5
+    states (``benchmarks/bench_qlearning.py``) this took the end-to-end call's scoring from one
+    LU per distinct policy to a fraction of the kernel's time. The dict replaces the int64 row
+    hashes of :func:`distinct_rows` here: policies are stored in the learner's smallest action
+    dtype (int8: ``S`` bytes), and no ``(K, S)`` int64 copy is made.
     The store keeps the most recently used policies up to ``store_bytes``.
     """
 
@@ -540,6 +547,7 @@ class StartValues:
         self._store: dict[bytes, float] = {}  # policy bytes -> start value, oldest use first
         self._stored_bytes = 0
         self._store_bytes = store_bytes
+        self._solver = StartValueSolver(self._smdp, mu)
         self.solves = 0  #: policies solved so far (the others came from the store)
 
     def __call__(self, policies: np.ndarray, changed: np.ndarray) -> np.ndarray:
@@ -561,7 +569,7 @@ class StartValues:
             if not self._all_admissible and not np.all(
                     self._smdp.admissible[np.arange(policy.size), policy]):
                 raise ModelError("a policy to score chooses an inadmissible action")
-            value = _start_value(self._smdp, policy, self._mu)
+            value = self._solver(policy)
             self.solves += 1
             self._values[runs] = value
             self._keep(key, value)

@@ -1,0 +1,132 @@
+"""The start-value solver against one sparse LU per policy on every state (the exact solver).
+
+Each path of :class:`adpart.mdp.start_value.StartValueSolver` is checked: the push from cold
+and warm starts (the residual carried over when every state is a start), the search for the
+reachable states when the start distribution is narrow, the LU fallback (over budget, and
+undiscounted), and the stated tolerance.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from adpart.mdp.evaluation import policy_evaluation
+from adpart.mdp.generate import random_grid_mdp, random_mdp
+from adpart.mdp.model import FiniteMDP, SMDPModel
+from adpart.mdp.start_value import START_VALUE_TOL, StartValueSolver
+
+EXACT = 1e-9  # agreement asked of every path (the iterative one promises START_VALUE_TOL)
+
+
+def _exact(model, policy, mu) -> float:
+    return float(policy_evaluation(model, policy) @ mu)
+
+
+def _with_terminals(mdp: FiniteMDP, terminal: np.ndarray, initial: np.ndarray) -> FiniteMDP:
+    return FiniteMDP(mdp.P, mdp.R, mdp.gamma, terminal=terminal, initial=initial)
+
+
+def _policies(rng, S, A, n, flips):
+    """``n`` policies, each the last with ``flips`` states changed (the learner's pattern),
+    after a uniformly random first one."""
+    pol = rng.integers(0, A, size=S)
+    out = []
+    for _ in range(n):
+        out.append(pol.copy())
+        where = rng.choice(S, size=flips, replace=False)
+        pol[where] = rng.integers(0, A, size=flips)
+    return out
+
+
+@pytest.mark.parametrize("gamma", [0.5, 0.9, 0.99])
+@pytest.mark.parametrize("flips", [1, 20, 300])
+def test_every_start_equals_the_exact_solve(gamma, flips):
+    rng = np.random.default_rng(int(gamma * 100) + flips)
+    mdp = random_mdp(300, 4, density=0.01, seed=flips, gamma=gamma)
+    mu = rng.dirichlet(np.ones(mdp.n_states))  # every state a start: no search, residual carried
+    solver = StartValueSolver(mdp, mu)
+    for pol in _policies(rng, mdp.n_states, 4, 25, flips):
+        assert abs(solver(pol) - _exact(mdp, pol, mu)) <= EXACT
+    assert solver.pushed + solver.factored == 25
+
+
+def test_on_a_grid_warm_pushes_agree_whatever_the_budget():
+    # the push from the last policy's values (budget unbounded) and the default budget, which
+    # hands the policies whose change spreads far to the LU
+    rng = np.random.default_rng(0)
+    mdp = random_grid_mdp(900, gamma=0.9, seed=1)
+    mu = np.full(mdp.n_states, 1.0 / mdp.n_states)
+    pushing, default = StartValueSolver(mdp, mu, budget=1e9), StartValueSolver(mdp, mu)
+    for pol in _policies(rng, mdp.n_states, 4, 30, 3):
+        exact = _exact(mdp, pol, mu)
+        assert abs(pushing(pol) - exact) <= EXACT
+        assert abs(default(pol) - exact) <= EXACT
+    assert pushing.pushed == 30 and pushing.factored == 0
+    assert default.pushed + default.factored == 30
+
+
+def test_a_narrow_start_solves_only_the_reachable_states():
+    # terminal states and one start state: most states are never reached under a policy
+    rng = np.random.default_rng(3)
+    base = random_mdp(500, 3, density=0.002, seed=4, gamma=0.95)
+    terminal = rng.random(base.n_states) < 0.1
+    terminal[0] = False
+    initial = np.zeros(base.n_states)
+    initial[0] = 1.0
+    mdp = _with_terminals(base, terminal, initial)
+    mu = initial
+    for budget in (1e9, 0.0):  # the push, and the LU of the reachable states
+        solver = StartValueSolver(mdp, mu, budget=budget)
+        for pol in _policies(rng, mdp.n_states, 3, 20, 25):
+            assert abs(solver(pol) - _exact(mdp, pol, mu)) <= EXACT
+            reached = solver.reached
+            assert 0 < reached.size < mdp.n_states
+            # the reachable set is closed under the policy and holds the start
+            F_pi = mdp.as_smdp().F[pol * mdp.n_states + np.arange(mdp.n_states)]
+            assert 0 in reached
+            assert np.isin(F_pi[reached].indices, reached).all()
+        assert solver.factored == (20 if budget == 0.0 else 0)
+
+
+def test_options_models_with_uneven_discounts():
+    # an SMDP: rows of F with different masses (multi-time models), rewards of any sign
+    rng = np.random.default_rng(5)
+    base = random_mdp(200, 5, density=0.02, seed=6)
+    mass = rng.uniform(0.3, 0.97, size=base.P.shape[0])
+    model = SMDPModel(R=rng.normal(0, 10, size=(200, 5)),
+                      F=sp.csr_array(sp.diags_array(mass) @ base.P),
+                      admissible=np.ones((200, 5), dtype=bool))
+    mu = rng.dirichlet(np.ones(200) * 0.1)
+    solver = StartValueSolver(model, mu)
+    for pol in _policies(rng, 200, 5, 20, 10):
+        assert abs(solver(pol) - _exact(model, pol, mu)) <= EXACT
+
+
+def test_a_loose_tolerance_is_still_met():
+    rng = np.random.default_rng(7)
+    mdp = random_mdp(300, 4, density=0.01, seed=8, gamma=0.99)
+    mu = np.full(mdp.n_states, 1.0 / mdp.n_states)
+    for tol in (1e-2, 1e-5, START_VALUE_TOL):
+        solver = StartValueSolver(mdp, mu, tol=tol, budget=1e9)  # the push answers all
+        for pol in _policies(rng, mdp.n_states, 4, 10, 30):
+            assert abs(solver(pol) - _exact(mdp, pol, mu)) <= tol
+        assert solver.factored == 0
+
+
+def test_undiscounted_policies_take_the_lu_and_a_reachable_loop_scores_nan():
+    # gamma = 1: 0 -> 1 -> 2 (terminal); 3 <-> 4 a cycle no start reaches; "stay" loops
+    S, A = 5, 2
+    P = np.zeros((S, A, S))
+    P[0, 0, 1] = P[1, 0, 2] = 1.0
+    P[0, 1, 0] = P[1, 1, 1] = 1.0
+    P[2, :, 2] = 1.0
+    P[3, :, 4] = P[4, :, 3] = 1.0
+    terminal = np.array([False, False, True, False, False])
+    mu = np.array([1.0, 0, 0, 0, 0])
+    mdp = FiniteMDP.from_dense(P, -np.ones((S, A)), 1.0, terminal=terminal, initial=mu)
+    solver = StartValueSolver(mdp, mu)
+    assert solver(np.zeros(S, dtype=np.int64)) == pytest.approx(-2.0)
+    assert np.isnan(solver(np.array([0, 1, 0, 0, 0])))
+    assert solver.factored == 2 and solver.pushed == 0
