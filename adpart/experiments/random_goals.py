@@ -70,13 +70,15 @@ def random_goals(config: ExperimentConfig) -> ExperimentReport:
 
     s = dict(SETTINGS["quick" if config.quick else "full"])
     runs = min(config.runs, s.pop("runs", config.runs))
+    layer_params = dict(s.pop("hierarchical", {}))  # the layer learner's, beside the defaults
     out = Path(config.out)
     out.mkdir(parents=True, exist_ok=True)
     goals = goal_cells(s["env"], s["first"], s["goals"], config.seed)
     report = ExperimentReport("random-goals", "Randomly moved goals in the learned-model regime")
     pcfg = PipelineConfig(env=s["env"], tasks=(s["first"], *goals), runs=runs,
                           episodes=s["episodes"], first_episodes=s["first_episodes"],
-                          seed=config.seed, eval_every=s["eval_every"], fallback=False)
+                          seed=config.seed, eval_every=s["eval_every"], fallback=False,
+                          hierarchical_params=layer_params)
     with working_kb(config.kb, "random-goals") as kb:
         config.progress(f"{s['env']}: {s['first']} then {len(goals)} random goals")
         pipe = run_pipeline(kb, pcfg, out=out / "pipeline", progress=config.progress)
@@ -98,7 +100,7 @@ def random_goals(config: ExperimentConfig) -> ExperimentReport:
         per_goal.append(row)
     aggregate = {key: list(iqm(cells, seed=config.seed)) for key, cells in pooled.items()}
     report.data.update({"settings": {**s, "runs": runs, "seed": config.seed, "goals": goals,
-                                     "regime": pcfg.regime},
+                                     "regime": pcfg.regime, "hierarchical": layer_params},
                         "per_goal": per_goal, "iqm": aggregate,
                         "goals_with_a_ratio": {k: len(v) for k, v in pooled.items()}})
     report.findings.append(_table(per_goal))
