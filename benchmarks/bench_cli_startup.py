@@ -29,22 +29,10 @@ TARGET_S = 0.3
 
 def command_paths() -> list[tuple[str, ...]]:
     """Every command and sub-command of ``adpart`` (imports them, in this process only)."""
-    import click
-
     from adpart.cli import cli
+    from adpart.cli.group import command_paths as walk
 
-    ctx = click.Context(cli)
-    found: list[tuple[str, ...]] = []
-
-    def walk(group: click.Group, path: tuple[str, ...]) -> None:
-        for name in group.list_commands(ctx):
-            command = group.get_command(ctx, name)
-            found.append((*path, name))
-            if isinstance(command, click.Group):
-                walk(command, (*path, name))
-
-    walk(cli, ())
-    return found
+    return walk(cli)
 
 
 def _run(argv: list[str]) -> tuple[float, float]:

@@ -75,3 +75,20 @@ class LazyGroup(click.Group):
         except KeyboardInterrupt:
             click.echo("Interrupted.", err=True)
             raise click.exceptions.Exit(INTERRUPTED) from None
+
+
+def command_paths(group: click.Group) -> list[tuple[str, ...]]:
+    """Every command and sub-command under ``group``, e.g. ``("kb", "ls")`` (each is imported:
+    the help-import test and the start-up benchmark walk them)."""
+    ctx = click.Context(group)
+    found: list[tuple[str, ...]] = []
+
+    def walk(sub: click.Group, path: tuple[str, ...]) -> None:
+        for name in sub.list_commands(ctx):
+            command = sub.get_command(ctx, name)
+            found.append((*path, name))
+            if isinstance(command, click.Group):
+                walk(command, (*path, name))
+
+    walk(group, ())
+    return found

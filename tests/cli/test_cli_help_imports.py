@@ -10,28 +10,17 @@ import json
 import subprocess
 import sys
 
-import click
 import pytest
 
 from adpart.cli import cli
+from adpart.cli.group import command_paths as group_command_paths
 
 HEAVY = ("numpy", "numba", "scipy", "sqlalchemy", "pyarrow", "matplotlib", "pandas", "gymnasium")
 
 
 def command_paths() -> list[tuple[str, ...]]:
     """Every command and sub-command, e.g. ``("kb", "ls")``."""
-    ctx = click.Context(cli)
-    found: list[tuple[str, ...]] = []
-
-    def walk(group: click.Group, path: tuple[str, ...]) -> None:
-        for name in group.list_commands(ctx):
-            command = group.get_command(ctx, name)
-            found.append((*path, name))
-            if isinstance(command, click.Group):
-                walk(command, (*path, name))
-
-    walk(cli, ())
-    return found
+    return group_command_paths(cli)
 
 
 PROBE = """
