@@ -48,7 +48,7 @@ def _check_plugin_params(kind: str, name: str, params: dict[str, Any], option: s
 def check_pipeline_options(config: Any) -> None:
     """Every value of a pipeline's config checked up front (plugins, parameters, tasks)."""
     from adpart.workflows.pipeline import check_tasks
-    from adpart.workflows.regime import check_regime
+    from adpart.workflows.regime import check_regime, layer_params
 
     try:
         check_tasks(config.env, config.tasks)
@@ -58,8 +58,8 @@ def check_pipeline_options(config: Any) -> None:
                          "--detector-opt", "--detector")
     _check_plugin_params("learner", config.flat_learner, config.flat_params, "--flat-opt",
                          "--flat-learner")
-    _check_plugin_params("learner", "hierarchical", config.hierarchical_params, "--hier-opt",
-                         "--hier-opt")
+    _check_plugin_params("learner", "hierarchical", layer_params(config), "--hier-opt",
+                         "--hier-opt")  # with the regime's default exploration
     check_criterion(config.criterion, config.criterion_params, config.partition)
     try:
         check_regime(config)

@@ -39,6 +39,7 @@ from adpart.experiments.transfer import (
     setup_settings,
 )
 from adpart.learning.comparison import survival_sentence, time_ratio
+from adpart.workflows.progress import learning_progress
 
 #: R-max's known count: the tries of every pair the sample limit measured as enough.
 PLANNED_KNOWN = 30
@@ -81,8 +82,9 @@ def three_floor_arm_planned(config: ExperimentConfig) -> ExperimentReport:
     for label, threshold in zip(LEARNERS, (np.inf, None), strict=True):
         config.progress(f"three-floor-arm/deliver: {label}")
         settings = build_settings(HierarchicalSettings, {**kw, "threshold": threshold})
-        results[label] = hierarchical_learning(mdp, ctx["options"], ctx["partition"], settings,
-                                               run, ctx["models"])
+        with learning_progress(run, label) as shown:
+            results[label] = hierarchical_learning(mdp, ctx["options"], ctx["partition"],
+                                                   settings, shown, ctx["models"])
     flat_label = next(k for k in pipe.curves[setup.new] if k.startswith("flat"))
     curves = {"flat Q": pipe.curves[setup.new][flat_label],
               **{label: r.curve for label, r in results.items()}}

@@ -71,7 +71,7 @@ MEASURES = (("jumpstart", "jumpstart gap"), ("auc_episodes", "gap area (episodes
 def _measures(pipe: Any, task: str, seed: int) -> tuple[list[str], dict[str, Any]]:
     """Per learner of ``task``: the run means of :data:`MEASURES` with 95 % bootstrap CIs."""
     from adpart.experiments.stats import bootstrap_ci
-    from adpart.learning.comparison import success_bound
+    from adpart.learning.comparison import interval_text, success_bound
     from adpart.learning.transfer_metrics import metrics_from_curve
 
     curves = pipe.curves.get(task, {})
@@ -87,7 +87,7 @@ def _measures(pipe: Any, task: str, seed: int) -> tuple[list[str], dict[str, Any
         cis = {name: bootstrap_ci(getattr(m, name), statistic="mean", seed=seed)
                for name, _ in MEASURES}
         data[label] = {name: list(ci) for name, ci in cis.items()}
-        cells = " ".join(f"{f'{e:.3g} [{lo:.3g}, {hi:.3g}]':>26}" for e, lo, hi in cis.values())
+        cells = " ".join(f"{interval_text(e, lo, hi):>26}" for e, lo, hi in cis.values())
         lines.append(f"{label:<{width}} {cells}")
     return lines, data
 

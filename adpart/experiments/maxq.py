@@ -47,6 +47,7 @@ from adpart.experiments.sequential import sequential_test
 from adpart.experiments.stats import bootstrap_ci, compare, gap_auc_steps
 from adpart.learning.comparison import ratio_of_medians_ci
 from adpart.learning.settings import Run
+from adpart.workflows.progress import learning_progress
 
 ALPHA, EPSILON = "1/n^0.6", "1/n^0.5"
 #: Tolerance of the value gap (reward units, mean over the start distribution).
@@ -236,7 +237,8 @@ def maxq_taxi(config: ExperimentConfig) -> ExperimentReport:
                                     ("MAXQ-Q (no abstraction)", False, "maxq_noabs")):
         config.progress(f"fickle Taxi: {label}")
         g = taxi_graph().compile(mdp, abstraction=abstraction)
-        res = maxq_q(mdp, g, Run(episodes=s[key], **common))
+        with learning_progress(Run(episodes=s[key], **common), label) as run:
+            res = maxq_q(mdp, g, run)
         curves[label] = res.curve
         sol = recursively_optimal(mdp, g)
         polled = float(start_values_of(mdp, polled_policy(g, sol, mdp.admissible), mu))
@@ -245,7 +247,8 @@ def maxq_taxi(config: ExperimentConfig) -> ExperimentReport:
                            f"(executed as a hierarchy: {res.v_star_start - mu @ sol.V[g.root]:.3g}"
                            " below V*)"))
     config.progress("fickle Taxi: flat Q")
-    curves["flat Q"] = q_learning(mdp, Run(episodes=s["flat"], **common)).curve
+    with learning_progress(Run(episodes=s["flat"], **common), "flat Q") as run:
+        curves["flat Q"] = q_learning(mdp, run).curve
     ceilings["flat Q"] = (0.0, "V*")
     config.progress("fickle Taxi: pipeline (flat deliver, count-mc, options, partition)")
     curves["pipeline (hierarchical)"], pipe = _taxi_pipeline(config, s)

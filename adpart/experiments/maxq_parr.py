@@ -47,6 +47,7 @@ from adpart.experiments.protocol import (
     score,
     sentence,
 )
+from adpart.workflows.progress import learning_progress
 
 #: Tolerance of the value gap on the maze (reward units, mean over the start distribution).
 PARR_TOL = 2.0
@@ -267,9 +268,10 @@ def _parr(config: ExperimentConfig, *, mini: bool) -> ExperimentReport:
     mdp = maze.mdp()
     first, goal = _first_task(maze)
     config.progress(f"parr {which} maze: first task flat ({s['first']} episodes)")
-    fr = q_learning(first, Run(runs=1, episodes=s["first"], seed=config.seed, alpha=ALPHA,
+    with learning_progress(Run(runs=1, episodes=s["first"], seed=config.seed, alpha=ALPHA,
                                epsilon=EPSILON, eval_every=max(1, s["first"] // 10),
-                               max_steps_per_episode=s["horizon"]))
+                               max_steps_per_episode=s["horizon"]), "first task") as run:
+        fr = q_learning(first, run)
     found = discover_monte_carlo(first, fr.greedy_policies()[0],
                                  np.random.default_rng(config.seed),
                                  build_settings(MonteCarloSettings,
@@ -322,8 +324,9 @@ def _parr(config: ExperimentConfig, *, mini: bool) -> ExperimentReport:
               "eval_every": s["eval_every"], "max_steps_per_episode": s["horizon"],
               "alpha": ALPHA}
     config.progress("maze task: SMDP Q on the discovered options")
-    smdp = smdp_q_learning(mdp, options, SMDPQSettings(include_primitives=True),
-                           Run(epsilon=EPSILON, q_init=from_below, **common), models)
+    with learning_progress(Run(epsilon=EPSILON, q_init=from_below, **common), "SMDP Q") as run:
+        smdp = smdp_q_learning(mdp, options, SMDPQSettings(include_primitives=True), run,
+                               models)
     v_star = float(smdp.v_star_start)
     smdp_final = smdp.curve.matrix("value_gap")[:, -1]
     never_gap = v_star - from_below
@@ -331,12 +334,14 @@ def _parr(config: ExperimentConfig, *, mini: bool) -> ExperimentReport:
     config.progress("maze task: hierarchical learner on the multi-phase partition")
     layer, _full, layer_smdp = decision_layer(mdp, layer_options, delta=0.3, epsilon=10.0,
                                               models=layer_models)
-    hier = hierarchical_learning(
-        mdp, layer_options, layer,
-        build_settings(HierarchicalSettings, {
-            "delta": 0.3, "partition_epsilon": 10.0,
-            "primitive_exploration": LAYER_PRIMITIVE_EXPLORATION}),
-        Run(epsilon=EPSILON, q_init=from_below, **common), layer_models)
+    with learning_progress(Run(epsilon=EPSILON, q_init=from_below, **common),
+                           "hierarchical") as run:
+        hier = hierarchical_learning(
+            mdp, layer_options, layer,
+            build_settings(HierarchicalSettings, {
+                "delta": 0.3, "partition_epsilon": 10.0,
+                "primitive_exploration": LAYER_PRIMITIVE_EXPLORATION}),
+            run, layer_models)
     config.progress("maze task: MAXQ-Q (hierarchical greedy rollouts)")
     g = get_graph("parr-maze").compile(mdp)
     m_steps, m_gaps, m_ev, m_done = _maxq_parr(mdp, g, s, config.seed, v_star)

@@ -43,6 +43,7 @@ import numpy as np
 
 from adpart.experiments.base import ExperimentConfig, ExperimentReport, experiment
 from adpart.experiments.stats import compare, episodes_to_threshold
+from adpart.workflows.progress import learning_progress
 
 ENV = "three-floor"
 SOURCE_TASK = "reach-goal"
@@ -160,11 +161,13 @@ def options_three_floor(config: ExperimentConfig) -> ExperimentReport:
               "eval_every": s["eval_every"], "max_steps_per_episode": s["horizon"],
               "alpha": ALPHA, "epsilon": EPSILON, "reference_values": v_star}
     config.progress(f"learning {NEW_TASK}: flat ({s['runs']} runs x {s['episodes']} episodes)")
-    results: dict[str, Any] = {FLAT: q_learning(mdp, Run(**common))}
+    with learning_progress(Run(**common), FLAT) as run:
+        results: dict[str, Any] = {FLAT: q_learning(mdp, run)}
     for name, (options, models, prims) in built.items():
         config.progress(f"learning {NEW_TASK}: SMDP Q over {name}")
-        results[f"SMDP Q, {name}"] = smdp_q_learning(
-            mdp, options, SMDPQSettings(include_primitives=prims), Run(**common), models)
+        with learning_progress(Run(**common), f"SMDP Q, {name}") as run:
+            results[f"SMDP Q, {name}"] = smdp_q_learning(
+                mdp, options, SMDPQSettings(include_primitives=prims), run, models)
     curves = {k: r.curve for k, r in results.items()}
     v_start = float(results[FLAT].v_star_start)
     never = -1.0 / (1.0 - mdp.gamma)  # the value of a policy that never reaches the goal

@@ -42,6 +42,7 @@ import numpy as np
 from adpart.experiments.base import ExperimentConfig, ExperimentReport, experiment
 from adpart.experiments.stats import compare, episodes_to_threshold
 from adpart.partition.settings import PartitionSettings
+from adpart.workflows.progress import learning_progress
 
 if TYPE_CHECKING:
     from adpart.workflows.store import KnowledgeStore
@@ -120,14 +121,18 @@ def _learn(mdp: Any, options: list[Any], models: list[Any], partition: Any, s: d
               "eval_every": s["eval_every"], "max_steps_per_episode": s["horizon"]}
     out: dict[str, Any] = {}
     if "flat" in which:
-        out["flat Q-learning"] = q_learning(mdp, Run(**common))
+        with learning_progress(Run(**common), "flat Q-learning") as run:
+            out["flat Q-learning"] = q_learning(mdp, run)
     if "smdp" in which:
-        out["SMDP Q (options)"] = smdp_q_learning(mdp, options, None, Run(**common), models)
+        with learning_progress(Run(**common), "SMDP Q (options)") as run:
+            out["SMDP Q (options)"] = smdp_q_learning(mdp, options, None, run, models)
     if "hier" in which:
-        out["partition space"] = hierarchical_learning(
-            mdp, options, partition,
-            HierarchicalSettings(refinement=Refinement(delta=DELTA, partition_epsilon=EPSILON)),
-            Run(**common), models)
+        with learning_progress(Run(**common), "partition space") as run:
+            out["partition space"] = hierarchical_learning(
+                mdp, options, partition,
+                HierarchicalSettings(refinement=Refinement(delta=DELTA,
+                                                           partition_epsilon=EPSILON)),
+                run, models)
     return out
 
 

@@ -41,6 +41,7 @@ from adpart.errors import AdpartError
 from adpart.experiments.base import ExperimentConfig, ExperimentReport, experiment
 from adpart.learning.settings import Run
 from adpart.plotting import new_figure
+from adpart.workflows.progress import learning_progress
 
 P_LEVEL = 0.025
 
@@ -87,8 +88,10 @@ def subgoals_two_rooms(config: ExperimentConfig) -> ExperimentReport:
     uniform = np.where(mdp.terminal, 0.0, 1.0)
     learn_on = mdp.with_rewards(mdp.R, initial=uniform / uniform.sum())
     config.progress(f"Q-learning two-rooms: {s['runs']} runs x {s['episodes']} episodes")
-    q = q_learning(learn_on, Run(runs=s["runs"], episodes=s["episodes"], seed=config.seed,
-                                 alpha=s["alpha"], epsilon=s["epsilon"], eval_every=s["episodes"]))
+    with learning_progress(Run(runs=s["runs"], episodes=s["episodes"], seed=config.seed,
+                               alpha=s["alpha"], epsilon=s["epsilon"],
+                               eval_every=s["episodes"]), "Q-learning two-rooms") as run:
+        q = q_learning(learn_on, run)
     policies = q.greedy_policies()
     final_gap = q.curve.matrix("value_gap")[:, -1]
     seeds = np.random.SeedSequence(config.seed).spawn(s["runs"])

@@ -49,6 +49,7 @@ from adpart.learning.hierarchical_settings import HierarchicalSettings
 from adpart.learning.settings import Run
 from adpart.params import build_settings
 from adpart.partition.settings import PartitionSettings
+from adpart.workflows.progress import learning_progress
 
 if TYPE_CHECKING:
     from adpart.workflows.store import KnowledgeStore
@@ -191,14 +192,17 @@ def _transfer(config: ExperimentConfig, setup: TransferSetup, report: Experiment
     partition, run = ctx["partition"], Run(**ctx["common"])
     results: dict[str, Any] = {}
     config.progress(f"{s.env}/{s.new}: partition space without refinement")
-    results["no refinement"] = hierarchical_learning(
-        mdp, options, partition, layer_settings(threshold=np.inf), run, models)
+    with learning_progress(run, "no refinement") as shown:
+        results["no refinement"] = hierarchical_learning(
+            mdp, options, partition, layer_settings(threshold=np.inf), shown, models)
     config.progress(f"{s.env}/{s.new}: partition space with refinement")
-    results["refinement"] = hierarchical_learning(mdp, options, partition, layer_settings(),
-                                                  run, models)
+    with learning_progress(run, "refinement") as shown:
+        results["refinement"] = hierarchical_learning(mdp, options, partition, layer_settings(),
+                                                      shown, models)
     config.progress(f"{s.env}/{s.new}: reward variation")
-    results["reward variation"] = hierarchical_learning(
-        mdp, options, None, layer_settings(mode="reward-variation"), run, models)
+    with learning_progress(run, "reward variation") as shown:
+        results["reward variation"] = hierarchical_learning(
+            mdp, options, None, layer_settings(mode="reward-variation"), shown, models)
     flat_label = next(k for k in pipe.curves[s.new] if k.startswith("flat"))
     curves = {"flat Q": pipe.curves[s.new][flat_label],
               **{f"partition, {k}": r.curve for k, r in results.items()}}
@@ -336,16 +340,19 @@ def three_floor(config: ExperimentConfig) -> ExperimentReport:
     ctx = _transfer(config, setup, report)
     mdp, common = ctx["mdp"], ctx["common"]
     config.progress("three-floor: SMDP Q over the discovered options + primitives")
-    smdp = smdp_q_learning(mdp, ctx["options"], SMDPQSettings(include_primitives=True),
-                           Run(**common), ctx["models"])
+    with learning_progress(Run(**common), "SMDP Q") as run:
+        smdp = smdp_q_learning(mdp, ctx["options"], SMDPQSettings(include_primitives=True),
+                               run, ctx["models"])
     config.progress("three-floor: hand-designed doorway options")
     hand = doorway_options(mdp)
     hand_models = option_models(mdp, hand, duration=False)
     hand_part, _, _ = decision_layer(mdp, hand, delta=DELTA, epsilon=EPSILON, models=hand_models)
-    run = Run(**common)
-    hand_ref = hierarchical_learning(mdp, hand, hand_part, layer_settings(), run, hand_models)
-    hand_rv = hierarchical_learning(mdp, hand, None, layer_settings(mode="reward-variation"),
-                                    run, hand_models)
+    with learning_progress(Run(**common), "hand-designed, refinement") as run:
+        hand_ref = hierarchical_learning(mdp, hand, hand_part, layer_settings(), run,
+                                         hand_models)
+    with learning_progress(Run(**common), "hand-designed, reward variation") as run:
+        hand_rv = hierarchical_learning(mdp, hand, None, layer_settings(mode="reward-variation"),
+                                        run, hand_models)
     ctx["curves"]["SMDP Q (discovered + primitives)"] = smdp.curve
     ctx["curves"]["hand-designed, refinement"] = hand_ref.curve
     ctx["curves"]["hand-designed, reward variation"] = hand_rv.curve
@@ -409,9 +416,10 @@ def _directed(config: ExperimentConfig, ctx: dict[str, Any]) -> None:
           "intra_option": True, "refine": "block"}
     for label, threshold in zip(DIRECTED, (np.inf, None), strict=True):
         config.progress(f"three-floor-arm/deliver: {label}")
-        result = hierarchical_learning(ctx["mdp"], ctx["options"], ctx["partition"],
-                                       layer_settings(threshold=threshold, **kw),
-                                       Run(**ctx["common"]), ctx["models"])
+        with learning_progress(Run(**ctx["common"]), label) as run:
+            result = hierarchical_learning(ctx["mdp"], ctx["options"], ctx["partition"],
+                                           layer_settings(threshold=threshold, **kw), run,
+                                           ctx["models"])
         ctx["results"][label.removeprefix("partition, ")] = result
         ctx["curves"][label] = result.curve
 

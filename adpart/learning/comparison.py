@@ -22,8 +22,8 @@ from adpart.learning.transfer_metrics import (
 )
 
 __all__ = ["SUCCESS_FRACTION", "TIE_TOLERANCE", "best_final_run", "best_observed_run",
-           "episodes_to_bound", "measured", "per_run_to_bound", "ratio_of_medians_ci",
-           "success_bound", "survival_sentence", "task_row", "time_ratio"]
+           "episodes_to_bound", "interval_text", "measured", "per_run_to_bound",
+           "ratio_of_medians_ci", "success_bound", "survival_sentence", "task_row", "time_ratio"]
 
 
 #: Final gaps closer than this fraction of the value scale (``max(1, |V*(start)|)``) are a tie:
@@ -218,13 +218,37 @@ def time_ratio(method: LearningCurve, baseline: LearningCurve, fraction: float, 
             "first_evaluation": int(method.evaluated_episodes()[0])}
 
 
+#: What an interval of zero width is called: every bootstrap resample gave the estimate (for a
+#: run mean, every run has the same value; for a median, the runs tie at it).
+ZERO_WIDTH = "all resamples equal"
+
+
+def interval_text(estimate: float, low: float, high: float, *, inf: str = "inf",
+                  style: str = "brackets") -> str:
+    """An estimate and its CI as the tables and sentences print them, three significant digits.
+
+    ``style`` ``"brackets"``: ``161 [156, 166]``; ``"sentence"``: ``0.528 (95% CI 0.51-0.541)``.
+    An infinite value prints as ``inf`` (``"never"`` for a time no run reached). A CI of zero
+    width is said as such (``66.5 (all resamples equal)``), not drawn as ``[66.5, 66.5]``, and
+    an estimate whose whole interval is infinite prints alone (``never``, not ``never [never,
+    never]``).
+    """
+    def f(x: float) -> str:
+        return inf if x == float("inf") else f"{x:.3g}"
+
+    if f(low) == f(high) == f(estimate):
+        return f(estimate) if estimate == float("inf") else f"{f(estimate)} ({ZERO_WIDTH})"
+    if style == "sentence":
+        return f"{f(estimate)} (95% CI {f(low)}-{f(high)})"
+    return f"{f(estimate)} [{f(low)}, {f(high)}]"
+
+
 def survival_sentence(a: str, b: str, q: dict[str, Any]) -> str:
     """One sentence of :func:`time_ratio`'s figures for ``a`` against ``b``."""
 
     def ratio(entry: dict[str, Any]) -> str:
         if entry["ratio"] is not None:
-            low, high = ("inf" if x == float("inf") else f"{x:.3g}" for x in entry["ci95"])
-            return f"{entry['ratio']:.3g} (95% CI {low}-{high})"
+            return interval_text(entry["ratio"], *entry["ci95"], style="sentence")
         if "at_most" in entry:
             return f"at most {entry['at_most']:.3g} ({b}'s median is beyond its budget)"
         if "at_least" in entry:

@@ -69,6 +69,7 @@ from adpart.workflows.refs import parse_ref
 from adpart.workflows.regime import (
     agent_verdict,
     check_regime,
+    layer_params,
     learned_threshold,
     learned_value_ceiling,
 )
@@ -440,7 +441,7 @@ def run_pipeline(
     # a firing refines its block with the thresholds the layer was built with (eqs. 4.6-4.7)
     hierarchical = {**defaults, "delta": config.partition.delta,
                     "partition-epsilon": config.partition.reward_epsilon,
-                    **config.hierarchical_params}
+                    **layer_params(config)}
     hierarchical.setdefault("mode", HierarchicalSettings().mode)  # the seed's: inconsistency
     from adpart.learning.hierarchical import REWARD_OPTION_MODES
 
@@ -576,7 +577,8 @@ def run_pipeline(
             f"learning {task} on {layer.blocks} blocks (hierarchical)")
         params = dict(hierarchical)
         if model_env is not None and _directed_without_ceiling(params):
-            params["value-ceiling"] = learned_value_ceiling(model_env, first, task)
+            params["value-ceiling"] = learned_value_ceiling(model_env, first, task,
+                                                            int(hierarchical["max-steps"]))
         hier_req = LearnRequest(
             env=config.env,
             task=task,

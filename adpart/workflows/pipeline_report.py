@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from adpart.errors import TaskError
-from adpart.learning.comparison import TIE_TOLERANCE, survival_sentence
+from adpart.learning.comparison import TIE_TOLERANCE, interval_text, survival_sentence
 from adpart.workflows.learning import load_curve
 from adpart.workflows.refs import parse_ref
 from adpart.workflows.store import KnowledgeStore
@@ -284,9 +284,7 @@ def _gap(value: Any, v_star: Any) -> str:
 def _km(entry: Any) -> str:
     if not entry:
         return "-"
-    median, low, high = (("never" if x is None or not np.isfinite(x) else f"{x:.3g}")
-                         for x in entry)
-    return f"{median} [{low}, {high}]"
+    return interval_text(*(float("inf") if x is None else x for x in entry), inf="never")
 
 
 def _comparison(rows: list[dict[str, Any]]) -> list[str]:
@@ -328,9 +326,8 @@ def _comparison(rows: list[dict[str, Any]]) -> list[str]:
 
 def _ratio(q: dict[str, Any]) -> str:
     if q.get("ratio") is not None:
-        low, high = ("∞" if x is None or not np.isfinite(x) else f"{x:.3g}"
-                     for x in q["ci95"])
-        return f"{q['ratio']:.3g} [{low}, {high}]"
+        return interval_text(q["ratio"], *(float("inf") if x is None else x for x in q["ci95"]),
+                             inf="∞")
     if "at_most" in q:
         return f"≤ {q['at_most']:.3g}"
     if "at_least" in q:

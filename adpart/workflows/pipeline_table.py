@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from adpart.learning.comparison import survival_sentence
+from adpart.learning.comparison import interval_text, survival_sentence
 
 __all__ = ["comparison_lines"]
 
@@ -81,13 +81,5 @@ def _km(median: list[float] | None) -> str:
     """``median [low, high]`` of a Kaplan-Meier median; ``never`` where under half arrive."""
     if not median:
         return "-"
-    est, lo, hi = median
+    return interval_text(*median, inf="never")
 
-    def f(x: float) -> str:
-        return "never" if x == float("inf") else f"{x:.3g}"
-
-    return f"{f(est)} [{f(lo)}, {f(hi)}]"
-
-
-def _ci(ci: list[float]) -> str:
-    return "-".join("inf" if x == float("inf") else f"{x:.3g}" for x in ci)

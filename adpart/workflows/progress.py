@@ -13,7 +13,9 @@ from __future__ import annotations
 
 import contextlib
 import contextvars
+import dataclasses
 from collections.abc import Callable, Iterator
+from typing import Any
 
 #: ``(total, label) -> (update(done, total), close())``: one bar per stage.
 BarFactory = Callable[[int, str], tuple[Callable[[int, int], None], Callable[[], None]]]
@@ -45,3 +47,16 @@ def stage_progress(total: int, label: str) -> Iterator[Callable[[int, int], None
         yield update
     finally:
         close()
+
+
+@contextlib.contextmanager
+def learning_progress(run: Any, label: str) -> Iterator[Any]:
+    """``run`` (an :class:`adpart.learning.settings.Run`) whose ``progress`` hook draws a bar
+    of its episodes for one learner call of a stage (an experiment that calls the learning
+    cores itself, not through :mod:`adpart.workflows.learning`); ``run`` unchanged where it has
+    a hook already or no command installed bars."""
+    if run.progress is not None:
+        yield run
+        return
+    with stage_progress(run.episodes, label) as bar:
+        yield run if bar is None else dataclasses.replace(run, progress=bar)

@@ -347,11 +347,13 @@ def test_directed_exploration_is_a_learner_option_and_a_bad_count_is_refused(tmp
 
 def test_r_max_in_the_learned_model_regime_plans_unknown_pairs_at_the_first_tasks_ceiling(
         tmp_path):
-    """In the learned-model regime the pipeline gives R-max the ceiling of the rewards its first
-    task paid (the new task's own is not read), and the run records it; planned layer values,
-    which plan on the true model's transition table, are refused before any work."""
+    """In the learned-model regime the layer explores by R-max unless ``--hier-opt explore=``
+    names another rule (``regime.LEARNED_EXPLORATION``); the pipeline gives R-max the ceiling of
+    the rewards its first task paid (the new task's own is not read), and the run records both;
+    planned layer values, which plan on the true model's transition table, are refused before
+    any work."""
     kb_dir = tmp_path / "kb"
-    base = [*PIPELINE, "--hier-opt", "explore=r-max", "--kb", str(kb_dir)]
+    base = [*PIPELINE, "--kb", str(kb_dir)]
     planned = CliRunner().invoke(cli, [*base, "--hier-opt", "layer-values=planned",
                                        "--out", str(tmp_path / "p")])
     assert planned.exit_code == 2 and not kb_dir.exists()
@@ -369,8 +371,15 @@ def test_r_max_in_the_learned_model_regime_plans_unknown_pairs_at_the_first_task
         gamma = resolve_domain("two-rooms").mdp(summary["config"]["tasks"][1]).gamma
         paid = float(first.R[first.admissible & ~first.terminal[:, None]].max())
         assert run.provenance.parameters["value_ceiling"] == pytest.approx(paid / (1 - gamma))
+        assert run.provenance.parameters["explore"] == "r-max"
     finally:
         kb.close()
+    chosen = CliRunner().invoke(cli, [*base, "--hier-opt", "explore=optimistic-flat", "--out",
+                                      str(tmp_path / "f"), "--json"])
+    assert chosen.exit_code == 0, chosen.output
+    summary = json.loads(chosen.output)
+    layer = next(r for r in summary["tasks"] if r["learner"] == "hierarchical")
+    assert "R-max on the counts" not in layer["knowledge"]
 
 
 @pytest.mark.parametrize(("tasks", "message"), [

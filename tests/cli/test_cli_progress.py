@@ -125,3 +125,32 @@ def test_the_pipeline_learns_every_stage_under_a_bar(monkeypatch, tmp_path):
     assert len(seen) == len(learned) >= 3
     assert seen[0][:2] == ("q-learning on two-rooms/reach-goal", 300)
     assert all(calls and calls[-1] == (total, total) for _, total, calls in seen)
+
+
+def test_an_experiment_that_calls_the_learners_itself_draws_a_bar_per_learner(monkeypatch,
+                                                                           tmp_path):
+    """``adpart experiment`` installs the bars; an experiment that calls the learning cores
+    itself (subgoals-two-rooms: Q-learning, not the pipeline) opens a bar over the episodes of
+    each learner call (``learning_progress``), run to the end."""
+    seen, factory = _recording()
+    monkeypatch.setattr("adpart.cli.experiment.stage_bars", lambda enabled: factory)
+    out = CliRunner().invoke(cli, ["experiment", "subgoals-two-rooms", "--quick", "--runs", "2",
+                                   "--out", str(tmp_path / "out")])
+    assert out.exit_code == 0, out.output
+    [(label, total, calls)] = seen
+    assert label == "Q-learning two-rooms" and total > 0
+    assert calls and calls[-1] == (total, total)
+
+
+def test_a_learner_given_its_own_progress_hook_keeps_it():
+    """``learning_progress`` leaves a run that already reports alone and opens no bar."""
+    from adpart.learning.settings import Run
+    from adpart.workflows.progress import learning_progress
+
+    seen, factory = _recording()
+    own = Run(progress=lambda done, total: None)
+    with progress_bars(factory), learning_progress(own, "x") as run:
+        assert run is own
+    with progress_bars(factory), learning_progress(Run(episodes=7), "y") as run:
+        assert run.progress is not None and run.episodes == 7
+    assert [(label, total) for label, total, _ in seen] == [("y", 7)]

@@ -30,8 +30,11 @@ def test_quick_run_builds_a_layer_per_task_and_compares_task_five(tmp_path):
         trace = layer["trace"]
         assert all(b <= a for a, b in pairwise(trace))
     rows = report.data["pipeline"]["tasks"]
+    # each later task: the layer, flat, the learner that knows the true dynamics (the sequence
+    # runs in the true-model regime) and the planner's V* row
     assert {(r["task"], r["learner"]) for r in rows} == {(TASKS[0], "flat")} | {
-        (t, learner) for t in TASKS[1:] for learner in ("hierarchical", "flat")}
+        (t, learner) for t in TASKS[1:]
+        for learner in ("hierarchical", "flat", "known-dynamics", "planner")}
     five = report.data["task_five"]
     kb = KnowledgeBase.open(str(kb_dir))
     try:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -65,3 +66,20 @@ def test_a_row_reports_censored_runs_and_the_kaplan_meier_time_to_the_bound() ->
         eval_value=-20.0 - 9 * ones, value_gap=9 * ones, metadata={"v_star_start": -20.0}),
         0.05, {})
     assert never["censored_runs"] == 4 and never["time_to_bound_km"]["episodes"][0] == np.inf
+
+
+@pytest.mark.parametrize(("args", "kwargs", "text"), [
+    ((161.0, 156.0, 166.0), {}, "161 [156, 166]"),
+    ((0.528, 0.51, 0.541), {"style": "sentence"}, "0.528 (95% CI 0.51-0.541)"),
+    ((66.5, 66.5, 66.5), {}, "66.5 (all resamples equal)"),
+    ((2.0, 2.0, 2.0), {"style": "sentence"}, "2 (all resamples equal)"),
+    ((np.inf, np.inf, np.inf), {"inf": "never"}, "never"),
+    ((np.inf, 260.0, np.inf), {"inf": "never"}, "never [260, never]"),
+    ((0.1, 0.0, np.inf), {"style": "sentence"}, "0.1 (95% CI 0-inf)"),
+])
+def test_an_interval_of_zero_width_is_said_not_drawn(args, kwargs, text):
+    """``interval_text`` is the one spelling of an estimate and its CI in every table: a CI of
+    zero width (every resample gave the estimate) is named, never printed as ``[x, x]``."""
+    from adpart.learning.comparison import interval_text
+
+    assert interval_text(*args, **kwargs) == text

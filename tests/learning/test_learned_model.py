@@ -239,4 +239,4 @@ def test_the_learned_value_ceiling_is_the_first_tasks_best_paid_reward(two_rooms
     tried = estimated.experience.tried & first.admissible & ~first.terminal[:, None]
     expected = max(first.R[tried].max(), 0.0) / (1.0 - new.gamma)
     assert expected > 0  # the goal's reward was paid
-    assert learned_value_ceiling(estimated.name, "reach-goal", "goal:x=9,y=5") == expected
+    assert learned_value_ceiling(estimated.name, "reach-goal", "goal:x=9,y=5", 500) == expected
