@@ -38,6 +38,7 @@ import numpy as np
 from adpart.errors import TaskError
 from adpart.learning.comparison import TIE_TOLERANCE, interval_text, survival_sentence
 from adpart.workflows.learning import load_curve
+from adpart.workflows.pipeline_table import block_note
 from adpart.workflows.refs import parse_ref
 from adpart.workflows.store import KnowledgeStore
 
@@ -320,6 +321,8 @@ def _comparison(rows: list[dict[str, Any]]) -> list[str]:
                 r["learner"], r["model_based"], r["ratio_to_model_based"]))
         if r.get("fallback"):
             sentences.append(f"{r['task']}: {r['fallback']}")
+        if block_note(r):
+            sentences.append(f"{r['task']}: {block_note(r)}")
     parts += [f"<p>{escape(s)}</p>" for s in sentences]
     return parts
 

@@ -7,7 +7,24 @@ from typing import Any
 
 from adpart.learning.comparison import interval_text, survival_sentence
 
-__all__ = ["comparison_lines"]
+__all__ = ["block_note", "comparison_lines"]
+
+
+def block_note(row: dict[str, Any]) -> str | None:
+    """Why a layer learner's row starts on another number of blocks than its layer, or None.
+
+    The learner takes the stored layer as given but splits off each live state whose block
+    offers an option it cannot start (a layer built before the task was known, such as the
+    learned-model regime's phases 1-2, keeps the earlier task's terminal states in one block
+    that offers every option), and the reward-variation modes split blocks by where the task's
+    reward-state options can start, so the counts of one run's output may differ; this says so.
+    """
+    layer, start = row.get("partition_blocks"), row.get("initial_blocks")
+    if layer is None or start is None or int(layer) == int(start):
+        return None
+    return (f"{row['learner']} starts on {start} blocks, {row.get('partition')} has {layer}: "
+            "the learner splits off each state whose block offers an option the state cannot "
+            "start, and splits blocks by where the task's reward-state options can start")
 
 
 def comparison_lines(rows: list[dict[str, Any]]) -> list[str]:
@@ -45,6 +62,9 @@ def comparison_lines(rows: list[dict[str, Any]]) -> list[str]:
             if "ratio_to_model_based" in r:
                 lines.append(f"{r['task']}: " + survival_sentence(
                     r["learner"], r["model_based"], r["ratio_to_model_based"]))
+            note = block_note(r)
+            if note:
+                lines.append(f"  {note}")
             if "chain_cost" in r:
                 c = r["chain_cost"]
                 lines.append(

@@ -83,3 +83,21 @@ def test_an_interval_of_zero_width_is_said_not_drawn(args, kwargs, text):
     from adpart.learning.comparison import interval_text
 
     assert interval_text(*args, **kwargs) == text
+
+
+def test_a_layer_learner_that_starts_on_other_blocks_than_its_layer_says_why():
+    """The comparison's ``blocks`` column is the learner's start; where the stored layer has
+    another count, a line under the table names both (the counts of one output agree or are
+    explained)."""
+    from adpart.workflows.pipeline_table import block_note, comparison_lines
+
+    row = {"task": "t", "learner": "hierarchical", "initial_blocks": 48, "partition_blocks": 47,
+           "partition": "partition:12", "runs": 20, "runs_within_bound": 20,
+           "ratio_to_flat": {"ratio": 0.5, "ci95": [0.4, 0.6], "p_sooner": 0.01,
+                             "censored": [0, 0], "first_evaluation": 1,
+                             "steps": {"ratio": 0.4, "ci95": [0.3, 0.5]}}}
+    note = block_note(row)
+    assert note is not None and "48 blocks" in note and "partition:12 has 47" in note
+    assert f"  {note}" in comparison_lines([row])
+    assert block_note({**row, "initial_blocks": 47}) is None
+    assert block_note({**row, "partition_blocks": None}) is None
