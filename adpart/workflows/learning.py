@@ -332,17 +332,26 @@ def _decision_layer(kb: KnowledgeStore | None, request: LearnRequest) -> dict[st
         return {}
     if kb is None:
         raise TaskError("--options/--partition are read from the knowledge base; give --kb")
+    return load_decision_layer(kb, request.env, options=request.options,
+                               partition=request.partition)
+
+
+def load_decision_layer(kb: KnowledgeStore, env: str, *, options: str | None = None,
+                        partition: str | None = None) -> dict[str, Any]:
+    """A layer learner's ``options`` (and their ids, ``option_ids``) and ``partition`` named
+    as on the command line (``partition:N``; its own options unless ``options`` is given),
+    loaded from the knowledge base."""
     from adpart.workflows.options import resolve_option_set
     from adpart.workflows.refs import get_ref
 
     layer: dict[str, Any] = {}
     partition_rec = None
-    if request.partition is not None:
-        partition_rec = get_ref(kb, request.partition, "partition")
-    options_text = request.options
+    if partition is not None:
+        partition_rec = get_ref(kb, partition, "partition")
+    options_text = options
     if options_text is None and partition_rec is not None:
         options_text = ",".join(f"option:{i}" for i in partition_rec.option_ids) or "primitive"
-    option_set = resolve_option_set(kb, options_text, request.env)
+    option_set = resolve_option_set(kb, options_text, env)
     layer["options"] = option_set.options
     layer["option_ids"] = option_set.ids
     if partition_rec is not None:

@@ -414,6 +414,32 @@ def _directed_without_ceiling(params: dict[str, Any]) -> bool:
     return settings.directed and settings.exploration.value_ceiling is None
 
 
+def _rehearse(kb: KnowledgeStore, config: PipelineConfig, model_env: str, first: str,
+              layer: Layer, flat: dict[str, Any], hierarchical: dict[str, Any],
+              say: Callable[[str], object]) -> tuple[dict[str, Any], float]:
+    """The learned-model regime's second fallback check (:mod:`adpart.workflows.rehearsal`):
+    the layer and the flat learner rehearsed on hypothetical goals of the agent's own model;
+    the verdict and its seconds."""
+    from adpart.workflows.learning import load_decision_layer
+    from adpart.workflows.rehearsal import (
+        REHEARSAL_EVAL_EVERY,
+        REHEARSAL_GOALS,
+        REHEARSAL_RUNS,
+        rehearse,
+    )
+
+    say(f"rehearsing {layer.ref} against flat on {REHEARSAL_GOALS} hypothetical goals of "
+        f"{model_env} ({REHEARSAL_RUNS} runs each)")
+    start = time.perf_counter()
+    inputs = load_decision_layer(kb, config.env, partition=layer.ref)
+    inputs.pop("option_ids", None)
+    verdict = rehearse(resolve_domain(model_env), first, inputs,  # type: ignore[arg-type]
+                       config.flat_learner, flat, hierarchical, episodes=config.episodes,
+                       eval_every=max(config.eval_every, REHEARSAL_EVAL_EVERY),
+                       seed=config.seed, fraction=config.gap_fraction)
+    return verdict, time.perf_counter() - start
+
+
 def check_tasks(env: str, tasks: tuple[str, ...]) -> None:
     """Resolve every task of the sequence before any work is done: an unknown task name or a
     goal that matches no state raises here, naming it, not after the earlier tasks were learned
@@ -547,6 +573,7 @@ def run_pipeline(
         option_ids = [r.id for r in stored.records]
 
     learned = [parse_ref(first_ids["task"], "task")]
+    rehearsed: dict[str, tuple[dict[str, Any], float]] = {}
     # tasks learned to the bound in some flat run: the estimator's evidence (section 4.4 builds
     # on learned tasks T_i = (pi_i, P_i, Q_i); an unlearned task's Q predicts nothing)
     evidence = list(learned) if report.rows[0]["runs_within_bound"] > 0 else []
@@ -572,6 +599,17 @@ def run_pipeline(
         # own_layer without subgoals learns on the layer of the reward-state options alone
         layer = None if no_subgoals else _task_layer(kb, config, found.record.ref, task, learned,
                                                      option_ids, report, say, model_env)
+        if config.fallback and model_env is not None and layer is not None:
+            if layer.ref not in rehearsed:  # one rehearsal per layer: it reads no later task
+                rehearsed[layer.ref] = _rehearse(kb, config, model_env, first, layer, flat,
+                                                 hierarchical, say)
+            verdict, seconds = rehearsed[layer.ref]
+            report.stages.append(Stage("rehearse", task, "flat" if verdict["fallback"] else
+                                       "layer", False, seconds, verdict))
+            if verdict["fallback"]:
+                say(verdict["reason"])
+                learn_instead(task, verdict["reason"], "flat (fallback)")
+                continue
         say(f"learning {task} on the layer of the options and {task}'s reward states "
             f"({hierarchical['mode']})" if own_layer or layer is None else
             f"learning {task} on {layer.blocks} blocks (hierarchical)")
