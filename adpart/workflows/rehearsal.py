@@ -44,7 +44,8 @@ __all__ = [
     "rehearse",
 ]
 
-#: Hypothetical goals rehearsed, runs of each learner on each, and the coarsest scoring
+#: Hypothetical goals rehearsed, runs of each learner on each (whatever the pipeline's own
+#: ``--runs``: the verdict is the agent's, not the experiment's), and the coarsest scoring
 #: interval (episodes) it uses: a prediction, not a result, so fewer than a claim needs; with 3
 #: goals of 5 runs FrozenLake's verdict flipped with the draw (median ratio 0.5, against 2 with
 #: 6 goals of 10 runs; docs/learned-model.md). Its cost is printed with the stage.

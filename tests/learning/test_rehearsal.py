@@ -78,7 +78,7 @@ def test_the_rehearsal_decides_the_fallback_from_the_agents_model(tmp_path, env,
     """The benchmark's FrozenLake cell, where the layer was 1.24x flat's episodes with no
     fallback, is learned flat by the rehearsal's verdict; on two-rooms the layer is kept. The
     stage names the hypothetical goals and the ratio; with --no-fallback no rehearsal runs."""
-    args = ["pipeline", env, "--tasks", tasks, "--runs", "5", "--episodes", "150",
+    args = ["pipeline", env, "--tasks", tasks, "--runs", "3", "--episodes", "150",
             "--kb", str(tmp_path / "kb"), "--json"]
     res = CliRunner().invoke(cli, [*args, "--out", str(tmp_path / "a")])
     assert res.exit_code == 0, res.output
