@@ -147,7 +147,9 @@ def _say(quiet: bool):  # type: ignore[no-untyped-def]
 @click.option(
     "--no-fallback",
     is_flag=True,
-    help="Learn on the layer even where section 4.4's estimate predicts flat is faster.",
+    help="Learn on the layer even where the fallback checks predict flat is faster (section "
+         "4.4's estimate in the true-model regime; the rehearsal on the agent's own model in "
+         "the learned-model regime).",
 )
 @click.option(
     "--hier-opt",

@@ -116,7 +116,8 @@ def _ratio(layer: float, flat: float) -> float | None:
 def rehearse(domain: EstimatedDomain, first: str, layer_inputs: dict[str, Any],
              flat_learner: str, flat_params: dict[str, Any], layer_params: dict[str, Any], *,
              episodes: int, eval_every: int, seed: int, fraction: float,
-             goals: int = REHEARSAL_GOALS, runs: int = REHEARSAL_RUNS) -> dict[str, Any]:
+             goals: int = REHEARSAL_GOALS, runs_per_goal: int = REHEARSAL_RUNS
+             ) -> dict[str, Any]:
     """Learn ``goals`` hypothetical tasks (:func:`rehearsal_task`) on the layer and flat, and
     say whether the layer pays (module docstring).
 
@@ -146,7 +147,8 @@ def rehearse(domain: EstimatedDomain, first: str, layer_inputs: dict[str, Any],
             ceiling = (max(top, 0.0) / (1.0 - task.gamma) if task.gamma < 1.0
                        else max(top, 0.0) * horizon)
             learner = layer_spec.create({**params, "value-ceiling": ceiling})
-        common = {"runs": runs, "episodes": episodes, "seed": seed, "eval_every": eval_every}
+        common = {"runs": runs_per_goal, "episodes": episodes, "seed": seed,
+                  "eval_every": eval_every}
         flat_curve = flat.learn(task, **common).curve
         layer_curve = learner.learn(task, **common, **layer_inputs,
                                     belief=belief_model(domain, task, first)).curve
@@ -164,15 +166,15 @@ def rehearse(domain: EstimatedDomain, first: str, layer_inputs: dict[str, Any],
         f"{_episodes(g['flat_episodes'])}" for g in per_goal)
     if median is None:
         reason = (f"rehearsed on the model estimated from {first}'s runs ({told} episodes, "
-                  f"{runs} runs each): neither learner reached the bound on any hypothetical "
-                  "goal, so the rehearsal says nothing and the layer is kept")
+                  f"{runs_per_goal} runs each): neither learner reached the bound on any "
+                  "hypothetical goal, so the rehearsal says nothing and the layer is kept")
     else:
         reason = (f"rehearsed on the model estimated from {first}'s runs with {len(per_goal)} "
                   f"hypothetical goals ({told} episodes to the bound, layer against flat, "
-                  f"{runs} runs each): median ratio {median:.3g}, so the layer "
+                  f"{runs_per_goal} runs each): median ratio {median:.3g}, so the layer "
                   + ("is predicted slower than flat and the task is learned flat" if falls
                      else "is kept"))
-    return {"fallback": falls, "median_ratio": median, "goals": per_goal, "runs": runs,
+    return {"fallback": falls, "median_ratio": median, "goals": per_goal, "runs": runs_per_goal,
             "reason": reason}
 
 
