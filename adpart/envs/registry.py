@@ -1,4 +1,6 @@
-"""Lookup of environments by name: the built-in domains and ``gym:<id>`` Gymnasium environments.
+"""Lookup of environments by name: the built-in domains, ``gym:<id>`` Gymnasium environments and
+``minigrid:<id>`` MiniGrid layouts (the optional ``minigrid`` extra, imported only when such a
+name is resolved).
 
 Built-in domains are imported lazily (``"module:Class"``), so listing them costs nothing.
 
@@ -30,6 +32,9 @@ BUILTIN_DOMAINS: dict[str, str] = {
 }
 
 GYM_PREFIX = "gym:"
+MINIGRID_PREFIX = "minigrid:"
+#: The prefixes of environments resolved by an adapter rather than the plugin registry.
+ADAPTER_PREFIXES = (GYM_PREFIX, MINIGRID_PREFIX)
 
 
 def load_class(target: str) -> type:
@@ -62,14 +67,33 @@ def parse_gym_name(name: str) -> tuple[str, dict[str, object]]:
     Raises:
         UnknownNameError: a malformed bracket (the message shows the expected form).
     """
-    body = name.removeprefix(GYM_PREFIX)
+    return parse_bracket_name(
+        name, GYM_PREFIX, "gym:FrozenLake-v1[map_name=8x8,is_slippery=true]", "Gymnasium"
+    )
+
+
+def parse_minigrid_name(name: str) -> tuple[str, dict[str, object]]:
+    """``minigrid:ID[seed=1,key=value,...]`` -> ``(ID, {key: value})``.
+
+    Raises:
+        UnknownNameError: a malformed bracket (the message shows the expected form).
+    """
+    return parse_bracket_name(name, MINIGRID_PREFIX, "minigrid:MiniGrid-DoorKey-5x5-v0[seed=1]",
+                              "MiniGrid")
+
+
+def parse_bracket_name(
+    name: str, prefix: str, example: str, what: str
+) -> tuple[str, dict[str, object]]:
+    """``PREFIX ID[key=value,...]`` -> ``(ID, {key: value})``; ``example`` shows the form."""
+    body = name.removeprefix(prefix)
     if "[" not in body:
         return body, {}
     env_id, _, rest = body.partition("[")
     if not rest.endswith("]") or not env_id:
         raise UnknownNameError(
-            f"cannot read {name!r}: write Gymnasium keyword arguments as "
-            "gym:ID[key=value,...], e.g. gym:FrozenLake-v1[map_name=8x8,is_slippery=true]"
+            f"cannot read {name!r}: write {what} keyword arguments as "
+            f"{prefix}ID[key=value,...], e.g. {example}"
         )
     kwargs: dict[str, object] = {}
     for item in filter(None, (x.strip() for x in rest[:-1].split(","))):
@@ -77,7 +101,7 @@ def parse_gym_name(name: str) -> tuple[str, dict[str, object]]:
         if not eq or not key.strip():
             raise UnknownNameError(
                 f"cannot read {item!r} in {name!r}: each keyword argument is key=value, e.g. "
-                "gym:FrozenLake-v1[map_name=8x8,is_slippery=true]"
+                f"{example}"
             )
         kwargs[key.strip()] = _gym_value(value)
     return env_id, kwargs
@@ -94,11 +118,19 @@ def gym_module(name: str) -> str | None:
 
 
 def get_domain(name: str) -> Domain:
-    """The environment called ``name``: a built-in domain, or ``gym:<id>`` for Gymnasium.
+    """The environment called ``name``: a built-in domain, ``gym:<id>`` for Gymnasium or
+    ``minigrid:<id>`` for one seeded MiniGrid layout.
 
     ``gym:ID[key=value,...]`` passes the keyword arguments to ``gymnasium.make`` (values
-    ``true``/``false``, numbers or text), e.g. ``gym:FrozenLake-v1[map_name=8x8,is_slippery=true]``.
+    ``true``/``false``, numbers or text), e.g. ``gym:FrozenLake-v1[map_name=8x8,is_slippery=true]``;
+    ``minigrid:ID[seed=1,...]`` passes them to :class:`~adpart.envs.minigrid_adapter.MiniGridDomain`
+    (its own ``seed``, ``gamma``, ``actions``, ``max_states``; the rest to ``gymnasium.make``).
     """
+    if name.startswith(MINIGRID_PREFIX):
+        from adpart.envs.minigrid_adapter import MiniGridDomain
+
+        env_id, kwargs = parse_minigrid_name(name)
+        return MiniGridDomain(env_id, **kwargs)
     if name.startswith(GYM_PREFIX):
         from adpart.envs.gym_adapter import GymDomain
 
@@ -109,6 +141,7 @@ def get_domain(name: str) -> Domain:
         raise UnknownNameError(
             f"unknown environment {name!r}; known: {', '.join(BUILTIN_DOMAINS)}"
             + (f". Did you mean {hint[0]!r}?" if hint else "")
-            + ". Gymnasium environments are named gym:<id>, e.g. gym:Taxi-v4"
+            + ". Gymnasium environments are named gym:<id>, e.g. gym:Taxi-v4; MiniGrid layouts "
+            "minigrid:<id>, e.g. minigrid:MiniGrid-FourRooms-v0"
         )
     return load_class(BUILTIN_DOMAINS[name])()

@@ -1,9 +1,9 @@
-"""Resolve environment names through the plugin registry (or ``gym:<id>``)."""
+"""Resolve environment names through the plugin registry (or ``gym:<id>``, ``minigrid:<id>``)."""
 
 from __future__ import annotations
 
 from adpart.envs.base import Domain
-from adpart.envs.registry import GYM_PREFIX, get_domain
+from adpart.envs.registry import ADAPTER_PREFIXES, get_domain
 from adpart.errors import UnknownNameError
 from adpart.plugins import get_registry
 
@@ -25,8 +25,8 @@ def base_environment(name: str) -> str:
 
 
 def resolve_domain(name: str) -> Domain:
-    """A registered environment plugin by name, or ``gym:<id>`` through the Gymnasium adapter,
-    or a model estimated from experience that this process built."""
+    """A registered environment plugin by name, ``gym:<id>`` or ``minigrid:<id>`` through the
+    Gymnasium or MiniGrid adapter, or a model estimated from experience that this process built."""
     if name in _BUILT:
         return _BUILT[name]
     if EXPERIENCE_MARK in name:
@@ -34,7 +34,7 @@ def resolve_domain(name: str) -> Domain:
             f"{name!r} is {base_environment(name)!r} as estimated from the experience of "
             f"{name.split(EXPERIENCE_MARK, 1)[1]}; it is rebuilt from those runs by the pipeline "
             "that uses it (adpart pipeline --regime learned-model), not resolved by name")
-    if name.startswith(GYM_PREFIX):
+    if name.startswith(ADAPTER_PREFIXES):
         return get_domain(name)
     try:
         spec = get_registry().get("environment", name)
