@@ -35,6 +35,7 @@ OTHER_MEANINGS: dict[tuple[str, str], str] = {
     ("adpart/learning/maxq/maxq_q.py", "seed"): "the Monte Carlo rollouts' seed",
     ("adpart/mdp/generate.py", "seed"): "the random MDP generator's seed",
     ("adpart/envs/gym_adapter.py", "seed"): "the Gymnasium environment's reset seed",
+    ("adpart/envs/minigrid_adapter.py", "seed"): "the seed of the MiniGrid layout enumerated",
     ("adpart/cli/discover_cmd.py", "seed"): "the subgoal detector's sampling seed",
     ("adpart/workflows/discovery.py", "seed"): "the subgoal detector's sampling seed",
     ("adpart/testing.py", "seed"): "the conformance checks' fixed seed",
