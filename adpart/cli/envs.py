@@ -42,6 +42,8 @@ def envs_cmd(as_json: bool) -> None:
             f"tasks: {', '.join(r['tasks'])}"
         )
     click.echo("Gymnasium environments: gym:<id>, e.g. gym:Taxi-v4, gym:FrozenLake-v1")
+    click.echo("MiniGrid layouts (extra minigrid): minigrid:<id>[seed=N], e.g. "
+               "minigrid:MiniGrid-FourRooms-v0")
 
 
 @click.group(name="env")

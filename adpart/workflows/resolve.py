@@ -40,6 +40,7 @@ def resolve_domain(name: str) -> Domain:
         spec = get_registry().get("environment", name)
     except UnknownNameError as exc:
         raise UnknownNameError(
-            f"{exc}. Gymnasium environments are named gym:<id>, e.g. gym:Taxi-v4"
+            f"{exc}. Gymnasium environments are named gym:<id>, e.g. gym:Taxi-v4; MiniGrid "
+            "layouts minigrid:<id>, e.g. minigrid:MiniGrid-FourRooms-v0"
         ) from None
     return spec.create()  # a third-party environment's own failures named (PluginFailure)
