@@ -271,6 +271,8 @@ def pipeline_cmd(
         )
         if stage.detail.get("reason"):
             click.echo(f"  {stage.detail['reason']}")
+        for dropped in stage.detail.get("dropped", ()):
+            click.echo(f"  subgoal {dropped['subgoal']} dropped: {dropped['reason']}")
     click.echo("")
     for line in comparison_lines(report.rows):
         click.echo(line)

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import difflib
 import importlib
+import json
 from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cached_property
@@ -127,6 +128,56 @@ def make_env(env_id: str, **make_kwargs: Any) -> gymnasium.Env:
             f"gym:{env_id} rejected the arguments {sorted(make_kwargs)}: {exc}. Pass only "
             "keyword arguments its constructor accepts"
         ) from None
+    except ImportError as exc:  # e.g. tabular/CliffWalking-v0 needs jax
+        raise ModelError(
+            f"gym:{env_id} needs a package that is not installed ({exc}); install it, or use "
+            "the environment's plain id (gym:CliffWalking-v1 for the NumPy version)"
+        ) from None
+    except (ValueError, AssertionError, gymnasium.error.Error) as exc:
+        raise ModelError(f"gym:{env_id} could not be made with {make_kwargs}: {exc}") from None
+
+
+#: Keyword arguments adpart reads itself to give FrozenLake a seeded random map (Gymnasium's own
+#: map_name=None draws an unseeded one on every construction, which names no single MDP).
+RANDOM_MAP = ("random_map", "map_seed")
+
+
+def seeded_map(env_id: str, make_kwargs: dict[str, Any]) -> dict[str, Any]:
+    """``make_kwargs`` with ``random_map=SIZE`` (and ``map_seed=N``, default 0) replaced by the
+    ``desc`` of Gymnasium's ``generate_random_map(SIZE, seed=N)`` (FrozenLake only)."""
+    if "random_map" not in make_kwargs:
+        if "map_seed" in make_kwargs:
+            raise TaskError(f"gym:{env_id}: map_seed seeds random_map=SIZE; give both")
+        return make_kwargs
+    kwargs = dict(make_kwargs)
+    size, seed = kwargs.pop("random_map"), kwargs.pop("map_seed", 0)
+    if not env_id.startswith("FrozenLake"):
+        raise TaskError(f"gym:{env_id}: random_map=SIZE draws a FrozenLake map; "
+                        f"{env_id} takes its layout from its own arguments")
+    if not isinstance(size, int) or isinstance(size, bool) or not 2 <= size <= 64:
+        raise TaskError(f"gym:{env_id}: random_map = {size!r} must be a map size in [2, 64]")
+    if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
+        raise TaskError(f"gym:{env_id}: map_seed = {seed!r} must be an integer >= 0")
+    from gymnasium.envs.toy_text.frozen_lake import generate_random_map
+
+    kwargs["desc"] = generate_random_map(size=size, seed=seed)
+    return kwargs
+
+
+def _same_model(p: Any, q: Any) -> bool:
+    """Whether two ``env.unwrapped.P`` tables are the same model (entry for entry)."""
+    try:
+        return bool(p == q)
+    except ValueError:  # array entries: compare as text
+        return repr(p) == repr(q)
+
+
+def _name_value(value: object) -> str:
+    """A keyword value as the domain's name writes it, read back alike by the name parser:
+    lists and mappings as compact JSON, anything else as text."""
+    if isinstance(value, list | tuple | dict):
+        return json.dumps(value, separators=(",", ":"))
+    return str(value)
 
 
 def discrete_size(space: object, what: str, env_id: str) -> tuple[int, int]:
@@ -406,7 +457,8 @@ class GymDomain(Domain):
         self.make_kwargs = dict(make_kwargs)
         self.gamma = float(gamma)
         self.samples, self.seed, self.reset_samples = int(samples), int(seed), int(reset_samples)
-        self.env = make_env(env_id, **make_kwargs)
+        made = seeded_map(env_id, self.make_kwargs)
+        self.env = make_env(env_id, **made)
         self._S, self._obs_start = discrete_size(self.env.observation_space, "observation", env_id)
         self._A, self._act_start = discrete_size(self.env.action_space, "action", env_id)
         base = self.env.unwrapped
@@ -425,7 +477,14 @@ class GymDomain(Domain):
                 "it, "
                 "or fickle_passenger=False"
             )
-        suffix = ",".join(f"{k}={v}" for k, v in sorted(self.make_kwargs.items()))
+        if not self.estimated and not _same_model(base.P, make_env(env_id, **made).unwrapped.P):
+            raise ModelError(
+                f"gym:{env_id} with {self.make_kwargs or 'no arguments'} gives another model on "
+                "every construction (it draws its layout at random when made: FrozenLake without "
+                "desc or map_name draws an unseeded map), so the name names no single MDP: fix "
+                "the layout (map_name=8x8, desc=[\"SFFF\",...] or desc=@map.txt, or "
+                "random_map=8,map_seed=N for a seeded random map)")
+        suffix = ",".join(f"{k}={_name_value(v)}" for k, v in sorted(self.make_kwargs.items()))
         self.name = f"gym:{env_id}" + (f"[{suffix}]" if suffix else "")
         spec = self.env.spec
         self.source = f"Gymnasium {gymnasium.__version__}: {spec.entry_point if spec else env_id}"

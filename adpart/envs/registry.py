@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import difflib
 import importlib
+import json
+from pathlib import Path
 
 from adpart.envs.base import Domain
 from adpart.errors import UnknownNameError
@@ -46,9 +48,22 @@ def domain_names() -> list[str]:
     return list(BUILTIN_DOMAINS)
 
 
-def _gym_value(text: str) -> object:
-    """A keyword value from a name: ``true``/``false`` (any case), an int, a float, or text."""
-    low = text.strip().lower()
+def _gym_value(text: str, name: str = "", key: str = "") -> object:
+    """A keyword value from a name: ``true``/``false`` (any case), ``none``, an int, a float,
+    JSON (a value starting with ``[``, ``{`` or ``"``: a map as a list of strings,
+    ``desc=["SFFF","FHFH","FFFH","HFFG"]``), ``@FILE`` (the value read from a file: JSON if it
+    ends in ``.json``, else its non-empty lines as a list of strings), or text."""
+    stripped = text.strip()
+    if stripped[:1] in ("[", "{", '"'):
+        try:
+            return json.loads(stripped)
+        except json.JSONDecodeError as exc:
+            raise UnknownNameError(
+                f"cannot read {key}={stripped!r} in {name!r} as JSON ({exc}): write a list of "
+                'strings as ["SFFF","FHFH"], or give the value from a file as @FILE') from None
+    if stripped.startswith("@"):
+        return _file_value(stripped[1:], name, key)
+    low = stripped.lower()
     if low in ("true", "false"):
         return low == "true"
     if low in ("none", "null"):
@@ -59,6 +74,39 @@ def _gym_value(text: str) -> object:
         except ValueError:
             pass
     return text.strip()
+
+
+def _file_value(path: str, name: str, key: str) -> object:
+    """The value of ``key=@path``: JSON from a ``.json`` file, else the file's non-empty lines."""
+    try:
+        text = Path(path).read_text()
+    except OSError as exc:
+        raise UnknownNameError(f"cannot read {key}=@{path} in {name!r}: {exc.strerror or exc}; "
+                               "give a readable file (JSON, or one map row per line)") from None
+    if path.endswith(".json"):
+        try:
+            return json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise UnknownNameError(f"cannot read {key}=@{path} in {name!r}: {path} is not JSON "
+                                   f"({exc})") from None
+    return [line.strip() for line in text.splitlines() if line.strip()]
+
+
+def _split_arguments(text: str) -> list[str]:
+    """``key=value`` items of a bracket, split on the commas outside brackets and quotes."""
+    items, depth, quoted, start = [], 0, False, 0
+    for i, char in enumerate(text):
+        if char == '"' and (i == 0 or text[i - 1] != "\\"):
+            quoted = not quoted
+        elif not quoted and char in "[{":
+            depth += 1
+        elif not quoted and char in "]}":
+            depth -= 1
+        elif not quoted and depth == 0 and char == ",":
+            items.append(text[start:i])
+            start = i + 1
+    items.append(text[start:])
+    return [item.strip() for item in items if item.strip()]
 
 
 def parse_gym_name(name: str) -> tuple[str, dict[str, object]]:
@@ -96,14 +144,14 @@ def parse_bracket_name(
             f"{prefix}ID[key=value,...], e.g. {example}"
         )
     kwargs: dict[str, object] = {}
-    for item in filter(None, (x.strip() for x in rest[:-1].split(","))):
+    for item in _split_arguments(rest[:-1]):
         key, eq, value = item.partition("=")
         if not eq or not key.strip():
             raise UnknownNameError(
                 f"cannot read {item!r} in {name!r}: each keyword argument is key=value, e.g. "
                 f"{example}"
             )
-        kwargs[key.strip()] = _gym_value(value)
+        kwargs[key.strip()] = _gym_value(value, name, key.strip())
     return env_id, kwargs
 
 

@@ -299,8 +299,14 @@ def subgoal_options(
     radius: float | None = None,
     cover: bool = False,
     pseudo_gamma: float | None = None,
+    dropped: list[tuple[int, str]] | None = None,
 ) -> list[Option]:
     """One option per subgoal (in increasing state order), each bounded by the others' basins.
+
+    ``dropped``: where given, a subgoal whose option would have an empty initiation set (no
+    state can reach it, or every state that can is nearer another subgoal) is left out and
+    ``(subgoal, why)`` appended there, instead of raising :class:`ModelError`: a detector's
+    subgoal that no option can serve is reported, not fatal to the options of the others.
 
     With ``initiation="local"`` and ``cover=True`` a state that lies in no option's ball (no
     subgoal within ``radius`` steps) but in some basin is added to the initiation set of the
@@ -315,11 +321,16 @@ def subgoal_options(
     goals = np.flatnonzero(mask)
     initiation, radius = resolve_initiation(initiation, radius)
     if not (cover and initiation == "local"):
-        return [
-            subgoal_option(mdp, int(g), subgoals=mask, initiation=initiation, radius=radius,
-                           pseudo_gamma=pseudo_gamma)
-            for g in goals
-        ]
+        options = []
+        for g in goals:
+            try:
+                options.append(subgoal_option(mdp, int(g), subgoals=mask, initiation=initiation,
+                                              radius=radius, pseudo_gamma=pseudo_gamma))
+            except ModelError as exc:
+                if dropped is None or "no state" not in str(exc):
+                    raise
+                dropped.append((int(g), str(exc)))
+        return options
     parts = [_basin_parts(mdp, int(g), mask, pseudo_gamma) for g in goals]
     if not parts:
         return []
@@ -332,6 +343,11 @@ def subgoal_options(
     options = []
     for i, (g, (_, stop, policy, _)) in enumerate(zip(goals, parts, strict=True)):
         init = balls[i] | (far & (nearest == i))
+        if not init.any() and dropped is not None:
+            dropped.append((int(g), f"option 'to-{int(g)}': no state can start it (none can "
+                                    f"reach subgoal {int(g)}, or every one that can is nearer "
+                                    "another subgoal)"))
+            continue
         beta = (stop | ~init).astype(np.float64)
         beta[g] = 1.0
         options.append(Option(f"to-{int(g)}", init, policy, beta, subgoal=int(g),

@@ -9,7 +9,7 @@ source task's and is recomputed for a new task (phase 3 of the partitioning does
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -32,6 +32,8 @@ class StoredOptions:
     options: list[Option]
     models: list[OptionModel]
     reused: bool
+    #: ``(subgoal state, why)`` of each subgoal left without an option (an empty initiation set)
+    dropped: list[tuple[int, str]] = field(default_factory=list)
 
 
 def environment_and_mdp(
@@ -100,8 +102,16 @@ def options_for_subgoals(
         options, models = load_options(kb, records)
         return StoredOptions(records, options, models, reused=True)
     states = np.asarray(subgoal_set.states, dtype=np.int64)
+    dropped: list[tuple[int, str]] = []
     options = subgoal_options(mdp, states, initiation=initiation, radius=radius,
-                              cover=bool(cover))
+                              cover=bool(cover), dropped=dropped)
+    if dropped and existing:  # stored before for every subgoal that has an option: reuse them
+        by_subgoal = {o.subgoal_id: o for o in existing}
+        kept = [i for i, state in wanted.items() if int(state) not in {d for d, _ in dropped}]
+        if kept and set(kept) <= set(by_subgoal):
+            loaded, loaded_models = load_options(kb, [by_subgoal[i] for i in kept])
+            return StoredOptions([by_subgoal[i] for i in kept], loaded, loaded_models,
+                                 reused=True, dropped=dropped)
     models = option_models(mdp, options, executor=executor, duration=False)
     subgoal_of_state = {int(s): i for i, s in wanted.items()}
     records = store_options(
@@ -110,7 +120,7 @@ def options_for_subgoals(
         parameters=lambda o: {**rule, "task_id": task_id, "subgoal_set": subgoal_set.id,
                               "subgoal_state": int(o.subgoal)},
     )
-    return StoredOptions(records, options, models, reused=False)
+    return StoredOptions(records, options, models, reused=False, dropped=dropped)
 
 
 def store_options(

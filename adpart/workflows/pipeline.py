@@ -568,8 +568,12 @@ def run_pipeline(
                 ",".join(r.ref for r in stored.records),
                 stored.reused,
                 time.perf_counter() - start,
+                {"dropped": [{"subgoal": s, "reason": why} for s, why in stored.dropped]}
+                if stored.dropped else {},
             )
         )
+        for subgoal, why in stored.dropped:
+            say(f"subgoal {subgoal} dropped: {why}")
         option_ids = [r.id for r in stored.records]
 
     learned = [parse_ref(first_ids["task"], "task")]

@@ -7,6 +7,7 @@ deterministic FrozenLake; the exact model for the sampled estimator.
 
 from __future__ import annotations
 
+import re
 from collections import deque
 from collections.abc import Iterator
 
@@ -342,3 +343,52 @@ def test_gym_names_carry_keyword_arguments_and_round_trip():
         parse_gym_name("gym:FrozenLake-v1[map_name]")
     with pytest.raises(UnknownNameError, match=r"gym:ID\[key=value"):
         parse_gym_name("gym:FrozenLake-v1[map_name=8x8")
+
+
+def test_a_map_is_given_as_json_or_from_a_file_and_named_back_alike(tmp_path):
+    """``desc`` as a JSON list of strings in the name (its commas do not split the bracket), or
+    ``@FILE`` (one row a line): both give the map Gymnasium builds from that ``desc``, and the
+    domain's name writes the value as JSON, which the parser reads back to the same model."""
+    from adpart.envs.registry import get_domain, parse_gym_name
+
+    rows = ["SFFF", "FHFH", "FFFH", "HFFG"]
+    name = 'gym:FrozenLake-v1[desc=["SFFF","FHFH","FFFH","HFFG"],is_slippery=false]'
+    assert parse_gym_name(name) == ("FrozenLake-v1", {"desc": rows, "is_slippery": False})
+    (tmp_path / "map.txt").write_text("\n".join(rows) + "\n\n")
+    from_file = get_domain(f"gym:FrozenLake-v1[desc=@{tmp_path / 'map.txt'},is_slippery=false]")
+    inline = get_domain(name)
+    assert inline.dynamics().content_hash == from_file.dynamics().content_hash
+    assert get_domain(inline.name).dynamics().content_hash == inline.dynamics().content_hash
+    four = get_domain("gym:FrozenLake-v1[map_name=4x4,is_slippery=false]")
+    assert four.dynamics().content_hash == inline.dynamics().content_hash  # the 4x4 map itself
+
+
+@pytest.mark.parametrize(("name", "message"), [
+    ("gym:FrozenLake-v1[map_name=none]", "gives another model on every construction"),
+    ("gym:tabular/CliffWalking-v0", "needs a package that is not installed"),
+    ('gym:FrozenLake-v1[desc=["SFFF",]', "cannot read"),
+    ("gym:FrozenLake-v1[desc=@/no/such/map.txt]", "cannot read desc=@/no/such/map.txt"),
+    ("gym:Taxi-v4[random_map=8]", "draws a FrozenLake map"),
+    ("gym:FrozenLake-v1[map_seed=3]", "give both"),
+])
+def test_an_environment_that_names_no_single_mdp_is_one_clear_error(name, message):
+    """Each is refused with an adpart error naming the fix (the CLI prints it as one line):
+    an unseeded random map, a module that is not installed, malformed JSON, a missing file,
+    a random map on another environment, a map seed without a size."""
+    from adpart.envs.registry import get_domain
+    from adpart.errors import AdpartError
+
+    with pytest.raises(AdpartError, match=re.escape(message)):
+        get_domain(name)
+
+
+def test_a_seeded_random_map_is_the_same_map_every_time():
+    """``random_map=SIZE,map_seed=N`` draws Gymnasium's random map with that seed: the same
+    model on every construction, another for another seed."""
+    from adpart.envs.registry import get_domain
+
+    a, b = (get_domain("gym:FrozenLake-v1[random_map=6,map_seed=3]") for _ in range(2))
+    other = get_domain("gym:FrozenLake-v1[random_map=6,map_seed=4]")
+    assert a.n_states == 36
+    assert a.dynamics().content_hash == b.dynamics().content_hash
+    assert a.dynamics().content_hash != other.dynamics().content_hash
