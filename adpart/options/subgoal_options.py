@@ -344,9 +344,9 @@ def subgoal_options(
     for i, (g, (_, stop, policy, _)) in enumerate(zip(goals, parts, strict=True)):
         init = balls[i] | (far & (nearest == i))
         if not init.any() and dropped is not None:
-            dropped.append((int(g), f"option 'to-{int(g)}': no state can start it (none can "
-                                    f"reach subgoal {int(g)}, or every one that can is nearer "
-                                    "another subgoal)"))
+            why = (f"option 'to-{int(g)}': no state can start it (none can reach subgoal "
+                   f"{int(g)}, or every one that can is nearer another subgoal)")
+            dropped.append((int(g), why))
             continue
         beta = (stop | ~init).astype(np.float64)
         beta[g] = 1.0
