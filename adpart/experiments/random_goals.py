@@ -99,8 +99,11 @@ def random_goals(config: ExperimentConfig) -> ExperimentReport:
                          if k != "planner"}
         per_goal.append(row)
     aggregate = {key: list(iqm(cells, seed=config.seed)) for key, cells in pooled.items()}
+    from adpart.workflows.regime import layer_params as regime_layer_params
+
     report.data.update({"settings": {**s, "runs": runs, "seed": config.seed, "goals": goals,
-                                     "regime": pcfg.regime, "hierarchical": layer_params},
+                                     "regime": pcfg.regime,
+                                     "hierarchical": regime_layer_params(pcfg)},
                         "per_goal": per_goal, "iqm": aggregate,
                         "goals_with_a_ratio": {k: len(v) for k, v in pooled.items()}})
     report.findings.append(_table(per_goal))

@@ -132,9 +132,9 @@ import numpy as np
 from adpart.errors import TaskError
 from adpart.learning.curves import (
     LearningCurve,
+    StartValues,
     optimal_start_value,
     start_distribution,
-    start_values,
 )
 from adpart.learning.decision_layer import (
     DecisionLayer,
@@ -532,6 +532,9 @@ def hierarchical_learning(
         # the world's own model of the columns scores the greedy policies
         world_smdp = smdp if belief is None else option_set(
             mdp, full[mdp.n_actions:], include_primitives=True, models=models)[1]
+        # each distinct greedy policy solved once, warm-started from the last (issue 40)
+        start_values = StartValues(world_smdp, mu, K)
+    every_run = np.ones(K, dtype=bool)
     L = (default_threshold(v_star, scale=test.threshold_scale) if test.threshold is None
          else float(test.threshold))
     lower = flat_lower_bound(known, H)
@@ -571,7 +574,7 @@ def hierarchical_learning(
         Qs = lifted_values(settings.layer_values, st, parts, smdp, known, lower)
         policies = greedy_policy(Qs.reshape(K * S, -1)).reshape(K, S)
         with world():
-            return start_values(world_smdp, policies, mu)
+            return start_values(policies, every_run.copy())
 
     eval_value = drive(st, step_kernel, seed, episodes=N, eval_every=run.eval_every,
                        score=score, progress=run.progress, on_fire=on_fire if check else None)
