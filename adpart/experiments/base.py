@@ -10,6 +10,7 @@ PNG figures the experiment drew.
 from __future__ import annotations
 
 import difflib
+import json
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -74,6 +75,10 @@ class ExperimentReport:
             f"`adpart experiment {self.name}` ({self.seconds:.1f} s)",
             "",
         ]
+        record = self.data.get("settings")
+        if isinstance(record, dict) and record:  # the result's settings record, in one place
+            lines += ["## Settings", ""]
+            lines += [f"- `{key}`: `{json.dumps(value)}`" for key, value in record.items()] + [""]
         lines += ["## What the dissertation reports", ""]
         lines += [f"- {line}" for line in self.seed_reports] + [""]
         lines += ["## What we measured", ""]

@@ -160,8 +160,14 @@ def comparisons(config: ExperimentConfig) -> ExperimentReport:
                               "stages": [s.stage for s in pipe.stages],
                               "figures": [str(Path(f).relative_to(out)) for f in pipe.figures]})
     report.data["cells"] = cell_data
+    from adpart.workflows.regime import LEARNED_EXPLORATION
+    from adpart.workflows.rehearsal import REHEARSAL_GOALS, REHEARSAL_RUNS
+
     report.data["settings"] = {"seed": config.seed, "eval_every": 1, **sizes,
-                               "defaults": "adpart pipeline's"}
+                               "defaults": "adpart pipeline's", "regime": "learned-model",
+                               "explore": LEARNED_EXPLORATION,
+                               "rehearsal": {"goals": REHEARSAL_GOALS,
+                                             "runs_per_goal": REHEARSAL_RUNS}}
     for cell, data in zip(cells, cell_data, strict=True):
         lines = tables[cell.env]
         report.findings.append(
