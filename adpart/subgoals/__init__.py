@@ -8,9 +8,13 @@ Library functions, usable without the plugin layer:
 * :func:`discover_exhaustive`, :func:`discover_monte_carlo` - the two pipelines;
 * :func:`reward_variation_states`, :func:`with_reward_variation` - section 4.3.1;
 * :func:`betweenness`, :func:`visit_frequency` - the literature's detectors;
+* :func:`eigenoptions`, :func:`covering_options` - spectral option discovery reduced to subgoals
+  (Machado et al. 2017; Jinnai et al. 2019), with :func:`spectral_components`,
+  :func:`laplacian_eigenpairs` and :func:`fiedler_vector` (:mod:`adpart.subgoals.spectral`);
 * :class:`CountSettings`, :class:`MonteCarloSettings`, :class:`RewardVariationSettings`,
-  :class:`BetweennessSettings`, :class:`VisitFrequencySettings` - each detector's settings, the one
-  declaration of their defaults and checks (:mod:`adpart.subgoals.settings`).
+  :class:`BetweennessSettings`, :class:`VisitFrequencySettings`, :class:`EigenoptionSettings`,
+  :class:`CoveringSettings` - each detector's settings, the one declaration of their defaults
+  and checks (:mod:`adpart.subgoals.settings`).
 
 See ``docs/subgoals.md`` for the interpretations chosen.
 """
@@ -48,9 +52,18 @@ if TYPE_CHECKING:
     from adpart.subgoals.settings import (
         BetweennessSettings,
         CountSettings,
+        CoveringSettings,
+        EigenoptionSettings,
         MonteCarloSettings,
         RewardVariationSettings,
         VisitFrequencySettings,
+    )
+    from adpart.subgoals.spectral import (
+        covering_options,
+        eigenoptions,
+        fiedler_vector,
+        laplacian_eigenpairs,
+        spectral_components,
     )
 
 lazy_exports(__name__, {
@@ -70,18 +83,24 @@ lazy_exports(__name__, {
     "adpart.subgoals.result": ("SubgoalResult",),
     "adpart.subgoals.reward": ("reward_variation_states", "with_reward_variation"),
     "adpart.subgoals.settings": (
-        "BetweennessSettings", "CountSettings", "MonteCarloSettings", "RewardVariationSettings",
-        "VisitFrequencySettings",
+        "BetweennessSettings", "CountSettings", "CoveringSettings", "EigenoptionSettings",
+        "MonteCarloSettings", "RewardVariationSettings", "VisitFrequencySettings",
+    ),
+    "adpart.subgoals.spectral": (
+        "covering_options", "eigenoptions", "fiedler_vector", "laplacian_eigenpairs",
+        "spectral_components",
     ),
 })
 
 __all__ = [
-    "BetweennessSettings", "CountMetric", "CountSettings", "MonteCarloSettings", "RatioSamples",
+    "BetweennessSettings", "CountMetric", "CountSettings", "CoveringSettings",
+    "EigenoptionSettings", "MonteCarloSettings", "RatioSamples",
     "RewardVariationSettings", "SubgoalResult", "Trajectories", "VisitFrequencySettings",
     "arrival_counts",
     "bernstein_epsilon", "bernstein_samples", "betweenness", "check_policy", "count_metric",
-    "discover_exhaustive", "discover_monte_carlo", "gradient_ratios", "local_maxima",
+    "covering_options", "discover_exhaustive", "discover_monte_carlo", "eigenoptions",
+    "fiedler_vector", "gradient_ratios", "laplacian_eigenpairs", "local_maxima",
     "policy_matrix", "reward_variation_states", "sample_arrivals", "sample_trajectories",
-    "samples_per_state", "t_test_threshold", "transition_graph", "trapped_states",
-    "visit_frequency", "walker_matrix", "with_reward_variation",
+    "samples_per_state", "spectral_components", "t_test_threshold", "transition_graph",
+    "trapped_states", "visit_frequency", "walker_matrix", "with_reward_variation",
 ]

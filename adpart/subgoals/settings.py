@@ -11,6 +11,9 @@
   above a level (4.3.1); :func:`~adpart.subgoals.reward.reward_variation_states` takes it.
 * :class:`BetweennessSettings` and :class:`VisitFrequencySettings` - the literature's detectors;
   :func:`~adpart.subgoals.literature.visit_frequency` takes the latter.
+* :class:`EigenoptionSettings` and :class:`CoveringSettings` - the spectral option-discovery
+  methods (Machado et al. 2017; Jinnai et al. 2019); :func:`~adpart.subgoals.spectral.eigenoptions`
+  and :func:`~adpart.subgoals.spectral.covering_options` take them.
 
 The built-in ``subgoal-detector`` plugins' parameters, their command-line options
 (``adpart discover --detector count-mc --count-epsilon 1``, ``--detector-opt on-loop=error``)
@@ -28,13 +31,17 @@ from adpart.errors import TaskError
 from adpart.params import setting, settings
 
 __all__ = [
+    "LAPLACIANS",
     "ON_LOOP",
     "RATIO_MODES",
     "REWARD_BASES",
     "SELECT_RULES",
+    "SINK_RULES",
     "STOP_RULES",
     "BetweennessSettings",
     "CountSettings",
+    "CoveringSettings",
+    "EigenoptionSettings",
     "MonteCarloSettings",
     "RewardVariationSettings",
     "VisitFrequencySettings",
@@ -52,6 +59,11 @@ STOP_RULES = ("passes", "predicted", "either", "bernstein", "stable", "max")
 REWARD_BASES = ("count-exhaustive", "count-mc", "none")
 #: How the betweenness detector turns scores into subgoals.
 SELECT_RULES = ("local-maxima", "top")
+#: The graph Laplacians whose eigenvectors are the eigenoptions' proto-value functions:
+#: ``I - D^{-1/2} W D^{-1/2}`` (Machado et al. 2017) or ``D - W``.
+LAPLACIANS = ("normalised", "combinatorial")
+#: Which of an eigenoption's sink states are its subgoals (:mod:`adpart.subgoals.spectral`).
+SINK_RULES = ("extreme", "all")
 
 
 def _level(p: float) -> None:
@@ -171,6 +183,39 @@ class VisitFrequencySettings:
 
     horizon: int = setting(0, min=0, check=_ratio_samples)
     """step limit of a walk; 0 = 10 |S|."""
+
+
+def _discount(gamma: float) -> None:
+    if not 0.0 < gamma < 1.0:
+        raise TaskError("the eigenoptions' discount must be in (0, 1), e.g. 0.9 (Machado et al. "
+                        "2017's value iteration)")
+
+
+@settings
+class EigenoptionSettings:
+    """Eigenoptions: sinks of the eigenpurposes of the graph Laplacian (Machado et al. 2017)."""
+
+    k: int = setting(4, min=1)
+    """non-constant eigenvectors used, the smallest eigenvalues first; each with both signs, so up
+    to 2 k eigenoptions."""
+
+    laplacian: str = setting("normalised", choices=LAPLACIANS)
+    """normalised (I - D^-1/2 W D^-1/2, the paper's) or combinatorial (D - W)."""
+
+    discount: float = setting(0.9, min=0.0, max=1.0, check=_discount)
+    """discount of the eigenpurpose's value iteration, in (0, 1) (the authors' code: 0.9)."""
+
+    sinks: str = setting("extreme", choices=SINK_RULES)
+    """subgoals of an eigenoption: extreme (its sink of largest eigenvector value, the argmax) or
+    all (every state where the option terminates)."""
+
+
+@settings
+class CoveringSettings:
+    """Covering options: Fiedler-vector extremes joined round by round (Jinnai et al. 2019)."""
+
+    rounds: int = setting(4, min=1)
+    """rounds of the algorithm; each adds one option (a pair of subgoals) per component."""
 
 
 _S = TypeVar("_S")

@@ -20,7 +20,7 @@ def test_subgoal_registration_and_json():
     builtin.register_subgoal_detectors(Registrar(reg, "subgoal-detector", "adpart", "0"))
     names = reg.names("subgoal-detector")
     assert names == ["count-exhaustive", "count-mc", "reward-variation", "betweenness",
-                     "visit-frequency"]
+                     "visit-frequency", "eigenoptions", "covering"]
     mdp = get_domain("two-rooms").mdp("reach-goal")
     policy = solve(mdp).policy
     for name in names:

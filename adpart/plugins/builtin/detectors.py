@@ -19,16 +19,21 @@ from adpart.plugins.registry import Registrar
 from adpart.subgoals.settings import (
     BetweennessSettings,
     CountSettings,
+    CoveringSettings,
+    EigenoptionSettings,
     MonteCarloSettings,
     RewardVariationSettings,
     VisitFrequencySettings,
 )
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
+
     import numpy as np
 
     from adpart.mdp.model import FiniteMDP
     from adpart.subgoals.result import SubgoalResult
+    from adpart.subgoals.spectral import CoveringOption, Eigenoption
 
 
 class CountExhaustive:
@@ -183,7 +188,84 @@ class VisitFrequency:
                              self.name)
 
 
-DETECTORS = (CountExhaustive, CountMonteCarlo, RewardVariation, Betweenness, VisitFrequency)
+def _spectral_result(options: Sequence[Eigenoption | CoveringOption], stats: dict[str, object],
+                     S: int, t0: float, key: str, params: dict[str, object],
+                     name: str) -> SubgoalResult:
+    """The union of the options' subgoals; a state's score is how many options end there."""
+    import numpy as np
+
+    from adpart.subgoals.result import SubgoalResult
+
+    ends = [o.subgoals for o in options]
+    flat = np.concatenate(ends) if ends else np.zeros(0, np.int64)
+    scores = np.bincount(flat, minlength=S).astype(np.float64)
+    stats = {**stats, "time_s": time.perf_counter() - t0, key: [o.to_json() for o in options]}
+    return SubgoalResult(np.unique(flat), scores, None, stats, params, name)
+
+
+class Eigenoptions:
+    """Eigenoptions of the transition graph's Laplacian (Machado, Bellemare & Bowling 2017).
+
+    For each of the first ``k`` non-constant eigenvectors ``e`` (normalised Laplacian of the
+    symmetrised graph of the reachable states) and each sign, the eigenpurpose ``e(s') - e(s)``
+    is solved by value iteration with a terminate action; the subgoals are the option's sink of
+    largest ``e`` (``sinks="extreme"``: the argmax) or all its sinks (``sinks="all"``). A
+    state's score is the number of eigenoptions with it as a subgoal. Policy-independent. Its
+    parameters are :class:`~adpart.subgoals.settings.EigenoptionSettings`' fields.
+    """
+
+    name = "eigenoptions"
+    description = "sinks of the Laplacian's eigenoptions (Machado, Bellemare & Bowling 2017)"
+    params = settings_params(EigenoptionSettings)
+
+    def __init__(self, **values: object) -> None:
+        self.settings = build_settings(EigenoptionSettings, values)
+
+    def detect(self, mdp: FiniteMDP, policy: np.ndarray | None, rng: np.random.Generator) -> (
+        SubgoalResult
+    ):
+        from adpart.subgoals.policy import check_mdp
+        from adpart.subgoals.spectral import eigenoptions
+
+        t0 = time.perf_counter()
+        mdp = check_mdp(mdp)
+        options, stats = eigenoptions(mdp, self.settings)
+        return _spectral_result(options, stats, mdp.n_states, t0, "eigenoptions",
+                                settings_dict(self.settings), self.name)
+
+
+class Covering:
+    """Covering options: Fiedler-vector extremes, one edge per round (Jinnai et al. 2019).
+
+    Each round takes the argmin and argmax of the Fiedler vector of the combinatorial Laplacian
+    of the symmetrised graph of the reachable states, joins them by an edge and repeats
+    ``rounds`` times; the subgoals are the ends. A state's score is the number of options ending
+    there. Policy-independent. Its parameters are
+    :class:`~adpart.subgoals.settings.CoveringSettings`' fields.
+    """
+
+    name = "covering"
+    description = "Fiedler-vector ends of covering options (Jinnai, Park, Abel & Konidaris 2019)"
+    params = settings_params(CoveringSettings)
+
+    def __init__(self, **values: object) -> None:
+        self.settings = build_settings(CoveringSettings, values)
+
+    def detect(self, mdp: FiniteMDP, policy: np.ndarray | None, rng: np.random.Generator) -> (
+        SubgoalResult
+    ):
+        from adpart.subgoals.policy import check_mdp
+        from adpart.subgoals.spectral import covering_options
+
+        t0 = time.perf_counter()
+        mdp = check_mdp(mdp)
+        options, stats = covering_options(mdp, self.settings)
+        return _spectral_result(options, stats, mdp.n_states, t0, "options",
+                                settings_dict(self.settings), self.name)
+
+
+DETECTORS = (CountExhaustive, CountMonteCarlo, RewardVariation, Betweenness, VisitFrequency,
+             Eigenoptions, Covering)
 
 
 @hookimpl
