@@ -454,7 +454,7 @@ def test_every_score_is_the_exact_start_value_of_its_greedy_policy(setup, monkey
     """The layer learner scores with the warm-started reachable-state solver (``StartValues``,
     as Q-learning does); the same runs scored with one sparse LU per policy
     (``curves.start_values``) give the same curve within 1e-9 (the solver's stated 1e-10)."""
-    import adpart.learning.hierarchical as hierarchical
+    from adpart.learning import hierarchical
     from adpart.learning.curves import start_values
 
     class EveryPolicyByLU:
