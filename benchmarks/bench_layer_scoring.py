@@ -1,4 +1,4 @@
-"""Scoring inside the option learners: the warm-started start-value solver against one LU per policy.
+"""Scoring inside the option learners: the warm-started start-value solver against one LU each.
 
 The layer learner (``hierarchical_learning``) and SMDP Q score each evaluation's greedy policies
 exactly. They used to solve one sparse LU per distinct policy per evaluation
