@@ -284,7 +284,8 @@ class Domain(ABC):
         return self.dynamics().n_actions
 
     def task(self, task: str | GoalSpec | Task | None = None) -> Task:
-        """Resolve a task name, a :class:`GoalSpec`, ``"goal:x=3,y=4"`` or a Task into a Task."""
+        """Resolve a task name, a :class:`GoalSpec`, ``"goal:x=3,y=4"``, a task string of
+        :mod:`adpart.envs.task_language` (``"move-goal:x=3,y=4"`` ...) or a Task into a Task."""
         if task is None:
             task = self.default_task or next(iter(self.tasks()))
         if isinstance(task, Task):
@@ -293,13 +294,18 @@ class Domain(ABC):
             return task.build(self)
         if task.startswith("goal:"):
             return GoalSpec.parse(task.removeprefix("goal:"), **self.goal_defaults).build(self)
+        from adpart.envs.task_language import build_task, is_task_spec
+
+        if is_task_spec(task):  # move-goal:, set-reward:, reward-table: (the task's own rewards)
+            return build_task(self, task)
         known = self.tasks()
         if task not in known:
             hint = difflib.get_close_matches(task, list(known), n=1)
             raise UnknownNameError(
                 f"environment {self.name!r} has no task {task!r}; tasks: {', '.join(known)}"
                 + (f". Did you mean {hint[0]!r}?" if hint else "")
-                + ". A custom goal is written goal:FEATURE=VALUE,... (e.g. goal:x=3,y=4)"
+                + ". A custom goal is written goal:FEATURE=VALUE,... (e.g. goal:x=3,y=4); "
+                "move-goal:, set-reward: and reward-table: keep the environment's rewards"
             )
         factory = known[task]
         return factory.build(self) if isinstance(factory, GoalSpec) else factory(self)

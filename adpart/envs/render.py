@@ -28,6 +28,7 @@ from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 
 from adpart.envs.base import Task
+from adpart.envs.task_language import goal_mask
 from adpart.errors import AdpartError, ModelError
 from adpart.plotting import block_adjacency, distinct_colours, map_colouring, map_figure
 
@@ -85,8 +86,8 @@ def _task_letters(domain: Domain, task: Task | str | None, cell: np.ndarray,
         if task is not None:
             raise
         return {}  # a domain without a default task: nothing to letter
-    out = {}
-    for letter, states in (("G", chosen.terminal), ("S", np.asarray(chosen.initial) > 0)):
+    out = {}  # G: the terminal states; a move-goal: (...) task's goal only, not its holes
+    for letter, states in (("G", goal_mask(domain, chosen)), ("S", np.asarray(chosen.initial) > 0)):
         mask = np.zeros(int(np.prod(shape)), dtype=bool)
         mask[cell[np.asarray(states, dtype=bool)]] = True
         if 0 < mask.sum() <= MAX_LETTERED:
