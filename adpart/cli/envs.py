@@ -64,6 +64,8 @@ def env_show(name: str, out: Path | None, task: str | None, as_json: bool) -> No
 
     domain = resolve_domain(name)
     info = describe(name, domain)
+    if task is not None:  # resolved even without --out: a bad task fails here, named
+        info["task"] = domain.task(task).name
     if out is not None:
         values = None
         if task is not None:

@@ -71,12 +71,16 @@ def check_pipeline_options(config: Any) -> None:
 
 
 def split_tasks(text: str) -> tuple[str, ...]:
-    """Split ``--tasks`` on commas, keeping a goal spec's own commas (``goal:x=9,y=5``) whole."""
+    """Split ``--tasks`` on commas, keeping a task spec's own commas (``goal:x=9,y=5``,
+    ``move-goal:row=0,col=3;from:reward``, ``set-reward:row=1,col=1=-1;terminal``) whole: a
+    token that goes on with ``FEATURE=`` continues the spec before it."""
+    specs = ("goal:", "move-goal:", "set-reward:", "reward-table:")
     tasks: list[str] = []
     for token in (t.strip() for t in text.split(",")):
         if not token:
             continue
-        if tasks and "=" in token and ":" not in token and tasks[-1].startswith("goal:"):
+        if (tasks and tasks[-1].startswith(specs) and "=" in token
+                and ":" not in token.split("=", 1)[0]):
             tasks[-1] += "," + token
         else:
             tasks.append(token)
