@@ -38,7 +38,8 @@ more pairs (two-rooms' -1 straight and -1.2 diagonal), that action's cost shifte
 common remainder. A transition certain to arrive at ``s'`` paid ``R(s, a)``; one that arrives with
 probability ``p < 1`` paid the step reward plus ``s'``'s *arrival bonus*, the most common value of
 ``(R(s, a) - step) / p`` over the pairs an episode can take (from a start state on) that can
-arrive at ``s'`` and at no other terminal or changed state. Replacing an arrival reward adds ``p (new - old)`` to ``R(s, a)``.
+arrive at ``s'`` and at no other terminal or changed state. Replacing an arrival reward adds
+``p (new - old)`` to ``R(s, a)``.
 
 Every task gets a canonical name (features sorted, numbers written canonically, ``;from:`` kept
 only when it is not the default task) and a JSON-able ``Task.spec`` (``{"kind": "move-goal",
