@@ -500,7 +500,7 @@ def _record_learning(kb: KnowledgeStore, outcome: LearnOutcome) -> dict[str, Any
         partition_id = parse_ref(request.partition, "partition")
     start = kb.get("partition", partition_id) if partition_id is not None else None
     knowledge = run_knowledge(outcome.curve.metadata.get("knowledge"), outcome.option_ids, start,
-                              _estimated_from(kb, outcome.option_ids))
+                              _estimated_from(kb, outcome.option_ids, request.model))
     if knowledge is not None:
         metrics["knowledge"] = knowledge.to_dict()
     final = _put_final_layers(kb, environment, task_rec, outcome, partition_id)
@@ -530,15 +530,28 @@ def _record_learning(kb: KnowledgeStore, outcome: LearnOutcome) -> dict[str, Any
     }
 
 
-def _estimated_from(kb: KnowledgeStore, option_ids: Sequence[int]) -> str | None:
+def _estimated_from(kb: KnowledgeStore, option_ids: Sequence[int], model: str | None = None
+                    ) -> str | None:
     """The runs whose experience estimated the model the options were built on (None: they
-    were built on the true model; a layer's options are all of one environment)."""
+    were built on the true model; a layer's options are all of one environment).
+
+    Environments are keyed by their model's hash, so an estimate equal to the true model (a
+    deterministic first task that tried every pair) is stored as the true environment's record;
+    with the request's ``model`` (``ENV@experience:run:N``) of that same hash the options were
+    built on the estimate all the same, and the record says so."""
     from adpart.workflows.resolve import EXPERIENCE_MARK
 
     if not option_ids:
         return None
-    name = _options_environment(kb, option_ids).name
-    return name.split(EXPERIENCE_MARK, 1)[1] if EXPERIENCE_MARK in name else None
+    env = _options_environment(kb, option_ids)
+    if EXPERIENCE_MARK in env.name:
+        return env.name.split(EXPERIENCE_MARK, 1)[1]
+    if model is not None and EXPERIENCE_MARK in model:
+        from adpart.workflows.experience import resolve_model
+
+        if resolve_model(kb, model).dynamics().content_hash == env.model_hash:
+            return model.split(EXPERIENCE_MARK, 1)[1]
+    return None
 
 
 def _options_environment(kb: KnowledgeStore, option_ids: Sequence[int]) -> Any:

@@ -222,7 +222,10 @@ def resolve_option_set(kb: KnowledgeStore, text: str, environment_name: str) -> 
             raise TaskError(f"--options {text!r} names no option; write e.g. option:1,option:2")
     for rec in records:
         env = kb.get("environment", rec.environment_id)
-        if base_environment(env.name) != environment_name and env.name != environment_name:
+        # an environment and its estimates (ENV@experience:...) share states and actions; one
+        # record serves both where the estimate's model is the true one (environments are keyed
+        # by their model's hash: a deterministic first task that tried every pair)
+        if base_environment(env.name) != base_environment(environment_name):
             raise TaskError(
                 f"{rec.ref} belongs to environment {env.name!r}, not {environment_name!r}"
             )

@@ -394,3 +394,26 @@ def test_a_bad_later_task_is_refused_before_anything_is_learned_or_stored(tasks,
     assert result.exit_code == 2, result.output
     assert result.output.strip().startswith(f"Error: {message}")
     assert not kb_dir.exists()  # nothing was learned, nothing stored
+
+
+def test_an_estimate_equal_to_the_true_model_serves_the_layer_and_says_it_was_estimated(
+        tmp_path):
+    """A deterministic first task that tries every pair estimates the true model exactly; the
+    knowledge base keys environments by their model's hash, so the estimate and the environment
+    share one record. The options built on it still serve the estimate's partition (this once
+    stopped the pipeline: 'option:1 belongs to environment ...'), and the layer learner's record
+    says the options and the layer came from the estimate."""
+    env = "gym:FrozenLake-v1[map_name=4x4,is_slippery=false]"
+    res = CliRunner().invoke(cli, ["pipeline", env, "--tasks", "reward,goal:row=0,col=3",
+                                   "--runs", "3", "--no-fallback", "--kb", str(tmp_path / "kb"),
+                                   "--out", str(tmp_path / "o"), "--json"])
+    assert res.exit_code == 0, res.output
+    summary = json.loads(res.output)
+    kb = KnowledgeBase.open(str(tmp_path / "kb"))
+    try:  # the estimate is the true model: one environment record serves both names
+        assert len(kb.records("environment")) == 1
+    finally:
+        kb.close()
+    layer = next(r for r in summary["tasks"] if r["learner"] == "hierarchical")
+    assert layer["knowledge"].startswith("dynamics estimated")
+    assert "option policies solved on the model estimated from run:1" in layer["knowledge"]
