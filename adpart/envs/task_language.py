@@ -670,6 +670,16 @@ def set_reward(domain: Domain, clauses: Sequence[Clause], base_name: str | None 
     base, from_part = _base(domain, base_name)
     clauses = _canonical_clauses(clauses)
     name = "set-reward:" + ";".join(c.text() for c in clauses) + from_part
+    return _clauses_task(domain, base, clauses, name,
+                         f"{base.name} with arrival rewards set: "
+                         + "; ".join(c.text() for c in clauses), {"kind": "set-reward"})
+
+
+def _clauses_task(domain: Domain, base: Task, clauses: Sequence[Clause], name: str,
+                  description: str, head: dict[str, object]) -> Task:
+    """The base task with ``clauses`` applied, named ``name``; its spec ``head`` followed by the
+    rows, the base task and the discount (the one spec of ``set-reward:`` and
+    ``reward-table:``)."""
     reward, terminal, initial = _apply_clauses(domain, base, clauses, name)
     return Task(
         name=name,
@@ -677,15 +687,9 @@ def set_reward(domain: Domain, clauses: Sequence[Clause], base_name: str | None 
         terminal=terminal,
         initial=initial,
         gamma=base.gamma,
-        description=f"{base.name} with arrival rewards set: " + "; ".join(
-            c.text() for c in clauses),
-        spec={
-            "kind": "set-reward",
-            "rows": [c.as_json() for c in clauses],
-            "from": base.name,
-            "gamma": base.gamma,
-            "base": _spec_json(base.spec),
-        },
+        description=description,
+        spec={**head, "rows": [c.as_json() for c in clauses], "from": base.name,
+              "gamma": base.gamma, "base": _spec_json(base.spec)},
     )
 
 
@@ -704,20 +708,6 @@ def reward_table(domain: Domain, path: str, base_name: str | None = None,
                         f"not {digest}: the file changed since the task was named; write "
                         f"reward-table:{path} for what it holds now")
     name = f"reward-table:{path}{from_part};sha256:{content[:NAME_HASH_DIGITS]}"
-    reward, terminal, initial = _apply_clauses(domain, base, clauses, name)
-    return Task(
-        name=name,
-        reward=reward,
-        terminal=terminal,
-        initial=initial,
-        gamma=base.gamma,
-        description=f"{base.name} with the arrival rewards of {path} ({len(clauses)} rows)",
-        spec={
-            "kind": "reward-table",
-            "sha256": content,
-            "rows": [c.as_json() for c in clauses],
-            "from": base.name,
-            "gamma": base.gamma,
-            "base": _spec_json(base.spec),
-        },
-    )
+    return _clauses_task(domain, base, clauses, name,
+                         f"{base.name} with the arrival rewards of {path} ({len(clauses)} rows)",
+                         {"kind": "reward-table", "sha256": content})
