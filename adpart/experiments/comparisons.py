@@ -158,6 +158,8 @@ def comparisons(config: ExperimentConfig) -> ExperimentReport:
             cell_data.append({"env": cell.env, "tasks": list(cell.tasks), "note": cell.note,
                               "rows": pipe.rows, "measures": measured,
                               "stages": [s.stage for s in pipe.stages],
+                              "rehearsal": next((s.detail for s in pipe.stages
+                                                 if s.stage == "rehearse"), None),
                               "figures": [str(Path(f).relative_to(out)) for f in pipe.figures]})
     report.data["cells"] = cell_data
     from adpart.workflows.regime import LEARNED_EXPLORATION
@@ -173,6 +175,8 @@ def comparisons(config: ExperimentConfig) -> ExperimentReport:
         report.findings.append(
             f"{cell.env}, {' -> '.join(cell.tasks)}{f' ({cell.note})' if cell.note else ''}:"
             "\n\n```\n" + "\n".join(lines) + "\n```")
+        if data["rehearsal"] is not None:
+            report.findings.append(f"{cell.env}: {data['rehearsal']['reason']}")
         if "fallback" in data["stages"]:
             report.findings.append(f"{cell.env}: the pipeline fell back to flat learning for "
                                    f"{cell.tasks[1]}: {_fallback_reason(data)}")
