@@ -38,10 +38,17 @@ from adpart.mdp.model import FiniteMDP, SMDPModel
 SWEEP_TOL = 1e-7
 
 
+def reward_ceiling(top: float, gamma: float, horizon: int) -> float:
+    """``v_max`` of rewards at most ``top``: ``max(top, 0) / (1 - gamma)``, or
+    ``max(top, 0) * horizon`` (the episode's step limit) when ``gamma = 1``."""
+    top = max(float(top), 0.0)
+    return top / (1.0 - gamma) if gamma < 1.0 else top * horizon
+
+
 def value_ceiling(mdp: FiniteMDP, horizon: int) -> float:
-    """``v_max``: ``max(R, 0) / (1 - gamma)``, or ``max(R, 0) * horizon`` when ``gamma = 1``."""
-    top = max(float(np.max(np.where(mdp.admissible, mdp.R, -np.inf))), 0.0)
-    return top / (1.0 - mdp.gamma) if mdp.gamma < 1.0 else top * horizon
+    """:func:`reward_ceiling` of ``mdp``'s own largest admissible reward."""
+    return reward_ceiling(float(np.max(np.where(mdp.admissible, mdp.R, -np.inf))), mdp.gamma,
+                          horizon)
 
 
 def predecessors(mdp: FiniteMDP) -> tuple[np.ndarray, np.ndarray]:

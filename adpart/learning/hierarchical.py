@@ -130,6 +130,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from adpart.errors import TaskError
+from adpart.learning._rmax import reward_ceiling, value_ceiling
 from adpart.learning.curves import (
     LearningCurve,
     StartValues,
@@ -186,7 +187,9 @@ __all__ = [
     "hierarchical_learning",
     "refine_block",
     "refinement_model",
+    "reward_ceiling",
     "reward_states",
+    "value_ceiling",
 ]
 
 
@@ -533,7 +536,7 @@ def hierarchical_learning(
         world_smdp = smdp if belief is None else option_set(
             mdp, full[mdp.n_actions:], include_primitives=True, models=models)[1]
         # each distinct greedy policy solved once, warm-started from the last (issue 40)
-        start_values = StartValues(world_smdp, mu, K)
+        scorer = StartValues(world_smdp, mu, K)
     every_run = np.ones(K, dtype=bool)
     L = (default_threshold(v_star, scale=test.threshold_scale) if test.threshold is None
          else float(test.threshold))
@@ -574,7 +577,7 @@ def hierarchical_learning(
         Qs = lifted_values(settings.layer_values, st, parts, smdp, known, lower)
         policies = greedy_policy(Qs.reshape(K * S, -1)).reshape(K, S)
         with world():
-            return start_values(policies, every_run.copy())
+            return scorer(policies, every_run.copy())
 
     eval_value = drive(st, step_kernel, seed, episodes=N, eval_every=run.eval_every,
                        score=score, progress=run.progress, on_fire=on_fire if check else None)

@@ -440,7 +440,7 @@ def smdp_q_learning(
         mu = start_distribution(mdp)
         v_star = optimal_start_value(mdp, mu, reference_values)
         # each distinct greedy policy solved once, warm-started from the last (issue 40)
-        start_values = StartValues(smdp, mu, K)
+        scorer = StartValues(smdp, mu, K)
     every_run = np.ones(K, dtype=bool)
     S = mdp.n_states
     state_adm = smdp.admissible  # terminal rows: every option, never chosen (episode over)
@@ -453,7 +453,7 @@ def smdp_q_learning(
     def score() -> np.ndarray:
         policies = greedy_policy(st.Q.reshape(K * S, -1)).reshape(K, S)
         with world():
-            return start_values(policies, every_run.copy())
+            return scorer(policies, every_run.copy())
 
     eval_value = drive(st, step_kernel, root_seed, episodes=N, eval_every=M, score=score,
                        progress=progress)

@@ -78,9 +78,10 @@ def learned_value_ceiling(model_env: str, first: str, task: str, horizon: int) -
     earlier = domain.base.mdp(first)  # type: ignore[attr-defined]
     tried = domain.experience.tried & earlier.admissible  # type: ignore[attr-defined]
     paid = earlier.R[tried & ~earlier.terminal[:, None]]
-    top = max(float(paid.max()) if paid.size else 0.0, 0.0)
+    from adpart.learning.hierarchical import reward_ceiling
+
     gamma = domain.base.mdp(task).gamma  # type: ignore[attr-defined]
-    return top / (1.0 - gamma) if gamma < 1.0 else top * horizon
+    return reward_ceiling(float(paid.max()) if paid.size else 0.0, gamma, horizon)
 
 
 def agent_verdict(first_curve: LearningCurve, first: str, task: str) -> dict[str, Any]:

@@ -122,13 +122,15 @@ def rehearse(domain: EstimatedDomain, first: str, layer_inputs: dict[str, Any],
     say whether the layer pays (module docstring).
 
     ``layer_inputs``: the layer learner's ``options`` and ``partition`` as loaded from the
-    knowledge base; ``layer_params``: its parameters as the pipeline will run it (a value
-    ceiling is given here, from the first task's paid rewards, when R-max has none).
+    knowledge base; ``layer_params``: its parameters as the pipeline will run it (where R-max
+    has no value ceiling it gets the ceiling of the hypothetical tasks' rewards, which are the
+    first task's paid rewards).
 
     Returns the stage detail: ``fallback``, ``median_ratio``, per goal the state, both
     learners' KM median episodes and the ratio, and a ``reason`` sentence.
     """
     from adpart.learning.comparison import success_bound
+    from adpart.learning.hierarchical import value_ceiling
     from adpart.learning.settings import Run
     from adpart.learning.transfer_metrics import km_median, metrics_from_curve
     from adpart.plugins import get_registry
@@ -136,19 +138,18 @@ def rehearse(domain: EstimatedDomain, first: str, layer_inputs: dict[str, Any],
 
     flat = get_registry().get("learner", flat_learner).create(flat_params)
     layer_spec = get_registry().get("learner", "hierarchical")
-    params = dict(layer_params)
-    learner = layer_spec.create(params)
+    learner = layer_spec.create(layer_params)
+    tasks = [rehearsal_task(domain, first, int(g)) for g in rehearsal_goals(domain, first, goals,
+                                                                             seed)]
+    if learner.settings.directed and learner.settings.exploration.value_ceiling is None:
+        # R-max's ceiling of the rewards the hypothetical tasks pay (the same in every one)
+        horizon = int(layer_params.get("max-steps", Run().max_steps_per_episode))
+        ceiling = value_ceiling(tasks[0], horizon)
+        learner = layer_spec.create({**layer_params, "value-ceiling": ceiling})
+    common = {"runs": runs_per_goal, "episodes": episodes, "seed": seed, "eval_every": eval_every}
     per_goal: list[dict[str, Any]] = []
-    for goal in rehearsal_goals(domain, first, goals, seed):
-        task = rehearsal_task(domain, first, int(goal))
-        if learner.settings.directed and learner.settings.exploration.value_ceiling is None:
-            top = float(np.max(np.where(task.admissible, task.R, -np.inf)))
-            horizon = int(params.get("max-steps", Run().max_steps_per_episode))
-            ceiling = (max(top, 0.0) / (1.0 - task.gamma) if task.gamma < 1.0
-                       else max(top, 0.0) * horizon)
-            learner = layer_spec.create({**params, "value-ceiling": ceiling})
-        common = {"runs": runs_per_goal, "episodes": episodes, "seed": seed,
-                  "eval_every": eval_every}
+    for task in tasks:
+        goal = int(np.flatnonzero(task.terminal)[0])
         flat_curve = flat.learn(task, **common).curve
         layer_curve = learner.learn(task, **common, **layer_inputs,
                                     belief=belief_model(domain, task, first)).curve
@@ -158,7 +159,7 @@ def rehearse(domain: EstimatedDomain, first: str, layer_inputs: dict[str, Any],
             times, censored = metrics_from_curve(curve, bound).event_times("episodes")
             medians.append(float(km_median(times, censored).estimate))
         ratio = _ratio(*medians)
-        per_goal.append({"goal": int(goal), "layer_episodes": medians[0],
+        per_goal.append({"goal": goal, "layer_episodes": medians[0],
                          "flat_episodes": medians[1], "ratio": ratio})
     falls, median = rehearsal_verdict([g["ratio"] for g in per_goal])
     told = ", ".join(
