@@ -14,6 +14,7 @@ which is how ``adpart kb ls`` lists the rest of a damaged knowledge base.
 
 from __future__ import annotations
 
+import gc
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from datetime import datetime, timezone
@@ -123,6 +124,24 @@ def _id(value: E.Record | int | None) -> int | None:
     return value.id
 
 
+@contextmanager
+def gc_paused() -> Iterator[None]:
+    """Pause the cyclic garbage collector for one bulk read, and resume it as it was.
+
+    A listing builds an ORM object and a record per row, all alive until the read ends, and
+    none of them can be garbage before it does; the allocations trigger collections that scan
+    every one of them again (a quarter of ``kb ls``'s CPU time over 10^4 records). Reference
+    counting still frees what a read drops.
+    """
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if enabled:
+            gc.enable()
+
+
 class Queries:
     """``get``, ``artifact``, ``records``, ``find_environment``, ``options_for``,
     ``partitions_using``, ``runs_for``, ``learned_tasks``, ``lineage``, ``load``,
@@ -216,6 +235,12 @@ class Queries:
 
     def _read_records(self, session: Session, model: type[Base], query: Any, ids: Any, *,
               strict: bool = False) -> list[Any]:
+        """:meth:`_read_verified` with the cyclic garbage collector paused (see :func:`gc_paused`)."""
+        with gc_paused():
+            return self._read_verified(session, model, query, ids, strict=strict)
+
+    def _read_verified(self, session: Session, model: type[Base], query: Any, ids: Any, *,
+                   strict: bool = False) -> list[Any]:
         """The verified records of ``query`` (ORM rows of ``model``); ``ids`` selects the same
         rows' ids, read when the whole result cannot be decoded, to read row by row.
 

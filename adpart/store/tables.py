@@ -36,7 +36,7 @@ from adpart.store.integrity import (
     values_digest,
 )
 from adpart.store.models import SqlArtifact
-from adpart.store.queries import UNREADABLE
+from adpart.store.queries import UNREADABLE, gc_paused
 
 #: the kinds listed when no kind is asked for (artifacts are listed only on request)
 LISTED_KINDS: tuple[str, ...] = tuple(k for k in E.RECORD_TYPES if k != "artifact")
@@ -428,9 +428,10 @@ class Tables:
             with self.tolerating_damage(damaged):
                 return self.records_table(kind, env=env, task=task, learner=learner,
                                           where=where, limit=limit)
-        records = self.select_records(kind, env=env, task=task, learner=learner, where=where,
-                                      limit=limit)
-        return self._records_to_table(records)
+        with gc_paused():
+            records = self.select_records(kind, env=env, task=task, learner=learner,
+                                          where=where, limit=limit)
+            return self._records_to_table(records)
 
     def records_page(self, kind: str | Sequence[str] | None = None, *, limit: int,
                      damaged: list[str] | None = None, **filters: Any) -> tuple[pa.Table, int]:
@@ -440,8 +441,9 @@ class Tables:
         if damaged is not None:
             with self.tolerating_damage(damaged):
                 return self.records_page(kind, limit=limit, **filters)
-        records = self.select_records(kind, **filters)
-        return self._records_to_table(records[:limit]), len(records)
+        with gc_paused():
+            records = self.select_records(kind, **filters)
+            return self._records_to_table(records[:limit]), len(records)
 
     def runs_table(self, *, env: Any = None, task: Any = None, learner: str | None = None,
                    where: Mapping[str, Any] | None = None, limit: int | None = None,
