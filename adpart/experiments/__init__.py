@@ -26,6 +26,7 @@ EXPERIMENT_MODULES: tuple[str, ...] = (
     "adpart.experiments.maxq_parr",
     "adpart.experiments.comparisons",
     "adpart.experiments.random_goals",
+    "adpart.experiments.benchmark",
 )
 
 

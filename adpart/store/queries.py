@@ -235,7 +235,7 @@ class Queries:
 
     def _read_records(self, session: Session, model: type[Base], query: Any, ids: Any, *,
               strict: bool = False) -> list[Any]:
-        """:meth:`_read_verified` with the cyclic garbage collector paused (see :func:`gc_paused`)."""
+        """:meth:`_read_verified` with the garbage collector paused (:func:`gc_paused`)."""
         with gc_paused():
             return self._read_verified(session, model, query, ids, strict=strict)
 
