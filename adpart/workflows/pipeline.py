@@ -69,6 +69,7 @@ from adpart.workflows.refs import parse_ref
 from adpart.workflows.regime import (
     agent_verdict,
     check_regime,
+    first_task_judgement,
     layer_params,
     learned_threshold,
     learned_value_ceiling,
@@ -520,6 +521,13 @@ def run_pipeline(
             f"steps, {known['pairs_tried']} of {known['pairs']} state-action pairs tried")
         report.stages.append(Stage("estimate", first, model_env, False,
                                    time.perf_counter() - start, known))
+        start = time.perf_counter()
+        judged = first_task_judgement(
+            kb, [kb.get("policy", parse_ref(ref, "policy")) for ref in first_ids["policies"]],
+            model_env, first, config.gap_fraction, best)
+        say(judged["reason"])
+        report.stages.append(Stage("judge", first, f"{judged['learned_runs']}/{judged['runs']}",
+                                   False, time.perf_counter() - start, judged))
         # the inconsistency threshold from the first task's learned values, not from V*
         hierarchical.setdefault("threshold", learned_threshold(kb, policy, config.env, first))
     say(f"discovering subgoals in {policy.ref} with {config.detector}"

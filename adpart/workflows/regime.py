@@ -8,6 +8,9 @@ what the first task's runs gave the agent instead:
   values (the learner's own default reads ``|V*(start)|`` of the task it learns);
 * :func:`agent_verdict` - whether to learn a later task on the layer at all: not if no episode
   of the first task ever ended in a terminal state;
+* :func:`first_task_judgement` - whether the first task was learned, by the agent's own
+  evaluation: each run's greedy policy against the optimum of the model it estimated, with the
+  rewards it observed (reported; the rehearsal, not this, decides the fallback);
 * :func:`check_regime` - which settings cannot run without the task's model or rewards, refused
   before any work.
 
@@ -31,7 +34,7 @@ if TYPE_CHECKING:
     from adpart.workflows.pipeline import PipelineConfig
 
 __all__ = ["LEARNED_EXPLORATION", "THRESHOLD_SCALE", "agent_verdict", "check_regime",
-           "layer_params", "learned_threshold", "learned_value_ceiling"]
+           "first_task_judgement", "layer_params", "learned_threshold", "learned_value_ceiling"]
 
 
 #: The inconsistency threshold as a fraction of the first task's learned start value (the
@@ -82,6 +85,52 @@ def learned_value_ceiling(model_env: str, first: str, task: str, horizon: int) -
 
     gamma = domain.base.mdp(task).gamma  # type: ignore[attr-defined]
     return reward_ceiling(float(paid.max()) if paid.size else 0.0, gamma, horizon)
+
+
+def first_task_judgement(kb: KnowledgeStore, policies: list[Any], model_env: str, first: str,
+                         fraction: float, chosen: int) -> dict[str, Any]:
+    """Whether ``first`` was learned, judged from what the agent knows: the model its runs
+    estimated (:mod:`adpart.workflows.experience`) with the rewards they were paid (a pair never
+    tried pays the step reward most tried pairs paid), on which each run's greedy policy is
+    evaluated exactly and compared with that model's optimum at the start distribution. A run
+    has learned the task when its gap is at most ``fraction`` of ``|V-hat*(start)|`` (the
+    pipeline's success bound, on the agent's model instead of the world's V*).
+
+    Returns the stage detail: ``learned_runs`` of ``runs``, ``value_hat`` (``V-hat*(start)``),
+    each run's ``gap_fraction``, whether the run the subgoals come from (``chosen``) learned it,
+    and a ``reason`` sentence. The pipeline reports it and does not fall back on it: on
+    FrozenLake random_map=8 no run learned its first task by this measure, yet the layer built
+    from the best of them reached the moved goal in 0.097 of flat's episodes
+    (docs/learned-model.md); the rehearsal decides.
+    """
+    from adpart.mdp.evaluation import policy_evaluation
+    from adpart.mdp.solvers import solve
+    from adpart.partition.layer import step_baseline
+
+    domain = resolve_domain(model_env)
+    mdp = domain.mdp(first)
+    tried = domain.experience.tried & mdp.admissible  # type: ignore[attr-defined]
+    step = step_baseline(mdp.R, tried, mdp.terminal, rule="mode")
+    belief = mdp.with_rewards(np.where(tried, mdp.R, step))
+    # a policy that never ends (gamma = 1) is worth the step reward for the horizon: no goal
+    never = step * 1e6 if mdp.gamma >= 1.0 else None
+    mu = belief.initial
+    best = float(mu @ policy_evaluation(belief, solve(belief).policy, never=never))
+    scale = max(abs(best), 1e-12)
+    fractions = []
+    for policy in policies:
+        q = np.asarray(kb.load(policy, "q"), dtype=np.float64)
+        greedy = np.argmax(np.where(np.isnan(q), -np.inf, q), axis=1)
+        value = float(mu @ policy_evaluation(belief, greedy, never=never))
+        fractions.append(max(best - value, 0.0) / scale)
+    learned = [f <= fraction for f in fractions]
+    said = (f"{sum(learned)} of {len(policies)} runs of {first} learned it by the agent's own "
+            f"evaluation (greedy value within {fraction:.0%} of the optimum of the model they "
+            f"estimated, {best:.4g} at the start); the subgoals come from run {chosen}, which "
+            + ("did" if learned[chosen] else f"did not (gap {fractions[chosen]:.0%})"))
+    return {"learned_runs": int(sum(learned)), "runs": len(policies), "value_hat": best,
+            "gap_fraction": fractions, "chosen_learned": bool(learned[chosen]),
+            "reason": said}
 
 
 def agent_verdict(first_curve: LearningCurve, first: str, task: str) -> dict[str, Any]:

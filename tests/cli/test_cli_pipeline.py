@@ -59,6 +59,7 @@ def test_pipeline_runs_stores_everything_and_a_second_run_recomputes_nothing(tmp
     assert stages == [
         "learn-flat",
         "estimate",
+        "judge",
         "discover",
         "options",
         "partition",
@@ -70,7 +71,11 @@ def test_pipeline_runs_stores_everything_and_a_second_run_recomputes_nothing(tmp
     model_env = summary["stages"][1]["result"]
     assert model_env.startswith("two-rooms@experience:run:")
     assert summary["stages"][1]["detail"]["steps"] > 0
-    assert summary["stages"][2]["detail"]["subgoals"] == [23]  # the doorway
+    # the first task judged on the agent's own model: each run's gap there, and the verdict
+    judged = summary["stages"][2]["detail"]
+    assert judged["runs"] == 3 and len(judged["gap_fraction"]) == 3
+    assert judged["learned_runs"] == sum(g <= 0.05 for g in judged["gap_fraction"])
+    assert summary["stages"][3]["detail"]["subgoals"] == [23]  # the doorway
     assert not any(s["reused"] for s in summary["stages"])
     rows = {(r["task"], r["learner"]): r for r in summary["tasks"]}
     hier = rows[("goal:x=9,y=5", "hierarchical")]
@@ -91,7 +96,7 @@ def test_pipeline_runs_stores_everything_and_a_second_run_recomputes_nothing(tmp
     assert planner["episodes_to_bound_median"] == 0 and planner["compute_seconds"] > 0
     kb = KnowledgeBase.open(str(kb_dir))
     try:  # the run is linked to the layer it started on and to the layers its runs ended on
-        run = kb.get("run", int(summary["stages"][5]["result"].split(":")[1]))
+        run = kb.get("run", int(summary["stages"][6]["result"].split(":")[1]))
         assert f"partition:{run.partition_id}" == layer["result"]
         finals = [kb.get("partition", p) for p in run.metrics["final_partitions"]]
         assert len(finals) == 3 and all(p.kind == "learned" for p in finals)

@@ -240,3 +240,40 @@ def test_the_learned_value_ceiling_is_the_first_tasks_best_paid_reward(two_rooms
     expected = max(first.R[tried].max(), 0.0) / (1.0 - new.gamma)
     assert expected > 0  # the goal's reward was paid
     assert learned_value_ceiling(estimated.name, "reach-goal", "goal:x=9,y=5", 500) == expected
+
+
+def test_the_first_task_is_judged_on_the_agents_model_as_v_star_judges_it_where_both_agree(
+        tmp_path):
+    """``first_task_judgement`` evaluates each run's greedy policy on the model the runs
+    estimated, with the rewards they were paid. On a deterministic lake whose every pair was
+    tried that model is the true one, so its verdicts must be V*'s: each run's gap computed here
+    by policy evaluation on the true task, independently of the estimate."""
+    from adpart.mdp.evaluation import policy_evaluation
+    from adpart.mdp.solvers import solve
+    from adpart.store import KnowledgeBase
+    from adpart.workflows.pipeline import PipelineConfig, run_pipeline
+
+    env = "gym:FrozenLake-v1[map_name=4x4,is_slippery=false]"
+    with KnowledgeBase.open(tmp_path / "kb") as kb:
+        report = run_pipeline(kb, PipelineConfig(env=env, tasks=("reward", "goal:row=0,col=3"),
+                                                 runs=4, episodes=30, first_episodes=300,
+                                                 eval_every=5, baseline=False,
+                                                 model_baseline=False))
+        judged = next(s.detail for s in report.stages if s.stage == "judge")
+        estimated = resolve_domain(next(s.result for s in report.stages
+                                        if s.stage == "estimate"))
+        true = resolve_domain(env).mdp("reward")
+        live = true.admissible & ~true.terminal[:, None]
+        assert np.all(estimated.experience.tried[live]), "every pair tried: the model is exact"
+        v_star = float(true.initial @ policy_evaluation(true, solve(true, 1e-12).policy))
+        task = next(t for t in kb.records("task") if t.name == "reward")
+        gaps = []
+        for policy in (p for p in kb.records("policy") if p.task_id == task.id):
+            q = np.asarray(kb.load(policy, "q"))
+            greedy = np.argmax(np.where(np.isnan(q), -np.inf, q), axis=1)
+            gaps.append((v_star - float(true.initial @ policy_evaluation(true, greedy)))
+                        / abs(v_star))
+    assert judged["runs"] == len(gaps) == 4
+    np.testing.assert_allclose(judged["gap_fraction"], np.maximum(gaps, 0.0), atol=1e-9)
+    assert judged["learned_runs"] == sum(g <= 0.05 for g in gaps)
+    assert judged["value_hat"] == pytest.approx(v_star, abs=1e-9)
