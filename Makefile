@@ -5,7 +5,7 @@ PY     := $(VENV)/bin/python
 BASE   := $(VENV)/.installed
 STAMP  := $(VENV)/.installed-dev
 
-.PHONY: demo test test-processes test-all bench lint docs results clean
+.PHONY: demo test test-docs test-processes test-all bench lint docs results clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -66,6 +66,13 @@ test: $(STAMP)
 	$(WARM_KERNELS)
 	$(SINGLE_THREAD) $(PY) -m pytest -n 2 -q --durations=10
 
+# The documentation run as written (every page's `$ adpart` commands, the README's first session,
+# the report page in headless Chromium): minutes of full pipelines, deselected from `make test`
+# for its speed, run here, by `make test-all` and by CI.
+test-docs: $(STAMP)
+	$(WARM_KERNELS)
+	$(SINGLE_THREAD) $(PY) -m pytest -n 2 -q -m docs
+
 # The process-level robustness tests (a Ray cluster, SIGKILLed and concurrent writers, a killed
 # pipeline): deselected from `make test` for its speed, run here, by `make test-all` and by CI.
 test-processes: $(STAMP)
@@ -76,15 +83,19 @@ test-all: $(STAMP)
 	$(WARM_KERNELS)
 	$(SINGLE_THREAD) $(PY) -m pytest -n 2 -q -m ""
 
-# The result tables the docs show, regenerated: the pipeline's defaults on the benchmark's cells
-# (adpart experiment comparisons, about 20 minutes on two cores) and on 20 randomly moved goals
-# of three-floor (adpart experiment random-goals, about 25), their summaries copied to
-# docs/results/.
+# The result tables the docs show, regenerated: the pipeline's defaults on the issue cells
+# (adpart experiment comparisons, about 50 minutes on two cores), on 20 randomly moved goals
+# of three-floor (adpart experiment random-goals, about 40) and on the 32 cells of toy text,
+# MiniGrid and the built-in domains (adpart experiment benchmark, about 15), their summaries
+# and figures copied to docs/results/.
 results: $(BASE)
 	$(ADPART) experiment comparisons --out build/results/comparisons
 	$(ADPART) experiment random-goals --out build/results/random-goals
+	$(ADPART) experiment benchmark --out build/results/benchmark
 	mkdir -p docs/results && cp build/results/comparisons/summary.md docs/results/comparisons.md
 	cp build/results/random-goals/summary.md docs/results/random-goals.md
+	cp build/results/benchmark/summary.md docs/results/benchmark.md
+	cp build/results/benchmark/benchmark-profile.png docs/results/
 
 bench: $(VENV)/.installed-bench
 	$(PY) -m benchmarks
