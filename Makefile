@@ -5,7 +5,7 @@ PY     := $(VENV)/bin/python
 BASE   := $(VENV)/.installed
 STAMP  := $(VENV)/.installed-dev
 
-.PHONY: demo test test-docs test-processes test-all bench lint docs results clean
+.PHONY: demo test test-extended test-processes test-all bench lint docs results clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -66,12 +66,13 @@ test: $(STAMP)
 	$(WARM_KERNELS)
 	$(SINGLE_THREAD) $(PY) -m pytest -n 2 -q --durations=10
 
-# The documentation run as written (every page's `$ adpart` commands, the README's first session,
-# the report page in headless Chromium): minutes of full pipelines, deselected from `make test`
-# for its speed, run here, by `make test-all` and by CI.
-test-docs: $(STAMP)
+# The extended tests: the documentation run as written (every page's `$ adpart` commands, the
+# README's first session, the report page in headless Chromium) and the longest end-to-end and
+# property tests; minutes of full pipelines, deselected from `make test` for its speed (about
+# three minutes from a fresh clone), run here, by `make test-all` and by CI.
+test-extended: $(STAMP)
 	$(WARM_KERNELS)
-	$(SINGLE_THREAD) $(PY) -m pytest -n 2 -q -m docs
+	$(SINGLE_THREAD) $(PY) -m pytest -n 2 -q -m "extended and not slow"
 
 # The process-level robustness tests (a Ray cluster, SIGKILLed and concurrent writers, a killed
 # pipeline): deselected from `make test` for its speed, run here, by `make test-all` and by CI.

@@ -74,7 +74,7 @@ def test_the_pages_with_commands_are_found():
     assert {"learning.md", "hierarchy.md", "pipeline.md", "index.md", "plugins.md"} <= names
 
 
-@pytest.mark.docs
+@pytest.mark.extended
 @pytest.mark.parametrize("page", PAGES, ids=lambda p: str(p.relative_to(DOCS)))
 def test_every_documented_command_runs_with_the_shown_shape(page, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
@@ -100,7 +100,7 @@ def test_every_documented_command_runs_with_the_shown_shape(page, tmp_path, monk
             position = printed.index(word, position) + 1
 
 
-@pytest.mark.docs
+@pytest.mark.extended
 def test_the_sweep_pages_config_and_commands_run(tmp_path, monkeypatch):
     """docs/scale-out.md: its TOML is a sweep of 3 alphas x 3 seeds x 3 (environment, task) pairs.
     The page's commands run in its order, but for the two that need a Ray cluster (tests/ray):

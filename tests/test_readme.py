@@ -45,7 +45,7 @@ def test_the_readme_session_has_the_commands_the_mission_needs():
         assert verb in verbs
 
 
-@pytest.mark.docs
+@pytest.mark.extended
 def test_the_readme_first_session_runs_as_written(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     runner = CliRunner()

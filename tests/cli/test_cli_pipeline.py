@@ -272,6 +272,7 @@ def test_no_subgoals_is_a_reported_outcome_and_the_flat_learner_is_a_choice(tmp_
     assert bad.exit_code == 2 and "--flat-learner" in bad.output
 
 
+@pytest.mark.extended
 def test_without_a_learned_first_task_only_the_reward_variation_modes_use_the_layer(tmp_path):
     """One episode does not learn two-rooms' first task, so the knowledge base holds no values to
     predict from: in the default inconsistency mode the later task is learned flat (stage
@@ -306,6 +307,7 @@ def test_without_a_learned_first_task_only_the_reward_variation_modes_use_the_la
     assert learned["tasks"][1]["learner"] == "hierarchical"
 
 
+@pytest.mark.extended
 def test_directed_exploration_is_a_learner_option_and_a_bad_count_is_refused(tmp_path):
     """``--hier-opt explore=r-max`` turns on R-max exploration (docs/hierarchical-learning.md);
     a count below one is refused before the knowledge base is opened."""

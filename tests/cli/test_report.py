@@ -106,7 +106,7 @@ class _Page(HTMLParser):
             self.cells[-1] += data
 
 
-@pytest.mark.docs
+@pytest.mark.extended
 def test_the_page_holds_every_section_and_only_embedded_images(pipeline_run):
     _, out, page = pipeline_run
     parsed = _Page()
@@ -124,7 +124,7 @@ def test_the_page_holds_every_section_and_only_embedded_images(pipeline_run):
                 assert ref in parsed.cells
 
 
-@pytest.mark.docs
+@pytest.mark.extended
 def test_the_rerun_command_recomputes_nothing(pipeline_run):
     """The page's command, run on the same knowledge base, takes every stage from it."""
     kb, out, page = pipeline_run
@@ -189,7 +189,7 @@ def open_in_chromium(page: Path, shot: Path) -> dict:
     return seen
 
 
-@pytest.mark.docs
+@pytest.mark.extended
 def test_the_page_renders_in_headless_chromium(pipeline_run):
     """A real browser: the page loads from the file, the console has no error, every image
     decodes (naturalWidth > 0); a screenshot is written beside the page."""
@@ -235,7 +235,7 @@ def test_the_docs_page_names_every_section_and_is_in_the_site():
     assert "$ adpart report run" in page
 
 
-@pytest.mark.docs
+@pytest.mark.extended
 def test_the_demos_figures_read_back(pipeline_run):
     """Every figure the demo's pipeline wrote: the value-gap axis with its 0, the bound at the
     rows' bound, a thin line per run of every learner, the regime in the title; the maps letter

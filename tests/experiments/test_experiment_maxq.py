@@ -55,6 +55,7 @@ def test_evaluated_schedule() -> None:
     # the same body as maxq-parr on the full maze, 3x its time
     pytest.param("maxq-parr-full", marks=pytest.mark.slow),
 ])
+@pytest.mark.extended
 def test_quick_experiment_writes_report(name: str, tmp_path) -> None:
     """The small versions of the chapter 6 experiments (--quick) write a complete report."""
     assert get_experiment(name).name == name

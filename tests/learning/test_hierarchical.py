@@ -375,6 +375,7 @@ def test_offered_values_are_the_optimum_of_the_offered_columns(setup):
     assert offered_values(fired, smdp, mdp.terminal, -3.0)[goal - 1] == pytest.approx(1.0)
 
 
+@pytest.mark.extended
 @pytest.mark.parametrize("reference", ["offered", "policy"])
 def test_the_offered_reference_fires_only_where_the_layer_cannot_do_as_well(setup, reference):
     """With ``reference="offered"`` a firing certifies ``Q*(s, a*) - V > L`` for both ``V*_P`` of

@@ -241,6 +241,7 @@ def compare(mdp, options, models, layer, run) -> int:
     return len(reference_firings)
 
 
+@pytest.mark.extended
 def test_the_kernel_fires_and_learns_as_the_plain_reference_does():
     fired: list[int] = []
 

@@ -52,6 +52,7 @@ def test_an_untried_pair_is_worth_the_best_reward_seen_so_far():
     np.testing.assert_array_equal(m.R_hat(), [[-1.0, 5.0], [5.0, 5.0]])
 
 
+@pytest.mark.extended
 @pytest.mark.parametrize("slip", [0.0, 0.3])
 def test_the_compiled_and_the_interpreted_kernel_agree_bit_for_bit(slip):
     mdp = random_grid_mdp(36, slip=slip, terminal_fraction=0.05, seed=4)
