@@ -45,6 +45,45 @@ def reward_ceiling(top: float, gamma: float, horizon: int) -> float:
     return top / (1.0 - gamma) if gamma < 1.0 else top * horizon
 
 
+def termination_ceiling(R: np.ndarray, pT: np.ndarray, live: np.ndarray) -> float | None:
+    """``v_max`` of a task whose positive rewards all come with a chance of ending the episode:
+    ``max R(s, a) / P(terminal | s, a)`` over the ``live`` pairs that pay more than 0, or None
+    when one of them cannot end it (then only :func:`reward_ceiling` bounds the value).
+
+    Why it bounds ``V``: every positive reward ``R(s, a) <= G P(terminal | s, a)`` with ``G`` that
+    maximum, so the expected discounted sum of positive rewards is at most ``G`` times the
+    expected number of terminations, which is at most 1; the other rewards are <= 0. A goal
+    task pays its reward once, on arrival, so ``G`` is that reward instead of
+    ``G / (1 - gamma)``, a reward paid at every step forever.
+
+    Args:
+        R, pT: ``(S, A)`` rewards and probabilities of arriving in a terminal state.
+        live: ``(S, A)`` bool, the pairs to bound over (admissible, from live states).
+    """
+    positive = live & (R > 0)
+    if not positive.any():
+        return 0.0
+    if np.any(pT[positive] <= 0.0):
+        return None
+    return float(np.max(R[positive] / pT[positive]))
+
+
+def episodic_ceiling(mdp: FiniteMDP, horizon: int, live: np.ndarray | None = None,
+                     gamma: float | None = None) -> float:
+    """:func:`termination_ceiling` of ``mdp`` over its ``live`` pairs (default: the admissible
+    pairs of its live states), or where a positive reward cannot end an episode the looser
+    :func:`reward_ceiling` of the largest of those rewards, at ``gamma`` (default the MDP's)."""
+    S, A = mdp.n_states, mdp.n_actions
+    if live is None:
+        live = mdp.admissible & ~mdp.terminal[:, None]
+    arrive = np.asarray(mdp.P @ mdp.terminal.astype(np.float64)).reshape(A, S).T
+    tight = termination_ceiling(mdp.R, arrive, live)
+    if tight is not None:
+        return tight
+    return reward_ceiling(float(np.max(mdp.R[live])) if live.any() else 0.0,
+                          mdp.gamma if gamma is None else gamma, horizon)
+
+
 def value_ceiling(mdp: FiniteMDP, horizon: int) -> float:
     """:func:`reward_ceiling` of ``mdp``'s own largest admissible reward."""
     return reward_ceiling(float(np.max(np.where(mdp.admissible, mdp.R, -np.inf))), mdp.gamma,

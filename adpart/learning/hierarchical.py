@@ -130,7 +130,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from adpart.errors import TaskError
-from adpart.learning._rmax import reward_ceiling, value_ceiling
+from adpart.learning._rmax import episodic_ceiling, reward_ceiling, value_ceiling
 from adpart.learning.curves import (
     LearningCurve,
     StartValues,
@@ -184,6 +184,7 @@ __all__ = [
     "child_values",
     "decision_layer",
     "default_threshold",
+    "episodic_ceiling",
     "hierarchical_learning",
     "refine_block",
     "refinement_model",

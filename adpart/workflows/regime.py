@@ -71,20 +71,22 @@ def learned_threshold(kb: KnowledgeStore, policy: Any, env: str, task: str) -> f
 
 
 def learned_value_ceiling(model_env: str, first: str, task: str, horizon: int) -> float:
-    """R-max's ``v_max`` for ``task`` from what the first task paid: ``max(r, 0) / (1 -
-    gamma)`` over the rewards of the pairs the first task's runs tried (each paid its reward on
-    every try; the tasks' rewards are deterministic), with ``task``'s discount (its interface),
-    or ``max(r, 0) * horizon`` (the episode's step limit) where ``task`` is undiscounted, as
-    :func:`adpart.learning._rmax.value_ceiling`. The true-model regime's default reads the
-    ceiling of ``task``'s own rewards instead."""
-    domain = resolve_domain(model_env)
-    earlier = domain.base.mdp(first)  # type: ignore[attr-defined]
-    tried = domain.experience.tried & earlier.admissible  # type: ignore[attr-defined]
-    paid = earlier.R[tried & ~earlier.terminal[:, None]]
-    from adpart.learning.hierarchical import reward_ceiling
+    """R-max's ``v_max`` for ``task`` from what the first task paid, on the model its runs
+    estimated: where every positive reward of a tried pair came with a chance of ending the
+    episode (a goal paid on arrival), the largest reward per unit of that chance
+    (:func:`adpart.learning._rmax.episodic_ceiling`: a goal's reward is collected once);
+    otherwise ``max(r, 0) / (1 - gamma)`` over the rewards of the tried pairs, with ``task``'s
+    discount (its interface), or ``max(r, 0) * horizon`` where ``task`` is undiscounted. The
+    later task is assumed to pay as the first did (the same kind of goal). The true-model
+    regime's default reads the ceiling of ``task``'s own rewards instead."""
+    from adpart.learning.hierarchical import episodic_ceiling
 
+    domain = resolve_domain(model_env)
+    earlier = domain.mdp(first)  # the estimated dynamics, the first task's rewards
+    tried = domain.experience.tried & earlier.admissible  # type: ignore[attr-defined]
+    live = tried & ~earlier.terminal[:, None]
     gamma = domain.base.mdp(task).gamma  # type: ignore[attr-defined]
-    return reward_ceiling(float(paid.max()) if paid.size else 0.0, gamma, horizon)
+    return episodic_ceiling(earlier, horizon, live, gamma)
 
 
 def first_task_judgement(kb: KnowledgeStore, policies: list[Any], model_env: str, first: str,

@@ -130,7 +130,7 @@ def rehearse(domain: EstimatedDomain, first: str, layer_inputs: dict[str, Any],
     learners' KM median episodes and the ratio, and a ``reason`` sentence.
     """
     from adpart.learning.comparison import success_bound
-    from adpart.learning.hierarchical import value_ceiling
+    from adpart.learning.hierarchical import episodic_ceiling
     from adpart.learning.settings import Run
     from adpart.learning.transfer_metrics import km_median, metrics_from_curve
     from adpart.plugins import get_registry
@@ -144,7 +144,7 @@ def rehearse(domain: EstimatedDomain, first: str, layer_inputs: dict[str, Any],
     if learner.settings.directed and learner.settings.exploration.value_ceiling is None:
         # R-max's ceiling of the rewards the hypothetical tasks pay (the same in every one)
         horizon = int(layer_params.get("max-steps", Run().max_steps_per_episode))
-        ceiling = value_ceiling(tasks[0], horizon)
+        ceiling = episodic_ceiling(tasks[0], horizon)
         learner = layer_spec.create({**layer_params, "value-ceiling": ceiling})
     common = {"runs": runs_per_goal, "episodes": episodes, "seed": seed, "eval_every": eval_every}
     per_goal: list[dict[str, Any]] = []

@@ -67,17 +67,18 @@ def test_the_layer_is_kept_unless_the_median_ratio_exceeds_one(ratios, verdict):
     assert rehearsal_verdict(ratios) == verdict
 
 
-FROZEN = "gym:FrozenLake-v1[map_name=8x8,is_slippery=false]"
+FROZEN = "gym:FrozenLake-v1[map_name=4x4]"
 
 
 @pytest.mark.parametrize(("env", "tasks", "branch"), [
-    (FROZEN, "reward,goal:row=0,col=7", "flat"),
+    (FROZEN, "reward,move-goal:row=0,col=3", "flat"),
     ("two-rooms", "reach-goal,goal:x=9,y=5", "layer"),
 ])
 def test_the_rehearsal_decides_the_fallback_from_the_agents_model(tmp_path, env, tasks, branch):
-    """The benchmark's FrozenLake cell, where the layer was 1.24x flat's episodes with no
-    fallback, is learned flat by the rehearsal's verdict; on two-rooms the layer is kept. The
-    stage names the hypothetical goals and the ratio; with --no-fallback no rehearsal runs."""
+    """The slippery 4x4 lake with its goal moved is learned flat by the rehearsal's verdict
+    (results/benchmark.md: the rehearsal predicts the layer slower there); on two-rooms the
+    layer is kept. The stage names the hypothetical goals and the ratio; with --no-fallback no
+    rehearsal runs."""
     args = ["pipeline", env, "--tasks", tasks, "--runs", "3", "--episodes", "150",
             "--kb", str(tmp_path / "kb"), "--json"]
     res = CliRunner().invoke(cli, [*args, "--out", str(tmp_path / "a")])
