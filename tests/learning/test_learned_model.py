@@ -234,7 +234,7 @@ def test_the_learned_value_ceiling_is_the_first_tasks_goal_reward_once(two_rooms
     from adpart.workflows.regime import learned_value_ceiling
     from adpart.workflows.resolve import register_domain
 
-    domain, estimated, new = two_rooms
+    domain, estimated, _ = two_rooms
     register_domain(estimated.name, estimated)
     first = domain.mdp("reach-goal")
     tried = estimated.experience.tried & first.admissible & ~first.terminal[:, None]
