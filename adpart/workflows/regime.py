@@ -102,7 +102,7 @@ def first_task_judgement(kb: KnowledgeStore, policies: list[Any], model_env: str
     each run's ``gap_fraction``, whether the run the subgoals come from (``chosen``) learned it,
     and a ``reason`` sentence. The pipeline reports it and does not fall back on it: on
     FrozenLake random_map=8 no run learned its first task by this measure, yet the layer built
-    from the best of them reached the moved goal in 0.097 of flat's episodes
+    from the best of them reached the moved goal in 0.06 of flat's episodes
     (docs/learned-model.md); the rehearsal decides.
     """
     from adpart.mdp.evaluation import policy_evaluation
