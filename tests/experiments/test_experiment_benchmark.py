@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 from matplotlib.image import imread
 
 from adpart.experiments.base import ExperimentConfig, run_experiment
@@ -17,6 +18,7 @@ from adpart.experiments.benchmark import (
 from adpart.workflows.resolve import resolve_domain
 
 
+@pytest.mark.extended
 def test_every_cell_runs_and_says_which_branch_it_took(tmp_path):
     out = tmp_path / "out"
     run_experiment("benchmark", ExperimentConfig(out=out, runs=3, seed=0, quick=True))

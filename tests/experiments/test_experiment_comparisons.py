@@ -5,11 +5,13 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 
 from adpart.experiments.base import ExperimentConfig, run_experiment
 from adpart.experiments.comparisons import CELLS, QUICK_CELLS
 
 
+@pytest.mark.extended
 def test_every_cell_has_its_table_with_each_learners_knowledge(tmp_path):
     config = ExperimentConfig(out=tmp_path / "out", runs=3, seed=0, quick=True)
     run_experiment("comparisons", config)

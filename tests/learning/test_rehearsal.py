@@ -74,6 +74,7 @@ FROZEN = "gym:FrozenLake-v1[map_name=4x4]"
     (FROZEN, "reward,move-goal:row=0,col=3", "flat"),
     ("two-rooms", "reach-goal,goal:x=9,y=5", "layer"),
 ])
+@pytest.mark.extended
 def test_the_rehearsal_decides_the_fallback_from_the_agents_model(tmp_path, env, tasks, branch):
     """The slippery 4x4 lake with its goal moved is learned flat by the rehearsal's verdict
     (results/benchmark.md: the rehearsal predicts the layer slower there); on two-rooms the
