@@ -35,8 +35,9 @@ __all__ = [
 
 #: What a learner may be given besides the MDP, when it declares it in ``accepts``: options, a
 #: partition over them, and in the learned-model regime (``--model ENV@experience:run:N``) the
-#: ``belief`` model it may read (a FiniteMDP) or the earlier runs' ``experience`` (counts).
-LEARNER_CONTEXT = frozenset({"options", "partition", "belief", "experience"})
+#: ``belief`` model it may read (a FiniteMDP) or the earlier runs' ``experience`` (counts), and
+#: those runs' greedy ``policies`` (``(n, S)``, for a learner that transfers policies).
+LEARNER_CONTEXT = frozenset({"options", "partition", "belief", "experience", "policies"})
 
 
 @runtime_checkable

@@ -34,7 +34,7 @@ from adpart.workflows.resolve import EXPERIENCE_MARK, register_domain, resolve_d
 from adpart.workflows.store import KnowledgeStore
 
 __all__ = ["EstimatedDomain", "belief_model", "estimated_environment", "resolve_model",
-           "run_experience"]
+           "run_experience", "run_policies"]
 
 
 class EstimatedDomain(Domain):
@@ -82,6 +82,29 @@ def run_experience(kb: KnowledgeStore, run_ref: str) -> Experience:
             "--regime true-model to build the layer on the true model")
     env = kb.get("environment", kb.get("task", run.task_id).environment_id)
     return Experience.from_table(table, env.n_states, env.n_actions, sources=(run.ref,))
+
+
+def run_policies(kb: KnowledgeStore, run_refs: Sequence[str]) -> np.ndarray:
+    """``(n, S)`` the greedy policies stored with the runs ``run_refs`` (one per run of each
+    record, in order): what a learner that transfers the earlier runs' policies is given
+    (``sf-gpi``).
+
+    Raises:
+        TaskError: a run stored no policy.
+    """
+    rows = []
+    for ref in run_refs:
+        run = kb.get("run", parse_ref(ref, "run"))
+        ids = run.provenance.parameters.get("policies", [])
+        if not ids:
+            raise TaskError(f"{run.ref} ({run.learner}) stored no policies to transfer; learn "
+                            "the earlier task with a learner that stores them (q-learning)")
+        for policy_id in ids:
+            pi = kb.load(kb.get("policy", int(policy_id)), "pi")
+            if pi is None:
+                raise TaskError(f"policy:{policy_id} of {run.ref} has no greedy policy stored")
+            rows.append(np.asarray(pi, dtype=np.int64))
+    return np.vstack(rows)
 
 
 def estimated_environment(kb: KnowledgeStore, env: str, run_refs: Sequence[str]) -> str:

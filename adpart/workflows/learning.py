@@ -171,7 +171,7 @@ def _learn_batch(job: dict[str, Any]) -> dict[str, Any]:
         extra["options"] = job["options"]
     if job.get("partition") is not None:
         extra["partition"] = job["partition"]
-    for given in ("belief", "experience"):  # what a --model gives the learner
+    for given in ("belief", "experience", "policies"):  # what a --model gives the learner
         if job.get(given) is not None:
             extra[given] = job[given]
     result = learner.learn(
@@ -268,7 +268,12 @@ def run_learning(
         if base_environment(estimated.name) != request.env:
             raise TaskError(f"--model {request.model} is a model of "
                             f"{base_environment(estimated.name)!r}, not of {request.env!r}")
-        if "experience" in getattr(spec.factory, "accepts", ()):
+        accepts = getattr(spec.factory, "accepts", ())
+        if "policies" in accepts:
+            from adpart.workflows.experience import run_policies
+
+            layer["policies"] = run_policies(kb, estimated.experience.sources)
+        if "experience" in accepts:
             layer["experience"] = estimated.experience
         else:
             source = kb.get("run", parse_ref(estimated.experience.sources[0], "run"))

@@ -13,6 +13,8 @@ from adpart.plugins.hookspecs import hookimpl
 from adpart.plugins.registry import Registrar
 
 if TYPE_CHECKING:
+    import numpy as np
+
     from adpart.mdp.experience import Experience
     from adpart.mdp.model import FiniteMDP
 
@@ -110,6 +112,26 @@ class EstimatedDynamicsLearner(RunLearner):
         return estimated_dynamics_learning(mdp, run, experience)
 
 
+class SFGPILearner(RunLearner):
+    """Successor features of the earlier runs' policies with generalised policy improvement
+    (Barreto et al. 2017), the new task's reward weights learned online and its own Q-learning
+    policy beside them (:mod:`adpart.learning.sf_gpi`). Given ``--model ENV@experience:run:N``,
+    the successor features are computed on those runs' counts and transfer their greedy
+    policies; without it there is nothing to transfer and it learns as Q-learning does."""
+
+    name = "sf-gpi"
+    description = ("successor features of the earlier runs' policies + GPI, reward weights "
+                   "learned online (Barreto et al. 2017)")
+    params = LEARNER_PARAMS
+    accepts = frozenset({"experience", "policies"})
+
+    def learn_run(self, mdp: FiniteMDP, run: Run, experience: Experience | None = None,
+                  policies: np.ndarray | None = None) -> object:
+        from adpart.learning.sf_gpi import sf_gpi_learning
+
+        return sf_gpi_learning(mdp, run, policies=policies, experience=experience)
+
+
 class ValueIterationLearner:
     """The model-based reference: one curve row per value-iteration sweep."""
 
@@ -141,4 +163,5 @@ def register_learners(register: Registrar) -> None:
     register(QLearner)
     register(KnownDynamicsLearner)
     register(EstimatedDynamicsLearner)
+    register(SFGPILearner)
     register(ValueIterationLearner)
