@@ -93,10 +93,13 @@ results: $(BASE)
 	$(ADPART) experiment comparisons --out build/results/comparisons
 	$(ADPART) experiment random-goals --out build/results/random-goals
 	$(ADPART) experiment benchmark --out build/results/benchmark
+	$(ADPART) experiment methods --out build/results/methods
 	mkdir -p docs/results && cp build/results/comparisons/summary.md docs/results/comparisons.md
 	cp build/results/random-goals/summary.md docs/results/random-goals.md
 	cp build/results/benchmark/summary.md docs/results/benchmark.md
 	cp build/results/benchmark/benchmark-profile.png docs/results/
+	cp build/results/methods/summary.md docs/results/methods.md
+	cp build/results/methods/methods-profile.png docs/results/
 
 bench: $(VENV)/.installed-bench
 	$(PY) -m benchmarks

@@ -27,6 +27,7 @@ EXPERIMENT_MODULES: tuple[str, ...] = (
     "adpart.experiments.comparisons",
     "adpart.experiments.random_goals",
     "adpart.experiments.benchmark",
+    "adpart.experiments.methods",
 )
 
 

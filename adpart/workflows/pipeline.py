@@ -204,21 +204,27 @@ class Learned(NamedTuple):
     knowledge: str
 
 
-def _learn(kb: KnowledgeStore, request: LearnRequest, report: PipelineReport, stage: str
-           ) -> Learned:
-    start = time.perf_counter()
+def learn_stored(kb: KnowledgeStore, request: LearnRequest) -> tuple[Learned, bool]:
+    """``request``'s runs from the knowledge base, learned and recorded first when it holds
+    none; and whether they were found there."""
     ids = find_learning(kb, request)
     reused = ids is not None
     if ids is None:
         ids = record_learning(kb, run_learning(request, kb=kb))
     run = kb.get("run", parse_ref(ids["run"], "run"))
-    curve = load_curve(kb, run)
     known = run.metrics.get("knowledge")
+    return Learned(ids, load_curve(kb, run), Knowledge.from_dict(known).label if known
+                   else "not declared by the learner"), reused
+
+
+def _learn(kb: KnowledgeStore, request: LearnRequest, report: PipelineReport, stage: str
+           ) -> Learned:
+    start = time.perf_counter()
+    learned, reused = learn_stored(kb, request)
     report.stages.append(
-        Stage(stage, request.task, ids["run"], reused, time.perf_counter() - start)
+        Stage(stage, request.task, learned.ids["run"], reused, time.perf_counter() - start)
     )
-    return Learned(ids, curve, Knowledge.from_dict(known).label if known
-                   else "not declared by the learner")
+    return learned
 
 
 def _row(task: str, label: str, learned: Learned, fraction: float,

@@ -25,6 +25,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from adpart.learning.knowledge import (
+    FLAT,
     OPTION_POLICIES,
     Knowledge,
     combine,
@@ -71,7 +72,13 @@ def run_knowledge(learner: dict[str, Any] | None, option_ids: Sequence[int],
     (None: they were built on the true model)."""
     if learner is None:
         return None
-    parts = [Knowledge.from_dict(learner)]
+    own = Knowledge.from_dict(learner)
+    if option_ids and own == OPTION_POLICIES:
+        # a learner that knows the dynamics only through its options (SMDP Q) declares the
+        # usual case, options solved on the true dynamics; the options' own record below says
+        # what they were solved on, and replaces that assumption
+        own = FLAT
+    parts = [own]
     if option_ids:
         parts.append(OPTION_POLICIES if estimated_from is None
                      else estimated_option_policies(estimated_from))

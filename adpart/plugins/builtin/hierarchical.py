@@ -37,7 +37,9 @@ class SMDPQLearner(RunLearner):
 
     name = "smdp-q"
     description = "SMDP Q-learning over options (plus primitive actions), runs in lock-step"
-    accepts = frozenset({"options"})
+    #: ``experience`` (``--model ENV@experience:run:N``) names the estimated model its options
+    #: were solved on, for its knowledge record; SMDP Q itself reads no model
+    accepts = frozenset({"options", "experience"})
     params = (*settings_params(SMDPQSettings), *LEARNER_PARAMS)
 
     def __init__(self, **values: object) -> None:
@@ -45,7 +47,8 @@ class SMDPQLearner(RunLearner):
         self.settings = build_settings(SMDPQSettings, self.values)
 
     def learn_run(self, mdp: FiniteMDP, run: Run, options: Sequence[Option] | None = None,
-                  partition: Partition | None = None) -> LearnResult:
+                  partition: Partition | None = None, experience: object = None
+                  ) -> LearnResult:
         from dataclasses import replace
 
         from adpart.learning.smdp_q import smdp_q_learning

@@ -1,0 +1,312 @@
+"""The field's option sources and transfer learners side by side, on the benchmark's cells.
+
+``adpart experiment methods`` runs every option source x every transfer learner that uses
+options, and the transfer learners that use none, on each cell of
+:data:`adpart.experiments.benchmark.BENCHMARK_CELLS` (a first task learned flat, a different
+second task), all in the learned-model regime: what any method knows of the dynamics is the
+counts model of the first task's runs, and every method observes the second task's rewards.
+
+* **Option sources** (subgoal detectors, :data:`SOURCES`): the seed's count metric
+  (``count-exhaustive``, section 4.1), betweenness (Şimşek & Barto 2008), eigenoptions' sinks
+  (Machado et al. 2017) and covering options' ends (Jinnai et al. 2019), each run on the
+  estimated model (docs/subgoals.md); the options to their subgoals are solved on it too.
+* **Transfer learners over a source's options**: the decision layer with inconsistency
+  refinement (``hierarchical``, the seed's chain without the rehearsal's fallback, so that the
+  method itself is measured; ``adpart experiment benchmark`` measures the default chain), and
+  SMDP Q-learning over the options and the primitive actions (``smdp-q``).
+* **Transfer learners without options**: successor features of the first task's policies with
+  GPI (``sf-gpi``, Barreto et al. 2017), and the knowledge-matched flat planner on the same
+  counts (``estimated-dynamics``).
+* **The baseline**: flat Q-learning, which knows nothing (every ratio is to it).
+
+Per cell and method: the ratio of Kaplan-Meier medians of episodes to the bound over flat's in
+the same run, with a 95 % bootstrap CI (censored runs stay censored). Per method over the cells
+where flat's median lies within its budget: the interquartile mean of each run's episodes over
+flat's median with a stratified bootstrap CI, the probability that a run of the method reaches
+the bound sooner than a flat run of the same cell, and the run-score performance profile
+(``methods-profile.png``). A source that finds no subgoal on a cell leaves its two learners
+out of that cell (recorded); a cell whose pipeline raises is recorded and the rest still run.
+Every setting is in the summary's settings record.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from adpart.experiments.base import ExperimentConfig, ExperimentReport, experiment
+from adpart.experiments.benchmark import BENCHMARK_CELLS, PROFILE_TAUS, QUICK_BENCHMARK_CELLS
+
+__all__ = ["BASELINE", "OPTION_LEARNERS", "SOURCES", "method_times"]
+
+#: The option sources: subgoal detector plugins, each run on the first task's estimated model.
+SOURCES = ("count-exhaustive", "betweenness", "eigenoptions", "covering")
+#: The learners over a source's options (their row names).
+OPTION_LEARNERS = ("layer", "smdp-q")
+#: The learners without options, and the baseline every ratio is to.
+PLAIN_LEARNERS = ("sf-gpi", "estimated-dynamics")
+BASELINE = "flat"
+
+
+def method_times(curve: Any, flat: Any, fraction: float) -> tuple[np.ndarray, dict[str, Any]]:
+    """Per run of ``curve``, its episodes to the bound over flat's Kaplan-Meier median (inf:
+    censored; empty when flat's median lies beyond its budget), and the KM-median ratio to flat
+    with its CI (:func:`adpart.learning.comparison.time_ratio`)."""
+    from adpart.learning.comparison import success_bound, time_ratio
+    from adpart.learning.transfer_metrics import km_median, metrics_from_curve
+
+    bound = success_bound(flat, fraction)
+    median = km_median(*metrics_from_curve(flat, bound).event_times("episodes")).estimate
+    ratio = time_ratio(curve, flat, fraction, 0)
+    if not np.isfinite(median) or median <= 0:
+        return np.zeros(0), ratio
+    times, censored = metrics_from_curve(curve, bound).event_times("episodes")
+    return np.where(censored, np.inf, times).astype(np.float64) / median, ratio
+
+
+def _within(curve: Any, flat: Any, fraction: float) -> str:
+    from adpart.learning.comparison import success_bound
+    from adpart.learning.transfer_metrics import metrics_from_curve
+
+    _, censored = metrics_from_curve(curve, success_bound(flat, fraction)).event_times(
+        "episodes")
+    return f"{int((~censored).sum())}/{censored.size}"
+
+
+def _cell_methods(kb: Any, cell: Any, sizes: dict[str, Any], config: ExperimentConfig,
+                  out: Path) -> tuple[dict[str, Any], dict[str, str], list[str]]:
+    """One cell: every method's curve (label -> curve), its knowledge label, and notes (a
+    source without subgoals)."""
+    from adpart.workflows.learning import LearnRequest
+    from adpart.workflows.pipeline import (
+        PipelineConfig,
+        episode_defaults,
+        learn_stored,
+        learner_defaults,
+        run_pipeline,
+    )
+    from adpart.workflows.reports import folder_name
+
+    curves: dict[str, Any] = {}
+    knows: dict[str, str] = {}
+    notes: list[str] = []
+    task = cell.tasks[1]
+    base = {"eval_every": 1, **sizes, **cell.options}
+    model_env = None
+    for source in SOURCES:
+        pcfg = PipelineConfig(env=cell.env, tasks=cell.tasks, seed=config.seed, detector=source,
+                              fallback=False, **base)
+        pipe = run_pipeline(kb, pcfg, out=out / f"{folder_name(cell.env)}-{source}",
+                            progress=config.progress)
+        rows = {r["learner"]: r for r in pipe.rows if r["task"] == task}
+        for label, curve in pipe.curves[task].items():
+            if label.startswith("flat (no transfer)"):
+                curves[BASELINE], knows[BASELINE] = curve, rows["flat"]["knowledge"]
+            elif label.startswith("flat (no subgoals)"):
+                curves.setdefault(BASELINE, curve)
+                knows.setdefault(BASELINE, rows["flat"]["knowledge"])
+                notes.append(f"{source} found no subgoals")
+            elif label.startswith("hierarchical"):
+                curves[f"layer [{source}]"] = curve
+                knows[f"layer [{source}]"] = rows["hierarchical"]["knowledge"]
+            elif label.startswith("estimated-dynamics"):
+                curves["estimated-dynamics"] = curve
+                knows["estimated-dynamics"] = rows["estimated-dynamics"]["knowledge"]
+        estimate = next((s for s in pipe.stages if s.stage == "estimate"), None)
+        model_env = estimate.result if estimate is not None else model_env
+        options = next((s.result for s in pipe.stages if s.stage == "options"), None)
+        if options:
+            defaults = episode_defaults(cell.env)
+            req = LearnRequest(env=cell.env, task=task, learner="smdp-q",
+                               params={**learner_defaults("smdp-q", defaults),
+                                       "include-primitives": True},
+                               runs=pcfg.runs, episodes=pcfg.episodes, seed=config.seed,
+                               eval_every=1, options=options, model=model_env)
+            learned, _ = learn_stored(kb, req)
+            curves[f"smdp-q [{source}]"], knows[f"smdp-q [{source}]"] = (learned.curve,
+                                                                        learned.knowledge)
+    if model_env is not None:
+        defaults = episode_defaults(cell.env)
+        req = LearnRequest(env=cell.env, task=task, learner="sf-gpi",
+                           params=learner_defaults("sf-gpi", defaults), runs=pcfg.runs,
+                           episodes=pcfg.episodes, seed=config.seed, eval_every=1,
+                           model=model_env)
+        learned, _ = learn_stored(kb, req)
+        curves["sf-gpi"], knows["sf-gpi"] = learned.curve, learned.knowledge
+    return curves, knows, notes
+
+
+def _row_order(labels: list[str]) -> list[str]:
+    order = [f"{learner} [{source}]" for source in SOURCES for learner in OPTION_LEARNERS]
+    order += [*PLAIN_LEARNERS, BASELINE]
+    return [m for m in order if m in labels]
+
+
+def _profile_figure(profiles: dict[str, Any], out: Path) -> str:
+    """Every method's run-score performance profile on one axis (log tau)."""
+    from adpart.plotting import legend_below, new_figure
+
+    fig, ax = new_figure((7.2, 4.8))
+    taus = np.asarray(profiles["taus"])
+    for method, prof in profiles["methods"].items():
+        style = "--" if method.startswith("smdp-q") else (":" if method == BASELINE else "-")
+        ax.plot(taus, prof["fraction"], style, label=method)
+    ax.axvline(1.0, color="0.6", linewidth=0.8, linestyle=":")
+    ax.set_xscale("log")
+    ax.set_ylim(0.0, 1.02)
+    ax.set_xlabel("episodes to the bound / flat's Kaplan-Meier median (tau)")
+    ax.set_ylabel("fraction of runs within tau")
+    ax.set_title(f"performance profiles over {profiles['cells']} cells (learned-model regime)")
+    legend_below(ax, columns=3)
+    path = out / "methods-profile.png"
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    return str(path)
+
+
+@experiment(
+    "methods",
+    "Option sources x transfer learners, SF-GPI and the counts planner against flat, per cell",
+    "the field's methods on the benchmark cells (no figure of the seed)",
+)
+def methods(config: ExperimentConfig) -> ExperimentReport:
+    """Run every method on every cell and aggregate (module docstring)."""
+    from adpart.errors import AdpartError
+    from adpart.learning.comparison import interval_text
+    from adpart.learning.transfer_metrics import (
+        iqm,
+        performance_profile,
+        probability_of_improvement,
+    )
+    from adpart.workflows.working_kb import working_kb
+
+    out = Path(config.out)
+    out.mkdir(parents=True, exist_ok=True)
+    cells = QUICK_BENCHMARK_CELLS[:2] if config.quick else BENCHMARK_CELLS
+    sizes = ({"runs": min(config.runs, 3), "episodes": 60, "first_episodes": 150}
+             if config.quick else {"runs": config.runs})
+    fraction = 0.1
+    report = ExperimentReport("methods", "the field's methods on the benchmark cells")
+    report.seed_reports = ["(the dissertation compares its chain with flat Q-learning only)"]
+    per_cell: list[dict[str, Any]] = []
+    failed: list[dict[str, str]] = []
+    pooled: dict[str, list[np.ndarray]] = {}
+    flat_pooled: dict[str, list[np.ndarray]] = {}
+    regimes: dict[str, set[str]] = {}
+    uses: dict[str, str] = {}  # each method's full knowledge record, on its first cell
+    with working_kb(config.kb, "methods") as kb:
+        for number, cell in enumerate(cells, 1):
+            config.progress(f"cell {number}/{len(cells)}: {cell.env}: {' -> '.join(cell.tasks)}")
+            try:
+                curves, knows, notes = _cell_methods(kb, cell, sizes, config,
+                                                     out / f"{number:02d}")
+            except AdpartError as err:  # recorded; the other cells still run
+                failed.append({"env": cell.env, "tasks": list(cell.tasks),
+                               "error": str(err).splitlines()[0]})
+                continue
+            flat = curves.get(BASELINE)
+            if flat is None:
+                failed.append({"env": cell.env, "tasks": list(cell.tasks),
+                               "error": "no flat baseline"})
+                continue
+            flat_times, _ = method_times(flat, flat, fraction)
+            row: dict[str, Any] = {"env": cell.env, "tasks": list(cell.tasks), "notes": notes,
+                                   "methods": {}}
+            for method in _row_order(list(curves)):
+                times, ratio = method_times(curves[method], flat, fraction)
+                label = knows.get(method, "not declared")
+                regimes.setdefault(method, set()).add(label.split(" (", 1)[0])
+                uses.setdefault(method, label)
+                row["methods"][method] = {
+                    "within": _within(curves[method], flat, fraction), "ratio_to_flat": ratio,
+                    "runs": times.tolist(), "knowledge": knows.get(method)}
+                if times.size and method != BASELINE:
+                    pooled.setdefault(method, []).append(times)
+                    flat_pooled.setdefault(method, []).append(flat_times)
+            per_cell.append(row)
+    methods_seen = _row_order([m for row in per_cell for m in row["methods"]])
+    methods_seen = list(dict.fromkeys(methods_seen))
+    aggregate: dict[str, Any] = {}
+    for method in methods_seen:
+        if method == BASELINE or method not in pooled:
+            continue
+        agg = iqm(pooled[method], seed=config.seed)
+        sooner = probability_of_improvement(pooled[method], flat_pooled[method], better="lower",
+                                            seed=config.seed)
+        aggregate[method] = {"cells": len(pooled[method]), "iqm": list(agg),
+                             "probability_sooner": list(sooner)}
+    report.findings.append(_aggregate_table(aggregate, regimes, interval_text))
+    report.findings.append("what each method knew, in full (its stored knowledge record on the "
+                           "first cell it ran on):\n\n" + "\n".join(
+                               f"- **{m}**: {uses[m]}" for m in methods_seen if m in uses))
+    report.findings.append(_cell_tables(per_cell, methods_seen, interval_text))
+    if failed:
+        report.findings.append("cells that failed: " + "; ".join(
+            f"{f['env']} {f['tasks'][1]} ({f['error']})" for f in failed))
+    data: dict[str, Any] = {
+        "settings": {"seed": config.seed, "eval_every": 1, **sizes, "regime": "learned-model",
+                     "sources": list(SOURCES), "option_learners": list(OPTION_LEARNERS),
+                     "plain_learners": list(PLAIN_LEARNERS), "baseline": BASELINE,
+                     "gap_fraction": fraction, "layer_fallback": False,
+                     "smdp_q": {"include-primitives": True}},
+        "cells": per_cell, "failed": failed, "aggregate": aggregate,
+        "regimes": {k: sorted(v) for k, v in regimes.items()},
+        "knowledge_on_the_first_cell": uses,
+    }
+    # the profiles over the cells every method has a ratio on (flat's median within budget)
+    scored = [r for r in per_cell if r["methods"].get(BASELINE, {}).get("runs")]
+    if scored:
+        profiles: dict[str, Any] = {"taus": PROFILE_TAUS.tolist(), "cells": len(scored),
+                                    "methods": {}}
+        for method in methods_seen:
+            runs = [np.asarray(r["methods"][method]["runs"]) for r in scored
+                    if method in r["methods"] and r["methods"][method]["runs"]]
+            if len(runs) < len(scored):
+                continue  # a method missing on some cell is not profiled beside the others
+            prof = performance_profile([-x for x in runs], -PROFILE_TAUS, seed=config.seed)
+            profiles["methods"][method] = {"fraction": prof.fraction.tolist(),
+                                           "low": prof.low.tolist(), "high": prof.high.tolist()}
+        data["profiles"] = profiles
+        report.figures.append(_profile_figure(profiles, out))
+    report.data = data
+    return report
+
+
+def _aggregate_table(aggregate: dict[str, Any], regimes: dict[str, set[str]],
+                     interval_text: Any) -> str:
+    lines = [("| method | what it knew | cells | IQM of episodes / flat's median [95 % CI] | "
+              "P(sooner than flat) [95 % CI] |"), "|---|---|---|---|---|"]
+    for method, agg in aggregate.items():
+        known = "; ".join(sorted(regimes.get(method, ())))
+        lines.append(f"| {method} | {known} | {agg['cells']} | "
+                     f"{interval_text(*agg['iqm'], inf='never')} | "
+                     f"{interval_text(*agg['probability_sooner'])} |")
+    return ("per method, over the cells where flat's median lies within its budget (the "
+            "interquartile mean of each run's episodes to the bound over flat's KM median, a "
+            "censored run counting as never; below 1 is faster than flat):\n\n"
+            + "\n".join(lines))
+
+
+def _cell_tables(per_cell: list[dict[str, Any]], methods_seen: list[str],
+                 interval_text: Any) -> str:
+    def text(entry: dict[str, Any] | None) -> str:
+        if entry is None:
+            return "-"
+        q = entry["ratio_to_flat"]
+        if q.get("ratio") is None:
+            if "at_most" in q:
+                return f"{entry['within']}, <= {q['at_most']:.3g}"
+            if "at_least" in q:
+                return f"{entry['within']}, >= {q['at_least']:.3g}"
+            return f"{entry['within']}, never"
+        return f"{entry['within']}, {interval_text(q['ratio'], *q['ci95'], inf='never')}"
+
+    header = "| # | environment | second task | " + " | ".join(methods_seen) + " |"
+    lines = [header, "|" + "---|" * (3 + len(methods_seen))]
+    for i, row in enumerate(per_cell, 1):
+        cells = " | ".join(text(row["methods"].get(m)) for m in methods_seen)
+        lines.append(f"| {i} | `{row['env']}` | `{row['tasks'][1]}` | {cells} |")
+    return ("per cell, each method's runs within the bound and its ratio of KM-median episodes "
+            "to flat's [95 % CI] (`-`: its source found no subgoals there):\n\n"
+            + "\n".join(lines))
