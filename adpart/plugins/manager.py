@@ -30,6 +30,7 @@ BUILTIN_PLUGINS: dict[str, str] = {
     "criteria": "adpart.plugins.builtin.criteria",
     "detectors": "adpart.plugins.builtin.detectors",
     "estimators": "adpart.plugins.builtin.estimators",
+    "simpleoptions": "adpart.plugins.builtin.simpleoptions_detector",
 }
 
 
