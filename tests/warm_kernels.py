@@ -34,6 +34,9 @@ def learning() -> None:
     from adpart.mdp.generate import random_grid_mdp
 
     known_dynamics_learning(random_grid_mdp(9, seed=0), Run(runs=1, episodes=1, kernel="numba"))
+    from adpart.learning.sf_gpi import sf_gpi_learning
+
+    sf_gpi_learning(random_grid_mdp(9, seed=0), Run(runs=1, episodes=1, kernel="numba"))
 
 
 def structure() -> None:

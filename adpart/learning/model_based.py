@@ -38,7 +38,7 @@ from adpart.learning.curves import (
 from adpart.learning.knowledge import Knowledge, world
 from adpart.learning.result import LearnResult
 from adpart.learning.settings import Run, fresh_seed, require_mdp
-from adpart.mdp._sampling import first_above
+from adpart.mdp._sampling import epsilon_greedy, first_above
 from adpart.mdp.evaluation import greedy_policy
 from adpart.mdp.experience import Experience
 from adpart.mdp.model import FiniteMDP
@@ -93,7 +93,7 @@ def _episode(s, Q, admissible, keys, indptr, indices, env_R, env_terminal, r_sum
     CSR entry of the transitions). Three uniforms a step: explore?, which action, successor.
     Returns ``(steps, return, discounted return, model changed)``; the model changed when a
     pair's mean reward moved, a pair was counted for the first time, or a terminal was found."""
-    S, A = Q.shape
+    S = Q.shape[0]
     scale, rate, omega, floor = eps
     steps = 0
     ret = 0.0
@@ -101,41 +101,10 @@ def _episode(s, Q, admissible, keys, indptr, indices, env_R, env_terminal, r_sum
     disc = 1.0
     changed = False
     while steps < H:
-        n = n_s[s] + 1
-        epsilon = max(floor, scale * rate ** e * n ** (-omega))
-        m = 0
-        for b in range(A):
-            if admissible[s, b]:
-                m += 1
-        if m == 0:
+        epsilon = max(floor, scale * rate ** e * (n_s[s] + 1) ** (-omega))
+        a = epsilon_greedy(U[steps, 0], U[steps, 1], epsilon, Q[s], Q[s], admissible[s])
+        if a < 0:
             break
-        if U[steps, 0] < epsilon:
-            pick = int(U[steps, 1] * m)
-            a = -1
-            for b in range(A):
-                if admissible[s, b]:
-                    if pick == 0:
-                        a = b
-                        break
-                    pick -= 1
-        else:
-            best = -np.inf
-            ties = 0
-            for b in range(A):
-                if admissible[s, b]:
-                    if Q[s, b] > best:
-                        best = Q[s, b]
-                        ties = 1
-                    elif Q[s, b] == best:
-                        ties += 1
-            pick = int(U[steps, 1] * ties)
-            a = -1
-            for b in range(A):
-                if admissible[s, b] and Q[s, b] == best:
-                    if pick == 0:
-                        a = b
-                        break
-                    pick -= 1
         row = a * S + s
         hi = indptr[row + 1]
         pos = min(first_above(keys, row + U[steps, 2], indptr[row], hi), hi - 1)

@@ -63,7 +63,7 @@ from adpart.learning.curves import (
 from adpart.learning.knowledge import Knowledge, world
 from adpart.learning.result import LearnResult
 from adpart.learning.settings import Run, fresh_seed, require_mdp
-from adpart.mdp._sampling import first_above
+from adpart.mdp._sampling import epsilon_greedy, first_above
 from adpart.mdp.evaluation import greedy_policy
 from adpart.mdp.experience import Experience
 from adpart.mdp.model import FiniteMDP
@@ -153,41 +153,10 @@ def _episode(s, Qn, Qb, admissible, keys, indptr, indices, env_R, env_terminal, 
     disc = 1.0
     changed = False
     while steps < H:
-        n = n_s[s] + 1
-        epsilon = max(e_floor, e_scale * e_rate ** e * n ** (-e_omega))
-        m = 0
-        for b in range(A):
-            if admissible[s, b]:
-                m += 1
-        if m == 0:
+        epsilon = max(e_floor, e_scale * e_rate ** e * (n_s[s] + 1) ** (-e_omega))
+        a = epsilon_greedy(U[steps, 0], U[steps, 1], epsilon, Qn[s], Qb[s], admissible[s])
+        if a < 0:
             break
-        a = -1
-        if U[steps, 0] < epsilon:
-            pick = int(U[steps, 1] * m)
-            for b in range(A):
-                if admissible[s, b]:
-                    if pick == 0:
-                        a = b
-                        break
-                    pick -= 1
-        else:
-            best = -np.inf
-            ties = 0
-            for b in range(A):
-                if admissible[s, b]:
-                    g = max(Qn[s, b], Qb[s, b])
-                    if g > best:
-                        best = g
-                        ties = 1
-                    elif g == best:
-                        ties += 1
-            pick = int(U[steps, 1] * ties)
-            for b in range(A):
-                if admissible[s, b] and max(Qn[s, b], Qb[s, b]) == best:
-                    if pick == 0:
-                        a = b
-                        break
-                    pick -= 1
         row = a * S + s
         hi = indptr[row + 1]
         pos = min(first_above(keys, row + U[steps, 2], indptr[row], hi), hi - 1)
