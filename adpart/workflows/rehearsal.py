@@ -17,7 +17,9 @@ belief) and once flat (the pipeline's flat learner), and compares their times to
 * the learners are scored on that model's own ``V*`` (the agent's model, not the world's);
 * the verdict (:func:`rehearse`): learn the new task flat when the median over the hypothetical
   goals of the layer's Kaplan-Meier median episodes over flat's exceeds 1; keep the layer when
-  it does not, or when no goal gives a ratio (neither learner reaches the bound on it).
+  it does not, or when no goal gives a ratio (neither learner reaches the bound on it). A
+  median of exactly 1 is a tie at the rehearsal's scoring resolution, broken by the same median
+  in primitive steps (:func:`rehearsal_verdict`).
 
 Nothing here reads the new task, its rewards or the true model; the rehearsal's runs are not
 stored (they are the agent's simulation, recorded in the pipeline's stage detail).
@@ -92,14 +94,23 @@ def rehearsal_task(domain: EstimatedDomain, first: str, goal: int) -> FiniteMDP:
                      action_names=earlier.action_names, name=f"rehearsal[{domain.name}:{goal}]")
 
 
-def rehearsal_verdict(ratios: list[float | None]) -> tuple[bool, float | None]:
+def rehearsal_verdict(ratios: list[float | None], steps: list[float | None] | None = None
+                      ) -> tuple[bool, float | None]:
     """``(fallback, median ratio)`` from the per-goal ratios of the layer's KM median episodes
     over flat's (None where neither reached the bound; ``inf`` where only flat did, 0 where only
-    the layer did): fall back when the median of the defined ratios exceeds 1."""
+    the layer did): fall back when the median of the defined ratios exceeds 1. A median of
+    exactly 1 is a tie at the rehearsal's resolution (both learners reached the bound at the
+    same scoring point, :data:`REHEARSAL_EVAL_EVERY` episodes apart); ``steps``, the same
+    ratios in primitive steps (which have no such resolution), then decide: fall back when
+    their median exceeds 1."""
     defined = [r for r in ratios if r is not None]
     if not defined:
         return False, None
     median = float(np.median(defined))
+    if median == 1.0 and steps is not None:
+        finer = [r for r in steps if r is not None]
+        if finer:
+            return float(np.median(finer)) > 1.0, median
     return median > 1.0, median
 
 
@@ -154,14 +165,21 @@ def rehearse(domain: EstimatedDomain, first: str, layer_inputs: dict[str, Any],
         layer_curve = learner.learn(task, **common, **layer_inputs,
                                     belief=belief_model(domain, task, first)).curve
         bound = success_bound(flat_curve, fraction)
-        medians = []
+        medians: dict[str, list[float]] = {"episodes": [], "steps": []}
         for curve in (layer_curve, flat_curve):
-            times, censored = metrics_from_curve(curve, bound).event_times("episodes")
-            medians.append(float(km_median(times, censored).estimate))
-        ratio = _ratio(*medians)
-        per_goal.append({"goal": goal, "layer_episodes": medians[0],
-                         "flat_episodes": medians[1], "ratio": ratio})
-    falls, median = rehearsal_verdict([g["ratio"] for g in per_goal])
+            for unit, out in medians.items():
+                times, censored = metrics_from_curve(curve, bound).event_times(unit)
+                out.append(float(km_median(times, censored).estimate))
+        per_goal.append({"goal": goal, "layer_episodes": medians["episodes"][0],
+                         "flat_episodes": medians["episodes"][1],
+                         "ratio": _ratio(*medians["episodes"]),
+                         "steps_ratio": _ratio(*medians["steps"])})
+    falls, median = rehearsal_verdict([g["ratio"] for g in per_goal],
+                                      [g["steps_ratio"] for g in per_goal])
+    steps_median = (float(np.median([g["steps_ratio"] for g in per_goal
+                                     if g["steps_ratio"] is not None]))
+                    if median == 1.0 and any(g["steps_ratio"] is not None for g in per_goal)
+                    else None)
     told = ", ".join(
         f"state {g['goal']}: {_episodes(g['layer_episodes'])} against "
         f"{_episodes(g['flat_episodes'])}" for g in per_goal)
@@ -172,7 +190,10 @@ def rehearse(domain: EstimatedDomain, first: str, layer_inputs: dict[str, Any],
     else:
         reason = (f"rehearsed on the model estimated from {first}'s runs with {len(per_goal)} "
                   f"hypothetical goals ({told} episodes to the bound, layer against flat, "
-                  f"{runs_per_goal} runs each): median ratio {median:.3g}, so the layer "
+                  f"{runs_per_goal} runs each): median ratio {median:.3g}"
+                  + (f", a tie broken by the median ratio in primitive steps, "
+                     f"{steps_median:.3g}" if steps_median is not None else "")
+                  + ", so the layer "
                   + ("is predicted slower than flat and the task is learned flat" if falls
                      else "is kept"))
     return {"fallback": falls, "median_ratio": median, "goals": per_goal, "runs": runs_per_goal,
