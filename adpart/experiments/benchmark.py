@@ -31,7 +31,7 @@ from adpart.experiments.base import ExperimentConfig, ExperimentReport, experime
 from adpart.experiments.comparisons import Cell
 
 __all__ = ["BENCHMARK_CELLS", "LOSS_BOUND", "PROFILE_TAUS", "QUICK_BENCHMARK_CELLS", "CellResult",
-           "chain_times"]
+           "chain_times", "draw_profiles"]
 
 #: A cell loses when the lower end of the chain's ratio-to-flat CI lies above this.
 LOSS_BOUND = 1.1
@@ -225,26 +225,35 @@ def _profiles(results: list[CellResult], seed: int) -> dict[str, Any] | None:
     return out
 
 
-def _profile_figure(profiles: dict[str, Any], out: Path) -> str:
-    """:func:`_profiles` drawn: the fraction of runs within tau, chain and flat, log tau."""
+def draw_profiles(taus: np.ndarray, curves: dict[str, dict[str, Any]], title: str,
+                  path: Path, *, bands: bool = True) -> str:
+    """Run-score performance profiles on one log-tau axis: per name, its ``fraction`` of runs
+    within tau (and its ``low``-``high`` band when ``bands``); a dotted line at tau = 1."""
     from adpart.plotting import legend_below, new_figure
 
-    fig, ax = new_figure((6.4, 4.2))
-    taus = np.asarray(profiles["taus"])
-    for key, name in (("chain", "default chain"), ("flat", "flat Q-learning")):
-        ax.plot(taus, profiles[key]["fraction"], label=name)
-        ax.fill_between(taus, profiles[key]["low"], profiles[key]["high"], alpha=0.2)
+    fig, ax = new_figure((7.2, 4.8) if len(curves) > 2 else (6.4, 4.2))
+    for name, prof in curves.items():
+        style = "--" if name.startswith("smdp-q") else (":" if name == "flat" else "-")
+        ax.plot(taus, prof["fraction"], style, label=name)
+        if bands:
+            ax.fill_between(taus, prof["low"], prof["high"], alpha=0.2)
     ax.axvline(1.0, color="0.6", linewidth=0.8, linestyle=":")
     ax.set_xscale("log")
     ax.set_ylim(0.0, 1.02)
     ax.set_xlabel("episodes to the bound / flat's Kaplan-Meier median (tau)")
     ax.set_ylabel("fraction of runs within tau")
-    ax.set_title(f"performance profile over {profiles['cells']} cells "
-                 "(95 % stratified bootstrap)")
-    legend_below(ax)
-    path = out / "benchmark-profile.png"
+    ax.set_title(title)
+    legend_below(ax, columns=3 if len(curves) > 2 else 2)
     fig.savefig(path, dpi=110, bbox_inches="tight")
     return str(path)
+
+
+def _profile_figure(profiles: dict[str, Any], out: Path) -> str:
+    """:func:`_profiles` drawn: the fraction of runs within tau, chain and flat, log tau."""
+    return draw_profiles(np.asarray(profiles["taus"]),
+                         {"default chain": profiles["chain"], "flat Q-learning": profiles["flat"]},
+                         f"performance profile over {profiles['cells']} cells "
+                         "(95 % stratified bootstrap)", out / "benchmark-profile.png")
 
 
 @experiment(

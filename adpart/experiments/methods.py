@@ -37,7 +37,12 @@ from typing import Any
 import numpy as np
 
 from adpart.experiments.base import ExperimentConfig, ExperimentReport, experiment
-from adpart.experiments.benchmark import BENCHMARK_CELLS, PROFILE_TAUS, QUICK_BENCHMARK_CELLS
+from adpart.experiments.benchmark import (
+    BENCHMARK_CELLS,
+    PROFILE_TAUS,
+    QUICK_BENCHMARK_CELLS,
+    draw_profiles,
+)
 
 __all__ = ["BASELINE", "OPTION_LEARNERS", "SOURCES", "method_times"]
 
@@ -144,27 +149,6 @@ def _row_order(labels: list[str]) -> list[str]:
     return [m for m in order if m in labels]
 
 
-def _profile_figure(profiles: dict[str, Any], out: Path) -> str:
-    """Every method's run-score performance profile on one axis (log tau)."""
-    from adpart.plotting import legend_below, new_figure
-
-    fig, ax = new_figure((7.2, 4.8))
-    taus = np.asarray(profiles["taus"])
-    for method, prof in profiles["methods"].items():
-        style = "--" if method.startswith("smdp-q") else (":" if method == BASELINE else "-")
-        ax.plot(taus, prof["fraction"], style, label=method)
-    ax.axvline(1.0, color="0.6", linewidth=0.8, linestyle=":")
-    ax.set_xscale("log")
-    ax.set_ylim(0.0, 1.02)
-    ax.set_xlabel("episodes to the bound / flat's Kaplan-Meier median (tau)")
-    ax.set_ylabel("fraction of runs within tau")
-    ax.set_title(f"performance profiles over {profiles['cells']} cells (learned-model regime)")
-    legend_below(ax, columns=3)
-    path = out / "methods-profile.png"
-    fig.savefig(path, dpi=110, bbox_inches="tight")
-    return str(path)
-
-
 @experiment(
     "methods",
     "Option sources x transfer learners, SF-GPI and the counts planner against flat, per cell",
@@ -268,7 +252,9 @@ def methods(config: ExperimentConfig) -> ExperimentReport:
             profiles["methods"][method] = {"fraction": prof.fraction.tolist(),
                                            "low": prof.low.tolist(), "high": prof.high.tolist()}
         data["profiles"] = profiles
-        report.figures.append(_profile_figure(profiles, out))
+        report.figures.append(draw_profiles(
+            PROFILE_TAUS, profiles["methods"], f"performance profiles over {len(scored)} cells "
+            "(learned-model regime)", out / "methods-profile.png", bands=False))
     report.data = data
     return report
 
