@@ -564,6 +564,7 @@ def run_pipeline(
         write_figures(kb, report, config, out)
         return report
     option_ids: list[int] = []
+    layer_options = found.record.ref  # the subgoal set's options (all of them, unless dropped)
     if no_subgoals:
         reason = (f"{config.detector} found no subgoals in {policy.ref}: each later task is "
                   f"learned on the layer of its reward-state options alone "
@@ -589,6 +590,8 @@ def run_pipeline(
         for subgoal, why in stored.dropped:
             say(f"subgoal {subgoal} dropped: {why}")
         option_ids = [r.id for r in stored.records]
+        if stored.dropped:  # the layer is over the options that exist, not the whole set
+            layer_options = ",".join(f"option:{i}" for i in option_ids)
 
     learned = [parse_ref(first_ids["task"], "task")]
     rehearsed: dict[str, tuple[dict[str, Any], float]] = {}
@@ -615,7 +618,7 @@ def run_pipeline(
                     evidence.append(tid)
                 continue
         # own_layer without subgoals learns on the layer of the reward-state options alone
-        layer = None if no_subgoals else _task_layer(kb, config, found.record.ref, task, learned,
+        layer = None if no_subgoals else _task_layer(kb, config, layer_options, task, learned,
                                                      option_ids, report, say, model_env)
         if config.fallback and model_env is not None and layer is not None:
             if layer.ref not in rehearsed:  # one rehearsal per layer: it reads no later task

@@ -429,3 +429,31 @@ def test_an_estimate_equal_to_the_true_model_serves_the_layer_and_says_it_was_es
     layer = next(r for r in summary["tasks"] if r["learner"] == "hierarchical")
     assert layer["knowledge"].startswith("dynamics estimated")
     assert "option policies solved on the model estimated from run:1" in layer["knowledge"]
+
+
+def test_a_layer_is_built_over_the_options_left_when_a_subgoal_is_dropped(tmp_path):
+    """On the slippery 4x4 lake the eigenoptions' sink 11 (a hole) has no option: it is dropped
+    and reported, and the layer is partitioned over the options that exist (it used to ask the
+    subgoal set for an option per subgoal and stop)."""
+    res = CliRunner().invoke(cli, [
+        "pipeline", "gym:FrozenLake-v1[map_name=4x4]", "--tasks", "reward,move-goal:row=0,col=3",
+        "--runs", "3", "--episodes", "30", "--first-episodes", "200", "--eval-every", "5",
+        "--detector", "eigenoptions", "--no-fallback", "--kb", str(tmp_path / "kb"), "--out",
+        str(tmp_path / "o"), "--json"])
+    assert res.exit_code == 0, res.output
+    summary = json.loads(res.output)
+    options = next(s for s in summary["stages"] if s["stage"] == "options")
+    dropped = [d["subgoal"] for d in options["detail"]["dropped"]]
+    assert 11 in dropped
+    kept = options["result"].split(",")
+    kb = KnowledgeBase.open(str(tmp_path / "kb"))
+    try:
+        partition = next(s for s in summary["stages"] if s["stage"] == "partition")
+        record = kb.get("partition", int(partition["result"].split(":")[1]))
+        assert [f"option:{i}" for i in record.option_ids] == kept
+        states = {kb.get("option", i).provenance.parameters["subgoal_state"]
+                  for i in record.option_ids}
+        assert states and not states & set(dropped)
+    finally:
+        kb.close()
+    assert [r["learner"] for r in summary["tasks"]][:2] == ["flat", "hierarchical"]
