@@ -175,8 +175,6 @@ def methods(config: ExperimentConfig) -> ExperimentReport:
     report.seed_reports = ["(the dissertation compares its chain with flat Q-learning only)"]
     per_cell: list[dict[str, Any]] = []
     failed: list[dict[str, str]] = []
-    pooled: dict[str, list[np.ndarray]] = {}
-    flat_pooled: dict[str, list[np.ndarray]] = {}
     regimes: dict[str, set[str]] = {}
     uses: dict[str, str] = {}  # each method's full knowledge record, on its first cell
     with working_kb(config.kb, "methods") as kb:
@@ -194,7 +192,6 @@ def methods(config: ExperimentConfig) -> ExperimentReport:
                 failed.append({"env": cell.env, "tasks": list(cell.tasks),
                                "error": "no flat baseline"})
                 continue
-            flat_times, _ = method_times(flat, flat, fraction)
             row: dict[str, Any] = {"env": cell.env, "tasks": list(cell.tasks), "notes": notes,
                                    "methods": {}}
             for method in _row_order(list(curves)):
@@ -205,22 +202,33 @@ def methods(config: ExperimentConfig) -> ExperimentReport:
                 row["methods"][method] = {
                     "within": _within(curves[method], flat, fraction), "ratio_to_flat": ratio,
                     "runs": times.tolist(), "knowledge": knows.get(method)}
-                if times.size and method != BASELINE:
-                    pooled.setdefault(method, []).append(times)
-                    flat_pooled.setdefault(method, []).append(flat_times)
             per_cell.append(row)
-    methods_seen = _row_order([m for row in per_cell for m in row["methods"]])
-    methods_seen = list(dict.fromkeys(methods_seen))
+    methods_seen = list(dict.fromkeys(
+        _row_order([m for row in per_cell for m in row["methods"]])))
+    # one set of cells for every method: those where each has runs and flat's median lies
+    # within its budget (a source without subgoals on a cell takes the cell out for all)
+    common = [r for r in per_cell
+              if all(r["methods"].get(m, {}).get("runs") for m in methods_seen)]
+    left_out = [r for r in per_cell if r not in common]
     aggregate: dict[str, Any] = {}
     for method in methods_seen:
-        if method == BASELINE or method not in pooled:
+        if method == BASELINE or not common:
             continue
-        agg = iqm(pooled[method], seed=config.seed)
-        sooner = probability_of_improvement(pooled[method], flat_pooled[method], better="lower",
-                                            seed=config.seed)
-        aggregate[method] = {"cells": len(pooled[method]), "iqm": list(agg),
+        runs = [_times(r, method) for r in common]
+        agg = iqm(runs, seed=config.seed)
+        sooner = probability_of_improvement(runs, [_times(r, BASELINE) for r in common],
+                                            better="lower", seed=config.seed)
+        aggregate[method] = {"cells": len(common), "iqm": list(agg),
                              "probability_sooner": list(sooner)}
     report.findings.append(_aggregate_table(aggregate, regimes, interval_text))
+    if left_out:
+        report.findings.append(
+            f"{len(left_out)} cell(s) left out of the aggregates and the profiles (a method has "
+            "no runs there: its source found no subgoal, or flat's median lies beyond its "
+            "budget): " + "; ".join(
+                f"{r['env']} {r['tasks'][1]} (missing: " + ", ".join(
+                    m for m in methods_seen if not r["methods"].get(m, {}).get("runs"))
+                + ")" for r in left_out))
     report.findings.append("what each method knew, in full (its stored knowledge record on the "
                            "first cell it ran on):\n\n" + "\n".join(
                                f"- **{m}**: {uses[m]}" for m in methods_seen if m in uses))
@@ -238,25 +246,25 @@ def methods(config: ExperimentConfig) -> ExperimentReport:
         "regimes": {k: sorted(v) for k, v in regimes.items()},
         "knowledge_on_the_first_cell": uses,
     }
-    # the profiles over the cells every method has a ratio on (flat's median within budget)
-    scored = [r for r in per_cell if r["methods"].get(BASELINE, {}).get("runs")]
-    if scored:
-        profiles: dict[str, Any] = {"taus": PROFILE_TAUS.tolist(), "cells": len(scored),
+    if common:  # the run-score profiles over the same cells
+        profiles: dict[str, Any] = {"taus": PROFILE_TAUS.tolist(), "cells": len(common),
                                     "methods": {}}
         for method in methods_seen:
-            runs = [np.asarray(r["methods"][method]["runs"]) for r in scored
-                    if method in r["methods"] and r["methods"][method]["runs"]]
-            if len(runs) < len(scored):
-                continue  # a method missing on some cell is not profiled beside the others
-            prof = performance_profile([-x for x in runs], -PROFILE_TAUS, seed=config.seed)
+            prof = performance_profile([-_times(r, method) for r in common], -PROFILE_TAUS,
+                                       seed=config.seed)
             profiles["methods"][method] = {"fraction": prof.fraction.tolist(),
                                            "low": prof.low.tolist(), "high": prof.high.tolist()}
         data["profiles"] = profiles
         report.figures.append(draw_profiles(
-            PROFILE_TAUS, profiles["methods"], f"performance profiles over {len(scored)} cells "
+            PROFILE_TAUS, profiles["methods"], f"performance profiles over {len(common)} cells "
             "(learned-model regime)", out / "methods-profile.png", bands=False))
     report.data = data
     return report
+
+
+def _times(row: dict[str, Any], method: str) -> np.ndarray:
+    """A cell's per-run times of ``method`` over flat's median (inf: censored)."""
+    return np.asarray(row["methods"][method]["runs"], dtype=np.float64)
 
 
 def _aggregate_table(aggregate: dict[str, Any], regimes: dict[str, set[str]],
@@ -268,9 +276,10 @@ def _aggregate_table(aggregate: dict[str, Any], regimes: dict[str, set[str]],
         lines.append(f"| {method} | {known} | {agg['cells']} | "
                      f"{interval_text(*agg['iqm'], inf='never')} | "
                      f"{interval_text(*agg['probability_sooner'])} |")
-    return ("per method, over the cells where flat's median lies within its budget (the "
-            "interquartile mean of each run's episodes to the bound over flat's KM median, a "
-            "censored run counting as never; below 1 is faster than flat):\n\n"
+    return ("per method, over the same cells for all (those where every method ran and flat's "
+            "median lies within its budget; the interquartile mean of each run's episodes to "
+            "the bound over flat's KM median, a censored run counting as never; below 1 is "
+            "faster than flat):\n\n"
             + "\n".join(lines))
 
 

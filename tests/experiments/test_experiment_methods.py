@@ -36,11 +36,15 @@ def test_every_method_runs_in_the_learned_model_regime_and_the_aggregates_recomp
             assert entry["knowledge"].startswith(
                 "dynamics none" if method == BASELINE else "dynamics estimated"), (method, entry)
             assert "rewards observed" in entry["knowledge"]
+    # the aggregates are over the same cells for every method: those where all have runs
+    methods = {m for c in data["cells"] for m in c["methods"]}
+    common = [c for c in data["cells"]
+              if all(c["methods"].get(m, {}).get("runs") for m in methods)]
+    assert common and all(a["cells"] == len(common) for a in data["aggregate"].values())
     # the interquartile mean of each method is rliable's: the 25 % trimmed mean of its pooled
     # runs (each over flat's median on its own cell)
     for method, agg in data["aggregate"].items():
-        pooled = np.concatenate([_runs(c["methods"][method]["runs"]) for c in data["cells"]
-                                 if method in c["methods"] and c["methods"][method]["runs"]])
+        pooled = np.concatenate([_runs(c["methods"][method]["runs"]) for c in common])
         est, lo, hi = (np.inf if v is None else v for v in agg["iqm"])
         finite = np.isfinite(pooled)
         if finite.all():
@@ -52,7 +56,7 @@ def test_every_method_runs_in_the_learned_model_regime_and_the_aggregates_recomp
     assert image.shape[0] > 200 and image[..., :3].std() > 0.05  # drawn, not blank
     taus = np.asarray(data["profiles"]["taus"])
     for method, prof in data["profiles"]["methods"].items():
-        pooled = np.concatenate([_runs(c["methods"][method]["runs"]) for c in data["cells"]])
+        pooled = np.concatenate([_runs(c["methods"][method]["runs"]) for c in common])
         np.testing.assert_allclose(prof["fraction"], (pooled[:, None] < taus).mean(axis=0))
     md = (out / "summary.md").read_text()
     assert "| sf-gpi | dynamics estimated, rewards observed |" in md
