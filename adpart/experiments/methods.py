@@ -55,20 +55,22 @@ PLAIN_LEARNERS = ("sf-gpi", "estimated-dynamics")
 BASELINE = "flat"
 
 
-def method_times(curve: Any, flat: Any, fraction: float) -> tuple[np.ndarray, dict[str, Any]]:
-    """Per run of ``curve``, its episodes to the bound over flat's Kaplan-Meier median (inf:
-    censored; empty when flat's median lies beyond its budget), and the KM-median ratio to flat
-    with its CI (:func:`adpart.learning.comparison.time_ratio`)."""
+def method_times(curve: Any, flat: Any, fraction: float
+                 ) -> tuple[np.ndarray, np.ndarray, float, dict[str, Any]]:
+    """Per run of ``curve``: its episodes to the bound (inf: censored) and those over the
+    cell's scale - flat's Kaplan-Meier median, or flat's budget where that median lies beyond
+    it (which overstates every method's ratio on that cell: flat's true median is larger) -;
+    the scale; and the KM-median ratio to flat with its CI
+    (:func:`adpart.learning.comparison.time_ratio`)."""
     from adpart.learning.comparison import success_bound, time_ratio
     from adpart.learning.transfer_metrics import km_median, metrics_from_curve
 
     bound = success_bound(flat, fraction)
     median = km_median(*metrics_from_curve(flat, bound).event_times("episodes")).estimate
-    ratio = time_ratio(curve, flat, fraction, 0)
-    if not np.isfinite(median) or median <= 0:
-        return np.zeros(0), ratio
+    scale = float(median) if np.isfinite(median) and median > 0 else float(flat.n_episodes)
     times, censored = metrics_from_curve(curve, bound).event_times("episodes")
-    return np.where(censored, np.inf, times).astype(np.float64) / median, ratio
+    episodes = np.where(censored, np.inf, times).astype(np.float64)
+    return episodes, episodes / scale, scale, time_ratio(curve, flat, fraction, 0)
 
 
 def _within(curve: Any, flat: Any, fraction: float) -> str:
@@ -81,9 +83,9 @@ def _within(curve: Any, flat: Any, fraction: float) -> str:
 
 
 def _cell_methods(kb: Any, cell: Any, sizes: dict[str, Any], config: ExperimentConfig,
-                  out: Path) -> tuple[dict[str, Any], dict[str, str], list[str]]:
-    """One cell: every method's curve (label -> curve), its knowledge label, and notes (a
-    source without subgoals)."""
+                  out: Path) -> tuple[dict[str, Any], dict[str, str], list[str], set[str]]:
+    """One cell: every method's curve (label -> curve), its knowledge label, notes, and the
+    methods that learned flat because their source found no subgoal there."""
     from adpart.workflows.learning import LearnRequest
     from adpart.workflows.pipeline import (
         PipelineConfig,
@@ -97,6 +99,7 @@ def _cell_methods(kb: Any, cell: Any, sizes: dict[str, Any], config: ExperimentC
     curves: dict[str, Any] = {}
     knows: dict[str, str] = {}
     notes: list[str] = []
+    flat_instead: set[str] = set()  # a source's learners where it found no subgoal
     task = cell.tasks[1]
     base = {"eval_every": 1, **sizes, **cell.options}
     model_env = None
@@ -113,6 +116,10 @@ def _cell_methods(kb: Any, cell: Any, sizes: dict[str, Any], config: ExperimentC
                 curves.setdefault(BASELINE, curve)
                 knows.setdefault(BASELINE, rows["flat"]["knowledge"])
                 notes.append(f"{source} found no subgoals")
+                for learner in OPTION_LEARNERS:  # what the chain does then: it learns flat
+                    curves[f"{learner} [{source}]"] = curve
+                    knows[f"{learner} [{source}]"] = rows["flat"]["knowledge"]
+                    flat_instead.add(f"{learner} [{source}]")
             elif label.startswith("hierarchical"):
                 curves[f"layer [{source}]"] = curve
                 knows[f"layer [{source}]"] = rows["hierarchical"]["knowledge"]
@@ -140,7 +147,7 @@ def _cell_methods(kb: Any, cell: Any, sizes: dict[str, Any], config: ExperimentC
                            model=model_env)
         learned, _ = learn_stored(kb, req)
         curves["sf-gpi"], knows["sf-gpi"] = learned.curve, learned.knowledge
-    return curves, knows, notes
+    return curves, knows, notes, flat_instead
 
 
 def _row_order(labels: list[str]) -> list[str]:
@@ -181,8 +188,8 @@ def methods(config: ExperimentConfig) -> ExperimentReport:
         for number, cell in enumerate(cells, 1):
             config.progress(f"cell {number}/{len(cells)}: {cell.env}: {' -> '.join(cell.tasks)}")
             try:
-                curves, knows, notes = _cell_methods(kb, cell, sizes, config,
-                                                     out / f"{number:02d}")
+                curves, knows, notes, flat_instead = _cell_methods(kb, cell, sizes, config,
+                                                                   out / f"{number:02d}")
             except AdpartError as err:  # recorded; the other cells still run
                 failed.append({"env": cell.env, "tasks": list(cell.tasks),
                                "error": str(err).splitlines()[0]})
@@ -195,18 +202,20 @@ def methods(config: ExperimentConfig) -> ExperimentReport:
             row: dict[str, Any] = {"env": cell.env, "tasks": list(cell.tasks), "notes": notes,
                                    "methods": {}}
             for method in _row_order(list(curves)):
-                times, ratio = method_times(curves[method], flat, fraction)
+                episodes, times, scale, ratio = method_times(curves[method], flat, fraction)
+                row["scale"] = scale
+                row["flat_median_within_budget"] = scale < flat.n_episodes
                 label = knows.get(method, "not declared")
                 regimes.setdefault(method, set()).add(label.split(" (", 1)[0])
                 uses.setdefault(method, label)
                 row["methods"][method] = {
                     "within": _within(curves[method], flat, fraction), "ratio_to_flat": ratio,
-                    "runs": times.tolist(), "knowledge": knows.get(method)}
+                    "episodes": episodes.tolist(), "runs": times.tolist(),
+                    "knowledge": knows.get(method), "flat_instead": method in flat_instead}
             per_cell.append(row)
     methods_seen = list(dict.fromkeys(
         _row_order([m for row in per_cell for m in row["methods"]])))
-    # one set of cells for every method: those where each has runs and flat's median lies
-    # within its budget (a source without subgoals on a cell takes the cell out for all)
+    # one set of cells for every method (a method without runs on a cell takes it out for all)
     common = [r for r in per_cell
               if all(r["methods"].get(m, {}).get("runs") for m in methods_seen)]
     left_out = [r for r in per_cell if r not in common]
@@ -224,8 +233,7 @@ def methods(config: ExperimentConfig) -> ExperimentReport:
     if left_out:
         report.findings.append(
             f"{len(left_out)} cell(s) left out of the aggregates and the profiles (a method has "
-            "no runs there: its source found no subgoal, or flat's median lies beyond its "
-            "budget): " + "; ".join(
+            "no runs there): " + "; ".join(
                 f"{r['env']} {r['tasks'][1]} (missing: " + ", ".join(
                     m for m in methods_seen if not r["methods"].get(m, {}).get("runs"))
                 + ")" for r in left_out))
@@ -276,10 +284,12 @@ def _aggregate_table(aggregate: dict[str, Any], regimes: dict[str, set[str]],
         lines.append(f"| {method} | {known} | {agg['cells']} | "
                      f"{interval_text(*agg['iqm'], inf='never')} | "
                      f"{interval_text(*agg['probability_sooner'])} |")
-    return ("per method, over the same cells for all (those where every method ran and flat's "
-            "median lies within its budget; the interquartile mean of each run's episodes to "
-            "the bound over flat's KM median, a censored run counting as never; below 1 is "
-            "faster than flat):\n\n"
+    return ("per method, over the same cells for all: the interquartile mean of each run's "
+            "episodes to the bound over the cell's scale - flat's KM median, or flat's budget "
+            "where that median lies beyond it (which overstates every method's ratio there) - "
+            "a censored run counting as never, below 1 faster than flat; and the probability "
+            "that a run reaches the bound sooner than a flat run of the same cell (ties count "
+            "one half):\n\n"
             + "\n".join(lines))
 
 
@@ -288,6 +298,8 @@ def _cell_tables(per_cell: list[dict[str, Any]], methods_seen: list[str],
     def text(entry: dict[str, Any] | None) -> str:
         if entry is None:
             return "-"
+        if entry.get("flat_instead"):
+            return "flat (no subgoals)"
         q = entry["ratio_to_flat"]
         if q.get("ratio") is None:
             if "at_most" in q:
@@ -301,7 +313,10 @@ def _cell_tables(per_cell: list[dict[str, Any]], methods_seen: list[str],
     lines = [header, "|" + "---|" * (3 + len(methods_seen))]
     for i, row in enumerate(per_cell, 1):
         cells = " | ".join(text(row["methods"].get(m)) for m in methods_seen)
-        lines.append(f"| {i} | `{row['env']}` | `{row['tasks'][1]}` | {cells} |")
+        mark = "" if row.get("flat_median_within_budget", True) else " (scale: budget)"
+        lines.append(f"| {i} | `{row['env']}` | `{row['tasks'][1]}`{mark} | {cells} |")
     return ("per cell, each method's runs within the bound and its ratio of KM-median episodes "
-            "to flat's [95 % CI] (`-`: its source found no subgoals there):\n\n"
+            "to flat's [95 % CI] (`flat (no subgoals)`: its source found no subgoal there and "
+            "the chain learned flat; `(scale: budget)`: flat's median lies beyond its budget, "
+            "so the aggregates divide by the budget there):\n\n"
             + "\n".join(lines))
