@@ -10,8 +10,9 @@ belief) and once flat (the pipeline's flat learner), and compares their times to
 
 * a hypothetical task (:func:`rehearsal_task`) is the estimated dynamics with the first task's
   step reward (the reward most of its tried pairs paid), a goal at a state the first task's runs
-  visited that pays the largest reward they were paid on arrival and ends the episode, the first
-  task's discount and start distribution; the goals are drawn uniformly (the interpretation of
+  visited that pays the largest reward they were paid on arrival and ends the episode, the
+  first task's traps (states where its episodes ended with no more than the step reward: holes,
+  lava) still ending episodes, the first task's discount and start distribution; the goals are drawn uniformly (the interpretation of
   4.4's "task randomly chosen from the distribution of previously learned tasks" when one task
   has been learned: its goal moved, its rewards and dynamics as observed);
 * the learners are scored on that model's own ``V*`` (the agent's model, not the world's);
@@ -44,6 +45,7 @@ __all__ = [
     "rehearsal_task",
     "rehearsal_verdict",
     "rehearse",
+    "trap_states",
 ]
 
 #: Hypothetical goals rehearsed, runs of each learner on each (whatever the pipeline's own
@@ -68,10 +70,30 @@ def rehearsal_goals(domain: EstimatedDomain, first: str, n: int, seed: int) -> n
     return np.sort(rng.choice(candidates, size=min(n, candidates.size), replace=False))
 
 
+def trap_states(domain: EstimatedDomain, first: str) -> np.ndarray:
+    """``(S,)`` bool: the states where the first task's runs saw an episode end with no more
+    than the step reward - holes, lava, a cliff that ends the episode - as opposed to its goal
+    (where a step paid more). The agent knows them by having entered them; a hypothetical task
+    keeps them terminal, since moving a goal does not fill a hole."""
+    earlier = domain.base.mdp(first)
+    counts = domain.experience.counts  # (A*S, S), rows a*S + s
+    S = earlier.n_states
+    entered = np.zeros(S, dtype=bool)
+    entered[counts.indices[counts.data > 0]] = True
+    tried = domain.experience.tried & earlier.admissible
+    step = step_baseline(earlier.R, tried, earlier.terminal, rule="mode")
+    paying = (earlier.R > step) & tried  # (S, A): pairs that paid above the step
+    rows = np.flatnonzero(paying.T.reshape(-1))  # as rows a*S + s
+    rewarded = np.zeros(S, dtype=bool)
+    if rows.size:
+        rewarded[counts[rows].indices] = True
+    return earlier.terminal & entered & ~rewarded
+
+
 def rehearsal_task(domain: EstimatedDomain, first: str, goal: int) -> FiniteMDP:
     """A hypothetical task on the estimated model: the first task's step reward on every pair,
-    its largest paid reward on arriving at ``goal`` (the only terminal state), its discount and
-    its start distribution without ``goal``."""
+    its largest paid reward on arriving at ``goal``, which ends the episode as the first task's
+    traps do (:func:`trap_states`), its discount and its start distribution without them."""
     earlier = domain.base.mdp(first)
     tried = domain.experience.tried & earlier.admissible
     step = step_baseline(earlier.R, tried, earlier.terminal, rule="mode")
@@ -84,7 +106,7 @@ def rehearsal_task(domain: EstimatedDomain, first: str, goal: int) -> FiniteMDP:
     A = P.shape[0] // S
     arrive = np.asarray(P[:, [goal]].toarray()).reshape(A, S).T  # (S, A): P(goal | s, a)
     R = step + arrive * (top - step)
-    terminal = np.zeros(S, dtype=bool)
+    terminal = trap_states(domain, first)
     terminal[goal] = True
     initial = np.where(terminal, 0.0, earlier.initial)
     if initial.sum() <= 0:
@@ -150,8 +172,8 @@ def rehearse(domain: EstimatedDomain, first: str, layer_inputs: dict[str, Any],
     flat = get_registry().get("learner", flat_learner).create(flat_params)
     layer_spec = get_registry().get("learner", "hierarchical")
     learner = layer_spec.create(layer_params)
-    tasks = [rehearsal_task(domain, first, int(g)) for g in rehearsal_goals(domain, first, goals,
-                                                                             seed)]
+    drawn = [int(g) for g in rehearsal_goals(domain, first, goals, seed)]
+    tasks = [rehearsal_task(domain, first, g) for g in drawn]
     if learner.settings.directed and learner.settings.exploration.value_ceiling is None:
         # R-max's ceiling of the rewards the hypothetical tasks pay (the same in every one)
         horizon = int(layer_params.get("max-steps", Run().max_steps_per_episode))
@@ -159,8 +181,7 @@ def rehearse(domain: EstimatedDomain, first: str, layer_inputs: dict[str, Any],
         learner = layer_spec.create({**layer_params, "value-ceiling": ceiling})
     common = {"runs": runs_per_goal, "episodes": episodes, "seed": seed, "eval_every": eval_every}
     per_goal: list[dict[str, Any]] = []
-    for task in tasks:
-        goal = int(np.flatnonzero(task.terminal)[0])
+    for goal, task in zip(drawn, tasks, strict=True):
         flat_curve = flat.learn(task, **common).curve
         layer_curve = learner.learn(task, **common, **layer_inputs,
                                     belief=belief_model(domain, task, first)).curve

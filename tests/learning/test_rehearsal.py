@@ -13,7 +13,12 @@ from adpart.cli import cli
 from adpart.learning.qlearning import q_learning
 from adpart.learning.settings import Run
 from adpart.workflows.experience import EstimatedDomain
-from adpart.workflows.rehearsal import rehearsal_goals, rehearsal_task, rehearsal_verdict
+from adpart.workflows.rehearsal import (
+    rehearsal_goals,
+    rehearsal_task,
+    rehearsal_verdict,
+    trap_states,
+)
 from adpart.workflows.resolve import resolve_domain
 
 
@@ -38,7 +43,7 @@ def test_goals_are_states_the_first_tasks_runs_acted_in(estimated):
 def test_a_hypothetical_task_pays_the_first_tasks_rewards_on_the_estimate(estimated):
     """Built by hand from the dense estimate: every pair pays the first task's step reward, a
     move into the goal its top paid reward instead (in expectation), and only the goal ends an
-    episode; the discount is the first task's."""
+    episode (two-rooms has no trap); the discount is the first task's."""
     first = estimated.base.mdp("reach-goal")
     goal = int(rehearsal_goals(estimated, "reach-goal", 1, seed=1)[0])
     task = rehearsal_task(estimated, "reach-goal", goal)
@@ -104,3 +109,25 @@ def test_the_rehearsal_decides_the_fallback_from_the_agents_model(tmp_path, env,
     off = json.loads(CliRunner().invoke(cli, [*args, "--no-fallback", "--out",
                                               str(tmp_path / "b")]).output)
     assert not any(s["stage"] == "rehearse" for s in off["stages"])
+
+
+def test_holes_the_first_tasks_runs_fell_into_stay_terminal_and_its_goal_does_not():
+    """On the 4x4 lake the first task ends in a hole (reward 0) or at the goal (+1): the map's
+    holes that the runs entered are the traps, the goal is not, and a hypothetical task keeps
+    the traps terminal beside its own goal."""
+    env = "gym:FrozenLake-v1[map_name=4x4,is_slippery=false]"
+    domain = resolve_domain(env)
+    first = domain.mdp("reward")
+    learned = q_learning(first, Run(runs=3, episodes=200, seed=1, alpha=1, epsilon=0.5))
+    estimated = EstimatedDomain(domain, learned.experience, f"{env}@experience:rehearsal")
+    rows = ["SFFF", "FHFH", "FFFH", "HFFG"]  # Gymnasium's 4x4 map
+    holes = np.array([c == "H" for row in rows for c in row])
+    entered = np.zeros(first.n_states, bool)
+    entered[learned.experience.counts.indices] = True
+    traps = trap_states(estimated, "reward")
+    np.testing.assert_array_equal(traps, holes & entered)
+    assert traps.any() and not traps[15]  # the goal paid +1: not a trap
+    goal = int(rehearsal_goals(estimated, "reward", 1, seed=0)[0])
+    task = rehearsal_task(estimated, "reward", goal)
+    np.testing.assert_array_equal(np.flatnonzero(task.terminal),
+                                  np.flatnonzero(traps | (np.arange(first.n_states) == goal)))
