@@ -12,9 +12,10 @@ belief) and once flat (the pipeline's flat learner), and compares their times to
   step reward (the reward most of its tried pairs paid), a goal at a state the first task's runs
   visited that pays the largest reward they were paid on arrival and ends the episode, the
   first task's traps (states where its episodes ended with no more than the step reward: holes,
-  lava) still ending episodes, the first task's discount and start distribution; the goals are drawn uniformly (the interpretation of
-  4.4's "task randomly chosen from the distribution of previously learned tasks" when one task
-  has been learned: its goal moved, its rewards and dynamics as observed);
+  lava) still ending episodes, the first task's discount and start distribution; the goals are
+  drawn uniformly (the interpretation of 4.4's "task randomly chosen from the distribution of
+  previously learned tasks" when one task has been learned: its goal moved, its rewards and
+  dynamics as observed); on the 32 benchmark cells keeping the traps changed no verdict;
 * the learners are scored on that model's own ``V*`` (the agent's model, not the world's);
 * the verdict (:func:`rehearse`): learn the new task flat when the median over the hypothetical
   goals of the layer's Kaplan-Meier median episodes over flat's exceeds 1; keep the layer when
