@@ -9,10 +9,13 @@ STAMP  := $(VENV)/.installed-dev
 
 # Packages are installed by uv (from PyPI, into the venv): the same resolution as pip's, 5-7 s
 # for the dev extra against pip's 50 s on this machine (docs/compile-times.md).
-UV := $(VENV)/bin/uv pip install -q --python $(PY)
+UV_BIN := $(VENV)/bin/uv
+UV := $(UV_BIN) pip install -q --python $(PY)
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
+
+$(UV_BIN): | $(PY)
 	$(PY) -m pip install -q uv
 
 # The demo needs only adpart itself; the tests add the dev extra (pytest, Ray, PostgreSQL driver,
@@ -20,7 +23,7 @@ $(PY):
 # suite discovers through its entry points like any third-party plugin.
 EXAMPLE_PLUGIN := examples/adpart-plugin-example
 
-$(BASE): $(PY) pyproject.toml
+$(BASE): $(PY) $(UV_BIN) pyproject.toml
 	$(UV) -e .
 	touch $@
 

@@ -229,14 +229,20 @@ def draw_profiles(taus: np.ndarray, curves: dict[str, dict[str, Any]], title: st
                   path: Path, *, bands: bool = True) -> str:
     """Run-score performance profiles on one log-tau axis: per name, its ``fraction`` of runs
     within tau (and its ``low``-``high`` band when ``bands``); a dotted line at tau = 1."""
+    import matplotlib as mpl
+
     from adpart.plotting import legend_below, new_figure
 
     fig, ax = new_figure((7.2, 4.8) if len(curves) > 2 else (6.4, 4.2))
+    # one colour per option source ("learner [source]") or per plain method, from tab10
+    groups = list(dict.fromkeys(name.split("[", 1)[-1] for name in curves))
+    palette = mpl.colormaps["tab10"].colors
     for name, prof in curves.items():
         style = "--" if name.startswith("smdp-q") else (":" if name == "flat" else "-")
-        ax.plot(taus, prof["fraction"], style, label=name)
+        colour = palette[groups.index(name.split("[", 1)[-1]) % len(palette)]
+        ax.plot(taus, prof["fraction"], style, color=colour, label=name)
         if bands:
-            ax.fill_between(taus, prof["low"], prof["high"], alpha=0.2)
+            ax.fill_between(taus, prof["low"], prof["high"], color=colour, alpha=0.2)
     ax.axvline(1.0, color="0.6", linewidth=0.8, linestyle=":")
     ax.set_xscale("log")
     ax.set_ylim(0.0, 1.02)
