@@ -66,8 +66,9 @@ if TYPE_CHECKING:
     "--model",
     "model_ref",
     metavar="ENV@experience:run:N",
-    help="The dynamics estimated from runs' experience, for hierarchical (its belief) or "
-    "estimated-dynamics (its prior counts).",
+    help="The dynamics estimated from runs' experience, for hierarchical (its belief), "
+    "estimated-dynamics (its prior counts), smdp-q (where its options were solved) or sf-gpi "
+    "(those runs' policies and counts).",
 )
 @click.option("--no-store", is_flag=True, help="Do not record the run in the knowledge base.")
 @click.option("--force", is_flag=True,

@@ -3,30 +3,40 @@
 ``adpart experiment methods`` runs every option source x every transfer learner that uses
 options, and the transfer learners that use none, on each cell of
 :data:`adpart.experiments.benchmark.BENCHMARK_CELLS` (a first task learned flat, a different
-second task), all in the learned-model regime: what any method knows of the dynamics is the
-counts model of the first task's runs, and every method observes the second task's rewards.
+second task), in each knowledge regime (:data:`REGIMES_RUN`):
+
+* **learned-model**: what any method knows of the dynamics is the counts model of the first
+  task's runs, and every method observes the second task's rewards;
+* **true-model** (the seed's figures): the options, their models and the layer are computed on
+  the second task's true model (phase 3 reads its rewards), SF-GPI's successor features on the
+  true dynamics, and the planner knows the true dynamics.
+
+The methods:
 
 * **Option sources** (subgoal detectors, :data:`SOURCES`): the seed's count metric
   (``count-exhaustive``, section 4.1), betweenness (Şimşek & Barto 2008), eigenoptions' sinks
   (Machado et al. 2017) and covering options' ends (Jinnai et al. 2019), each run on the
-  estimated model (docs/subgoals.md); the options to their subgoals are solved on it too.
+  regime's model (docs/subgoals.md); the options to their subgoals are solved on it too.
 * **Transfer learners over a source's options**: the decision layer with inconsistency
   refinement (``hierarchical``, the seed's chain without the rehearsal's fallback, so that the
   method itself is measured; ``adpart experiment benchmark`` measures the default chain), and
-  SMDP Q-learning over the options and the primitive actions (``smdp-q``).
+  SMDP Q-learning over the options and the primitive actions (``smdp-q``). A source that finds
+  no subgoal on a cell leaves the chain nothing to transfer: both its learners are flat
+  Q-learning there (as the pipeline does), and the tables say so.
 * **Transfer learners without options**: successor features of the first task's policies with
-  GPI (``sf-gpi``, Barreto et al. 2017), and the knowledge-matched flat planner on the same
-  counts (``estimated-dynamics``).
+  GPI (``sf-gpi``, Barreto et al. 2017), and the flat planner that knows what the layer knows
+  of the dynamics (``estimated-dynamics`` on the same counts, ``known-dynamics`` on the true
+  model).
 * **The baseline**: flat Q-learning, which knows nothing (every ratio is to it).
 
 Per cell and method: the ratio of Kaplan-Meier medians of episodes to the bound over flat's in
-the same run, with a 95 % bootstrap CI (censored runs stay censored). Per method over the cells
-where flat's median lies within its budget: the interquartile mean of each run's episodes over
-flat's median with a stratified bootstrap CI, the probability that a run of the method reaches
-the bound sooner than a flat run of the same cell, and the run-score performance profile
-(``methods-profile.png``). A source that finds no subgoal on a cell leaves its two learners
-out of that cell (recorded); a cell whose pipeline raises is recorded and the rest still run.
-Every setting is in the summary's settings record.
+the same run, with a 95 % bootstrap CI (censored runs stay censored). Per method and regime over
+the same cells for all: the interquartile mean of each run's episodes over the cell's scale
+(flat's median, or its budget where the median lies beyond it) with a stratified bootstrap CI,
+the probability that a run of the method reaches the bound sooner than a flat run of the same
+cell, and the run-score performance profile (``methods-profile.png``, learned-model;
+``methods-profile-true-model.png``). A cell whose pipeline raises is recorded and the rest still
+run. Every setting is in the summary's settings record.
 """
 
 from __future__ import annotations
@@ -44,15 +54,27 @@ from adpart.experiments.benchmark import (
     draw_profiles,
 )
 
-__all__ = ["BASELINE", "OPTION_LEARNERS", "SOURCES", "method_times"]
+__all__ = ["BASELINE", "MODEL_BASED", "OPTION_LEARNERS", "REGIMES_RUN", "SOURCES", "method_times"]
 
 #: The option sources: subgoal detector plugins, each run on the first task's estimated model.
 SOURCES = ("count-exhaustive", "betweenness", "eigenoptions", "covering")
 #: The learners over a source's options (their row names).
 OPTION_LEARNERS = ("layer", "smdp-q")
-#: The learners without options, and the baseline every ratio is to.
-PLAIN_LEARNERS = ("sf-gpi", "estimated-dynamics")
+#: The flat planner that knows what the layer learner knows of the dynamics, by regime.
+MODEL_BASED = ("estimated-dynamics", "known-dynamics")
+#: The baseline every ratio is to.
 BASELINE = "flat"
+#: The knowledge regimes the methods are run in, and what each gives every method.
+REGIMES_RUN = ("learned-model", "true-model")
+REGIME_TEXT = {
+    "learned-model": "every method's dynamics are the counts of the first task's runs, rewards "
+                     "observed",
+    "true-model": "the seed's: options, option models and the layer on the new task's true model "
+                  "(phase 3 reads its rewards), SF-GPI on the true dynamics, the planner knows "
+                  "the true dynamics; flat Q-learning knows nothing in both",
+}
+#: A run has learned the task once its value gap stays below this fraction of |V*|.
+GAP_FRACTION = 0.1
 
 
 def method_times(curve: Any, flat: Any, fraction: float
@@ -83,9 +105,11 @@ def _within(curve: Any, flat: Any, fraction: float) -> str:
 
 
 def _cell_methods(kb: Any, cell: Any, sizes: dict[str, Any], config: ExperimentConfig,
-                  out: Path) -> tuple[dict[str, Any], dict[str, str], list[str], set[str]]:
-    """One cell: every method's curve (label -> curve), its knowledge label, notes, and the
-    methods that learned flat because their source found no subgoal there."""
+                  out: Path, regime: str
+                  ) -> tuple[dict[str, Any], dict[str, str], list[str], set[str]]:
+    """One cell in one knowledge regime: every method's curve (label -> curve), its knowledge
+    label, notes, and the methods that learned flat because their source found no subgoal."""
+    from adpart.workflows.experience import estimated_environment
     from adpart.workflows.learning import LearnRequest
     from adpart.workflows.pipeline import (
         PipelineConfig,
@@ -100,12 +124,13 @@ def _cell_methods(kb: Any, cell: Any, sizes: dict[str, Any], config: ExperimentC
     knows: dict[str, str] = {}
     notes: list[str] = []
     flat_instead: set[str] = set()  # a source's learners where it found no subgoal
-    task = cell.tasks[1]
+    first, task = cell.tasks
     base = {"eval_every": 1, **sizes, **cell.options}
-    model_env = None
+    defaults = episode_defaults(cell.env)
+    model_env = first_run = None
     for source in SOURCES:
         pcfg = PipelineConfig(env=cell.env, tasks=cell.tasks, seed=config.seed, detector=source,
-                              fallback=False, **base)
+                              fallback=False, regime=regime, **base)
         pipe = run_pipeline(kb, pcfg, out=out / f"{folder_name(cell.env)}-{source}",
                             progress=config.progress)
         rows = {r["learner"]: r for r in pipe.rows if r["task"] == task}
@@ -123,14 +148,15 @@ def _cell_methods(kb: Any, cell: Any, sizes: dict[str, Any], config: ExperimentC
             elif label.startswith("hierarchical"):
                 curves[f"layer [{source}]"] = curve
                 knows[f"layer [{source}]"] = rows["hierarchical"]["knowledge"]
-            elif label.startswith("estimated-dynamics"):
-                curves["estimated-dynamics"] = curve
-                knows["estimated-dynamics"] = rows["estimated-dynamics"]["knowledge"]
+            elif label.split(" ", 1)[0] in MODEL_BASED:  # the knowledge-matched planner
+                based = label.split(" ", 1)[0]
+                curves[based], knows[based] = curve, rows[based]["knowledge"]
         estimate = next((s for s in pipe.stages if s.stage == "estimate"), None)
         model_env = estimate.result if estimate is not None else model_env
+        first_run = first_run or next(s.result for s in pipe.stages
+                                      if s.stage == "learn-flat" and s.task == first)
         options = next((s.result for s in pipe.stages if s.stage == "options"), None)
         if options:
-            defaults = episode_defaults(cell.env)
             req = LearnRequest(env=cell.env, task=task, learner="smdp-q",
                                params={**learner_defaults("smdp-q", defaults),
                                        "include-primitives": True},
@@ -139,37 +165,113 @@ def _cell_methods(kb: Any, cell: Any, sizes: dict[str, Any], config: ExperimentC
             learned, _ = learn_stored(kb, req)
             curves[f"smdp-q [{source}]"], knows[f"smdp-q [{source}]"] = (learned.curve,
                                                                         learned.knowledge)
-    if model_env is not None:
-        defaults = episode_defaults(cell.env)
-        req = LearnRequest(env=cell.env, task=task, learner="sf-gpi",
-                           params=learner_defaults("sf-gpi", defaults), runs=pcfg.runs,
-                           episodes=pcfg.episodes, seed=config.seed, eval_every=1,
-                           model=model_env)
-        learned, _ = learn_stored(kb, req)
-        curves["sf-gpi"], knows["sf-gpi"] = learned.curve, learned.knowledge
+    # the first task's runs give SF-GPI its base policies; their counts, or the true model in
+    # the true-model regime, its dynamics
+    sf_params = learner_defaults("sf-gpi", defaults)
+    if regime == "true-model":
+        sf_params["dynamics"] = "true-model"
+    req = LearnRequest(env=cell.env, task=task, learner="sf-gpi", params=sf_params,
+                       runs=pcfg.runs, episodes=pcfg.episodes, seed=config.seed, eval_every=1,
+                       model=model_env or estimated_environment(kb, cell.env, [first_run]))
+    learned, _ = learn_stored(kb, req)
+    curves["sf-gpi"], knows["sf-gpi"] = learned.curve, learned.knowledge
     return curves, knows, notes, flat_instead
 
 
 def _row_order(labels: list[str]) -> list[str]:
     order = [f"{learner} [{source}]" for source in SOURCES for learner in OPTION_LEARNERS]
-    order += [*PLAIN_LEARNERS, BASELINE]
+    order += ["sf-gpi", *MODEL_BASED, BASELINE]
     return [m for m in order if m in labels]
 
 
-@experiment(
-    "methods",
-    "Option sources x transfer learners, SF-GPI and the counts planner against flat, per cell",
-    "the field's methods on the benchmark cells (no figure of the seed)",
-)
-def methods(config: ExperimentConfig) -> ExperimentReport:
-    """Run every method on every cell and aggregate (module docstring)."""
+def _regime_cells(kb: Any, cells: Any, sizes: dict[str, Any], config: ExperimentConfig,
+                  out: Path, regime: str) -> tuple[list[dict[str, Any]], list[dict[str, str]],
+                                                   dict[str, set[str]], dict[str, str]]:
+    """Every cell's methods in ``regime``: the per-cell rows, the failed cells, each method's
+    knowledge heads and its full record on the first cell it ran on."""
     from adpart.errors import AdpartError
-    from adpart.learning.comparison import interval_text
+
+    fraction = GAP_FRACTION
+    per_cell: list[dict[str, Any]] = []
+    failed: list[dict[str, str]] = []
+    regimes: dict[str, set[str]] = {}
+    uses: dict[str, str] = {}
+    for number, cell in enumerate(cells, 1):
+        config.progress(f"{regime}, cell {number}/{len(cells)}: {cell.env}: "
+                        f"{' -> '.join(cell.tasks)}")
+        try:
+            curves, knows, notes, flat_instead = _cell_methods(
+                kb, cell, sizes, config, out / regime / f"{number:02d}", regime)
+        except AdpartError as err:  # recorded; the other cells still run
+            failed.append({"env": cell.env, "tasks": list(cell.tasks),
+                           "error": str(err).splitlines()[0]})
+            continue
+        flat = curves.get(BASELINE)
+        if flat is None:
+            failed.append({"env": cell.env, "tasks": list(cell.tasks),
+                           "error": "no flat baseline"})
+            continue
+        row: dict[str, Any] = {"env": cell.env, "tasks": list(cell.tasks), "notes": notes,
+                               "methods": {}}
+        for method in _row_order(list(curves)):
+            episodes, times, scale, ratio = method_times(curves[method], flat, fraction)
+            row["scale"] = scale
+            row["flat_median_within_budget"] = scale < flat.n_episodes
+            label = knows.get(method, "not declared")
+            regimes.setdefault(method, set()).add(label.split(" (", 1)[0])
+            uses.setdefault(method, label)
+            row["methods"][method] = {
+                "within": _within(curves[method], flat, fraction), "ratio_to_flat": ratio,
+                "episodes": episodes.tolist(), "runs": times.tolist(),
+                "knowledge": knows.get(method), "flat_instead": method in flat_instead}
+        per_cell.append(row)
+    return per_cell, failed, regimes, uses
+
+
+def _aggregate(per_cell: list[dict[str, Any]], seed: int) -> dict[str, Any]:
+    """The methods seen, the cells every method has runs on (``common``) and the ones left
+    out, each method's IQM and probability of beating flat over ``common``, and the
+    run-score profiles over the same cells."""
     from adpart.learning.transfer_metrics import (
         iqm,
         performance_profile,
         probability_of_improvement,
     )
+
+    methods_seen = list(dict.fromkeys(
+        _row_order([m for row in per_cell for m in row["methods"]])))
+    common = [r for r in per_cell
+              if all(r["methods"].get(m, {}).get("runs") for m in methods_seen)]
+    aggregate: dict[str, Any] = {}
+    profiles: dict[str, Any] = {"taus": PROFILE_TAUS.tolist(), "cells": len(common),
+                                "methods": {}}
+    for method in methods_seen:
+        if not common:
+            break
+        runs = [_times(r, method) for r in common]
+        prof = performance_profile([-x for x in runs], -PROFILE_TAUS, seed=seed)
+        profiles["methods"][method] = {"fraction": prof.fraction.tolist(),
+                                       "low": prof.low.tolist(), "high": prof.high.tolist()}
+        if method == BASELINE:
+            continue
+        agg = iqm(runs, seed=seed)
+        sooner = probability_of_improvement(runs, [_times(r, BASELINE) for r in common],
+                                            better="lower", seed=seed)
+        aggregate[method] = {"cells": len(common), "iqm": list(agg),
+                             "probability_sooner": list(sooner)}
+    return {"methods": methods_seen, "common": common,
+            "left_out": [r for r in per_cell if r not in common], "aggregate": aggregate,
+            "profiles": profiles}
+
+
+@experiment(
+    "methods",
+    "Option sources x transfer learners, SF-GPI and the knowledge-matched planner against flat",
+    "the field's methods on the benchmark cells (no figure of the seed)",
+)
+def methods(config: ExperimentConfig) -> ExperimentReport:
+    """Run every method on every cell in each regime and aggregate (module docstring)."""
+    from adpart.learning.comparison import interval_text
     from adpart.workflows.working_kb import working_kb
 
     out = Path(config.out)
@@ -177,95 +279,49 @@ def methods(config: ExperimentConfig) -> ExperimentReport:
     cells = QUICK_BENCHMARK_CELLS[:2] if config.quick else BENCHMARK_CELLS
     sizes = ({"runs": min(config.runs, 3), "episodes": 60, "first_episodes": 150}
              if config.quick else {"runs": config.runs})
-    fraction = 0.1
     report = ExperimentReport("methods", "the field's methods on the benchmark cells")
     report.seed_reports = ["(the dissertation compares its chain with flat Q-learning only)"]
-    per_cell: list[dict[str, Any]] = []
-    failed: list[dict[str, str]] = []
-    regimes: dict[str, set[str]] = {}
-    uses: dict[str, str] = {}  # each method's full knowledge record, on its first cell
-    with working_kb(config.kb, "methods") as kb:
-        for number, cell in enumerate(cells, 1):
-            config.progress(f"cell {number}/{len(cells)}: {cell.env}: {' -> '.join(cell.tasks)}")
-            try:
-                curves, knows, notes, flat_instead = _cell_methods(kb, cell, sizes, config,
-                                                                   out / f"{number:02d}")
-            except AdpartError as err:  # recorded; the other cells still run
-                failed.append({"env": cell.env, "tasks": list(cell.tasks),
-                               "error": str(err).splitlines()[0]})
-                continue
-            flat = curves.get(BASELINE)
-            if flat is None:
-                failed.append({"env": cell.env, "tasks": list(cell.tasks),
-                               "error": "no flat baseline"})
-                continue
-            row: dict[str, Any] = {"env": cell.env, "tasks": list(cell.tasks), "notes": notes,
-                                   "methods": {}}
-            for method in _row_order(list(curves)):
-                episodes, times, scale, ratio = method_times(curves[method], flat, fraction)
-                row["scale"] = scale
-                row["flat_median_within_budget"] = scale < flat.n_episodes
-                label = knows.get(method, "not declared")
-                regimes.setdefault(method, set()).add(label.split(" (", 1)[0])
-                uses.setdefault(method, label)
-                row["methods"][method] = {
-                    "within": _within(curves[method], flat, fraction), "ratio_to_flat": ratio,
-                    "episodes": episodes.tolist(), "runs": times.tolist(),
-                    "knowledge": knows.get(method), "flat_instead": method in flat_instead}
-            per_cell.append(row)
-    methods_seen = list(dict.fromkeys(
-        _row_order([m for row in per_cell for m in row["methods"]])))
-    # one set of cells for every method (a method without runs on a cell takes it out for all)
-    common = [r for r in per_cell
-              if all(r["methods"].get(m, {}).get("runs") for m in methods_seen)]
-    left_out = [r for r in per_cell if r not in common]
-    aggregate: dict[str, Any] = {}
-    for method in methods_seen:
-        if method == BASELINE or not common:
-            continue
-        runs = [_times(r, method) for r in common]
-        agg = iqm(runs, seed=config.seed)
-        sooner = probability_of_improvement(runs, [_times(r, BASELINE) for r in common],
-                                            better="lower", seed=config.seed)
-        aggregate[method] = {"cells": len(common), "iqm": list(agg),
-                             "probability_sooner": list(sooner)}
-    report.findings.append(_aggregate_table(aggregate, regimes, interval_text))
-    if left_out:
-        report.findings.append(
-            f"{len(left_out)} cell(s) left out of the aggregates and the profiles (a method has "
-            "no runs there): " + "; ".join(
-                f"{r['env']} {r['tasks'][1]} (missing: " + ", ".join(
-                    m for m in methods_seen if not r["methods"].get(m, {}).get("runs"))
-                + ")" for r in left_out))
-    report.findings.append("what each method knew, in full (its stored knowledge record on the "
-                           "first cell it ran on):\n\n" + "\n".join(
-                               f"- **{m}**: {uses[m]}" for m in methods_seen if m in uses))
-    report.findings.append(_cell_tables(per_cell, methods_seen, interval_text))
-    if failed:
-        report.findings.append("cells that failed: " + "; ".join(
-            f"{f['env']} {f['tasks'][1]} ({f['error']})" for f in failed))
     data: dict[str, Any] = {
-        "settings": {"seed": config.seed, "eval_every": 1, **sizes, "regime": "learned-model",
+        "settings": {"seed": config.seed, "eval_every": 1, **sizes, "regimes": list(REGIMES_RUN),
                      "sources": list(SOURCES), "option_learners": list(OPTION_LEARNERS),
-                     "plain_learners": list(PLAIN_LEARNERS), "baseline": BASELINE,
-                     "gap_fraction": fraction, "layer_fallback": False,
+                     "plain_learners": ["sf-gpi", *MODEL_BASED], "baseline": BASELINE,
+                     "gap_fraction": GAP_FRACTION, "layer_fallback": False,
                      "smdp_q": {"include-primitives": True}},
-        "cells": per_cell, "failed": failed, "aggregate": aggregate,
-        "regimes": {k: sorted(v) for k, v in regimes.items()},
-        "knowledge_on_the_first_cell": uses,
-    }
-    if common:  # the run-score profiles over the same cells
-        profiles: dict[str, Any] = {"taus": PROFILE_TAUS.tolist(), "cells": len(common),
-                                    "methods": {}}
-        for method in methods_seen:
-            prof = performance_profile([-_times(r, method) for r in common], -PROFILE_TAUS,
-                                       seed=config.seed)
-            profiles["methods"][method] = {"fraction": prof.fraction.tolist(),
-                                           "low": prof.low.tolist(), "high": prof.high.tolist()}
-        data["profiles"] = profiles
-        report.figures.append(draw_profiles(
-            PROFILE_TAUS, profiles["methods"], f"performance profiles over {len(common)} cells "
-            "(learned-model regime)", out / "methods-profile.png", bands=False))
+        "by_regime": {}}
+    with working_kb(config.kb, "methods") as kb:
+        for regime in REGIMES_RUN:
+            per_cell, failed, regimes, uses = _regime_cells(kb, cells, sizes, config, out,
+                                                            regime)
+            agg = _aggregate(per_cell, config.seed)
+            report.findings.append(f"**{regime} regime** ({REGIME_TEXT[regime]}): "
+                                   + _aggregate_table(agg["aggregate"], regimes, interval_text))
+            if agg["left_out"]:
+                report.findings.append(
+                    f"{len(agg['left_out'])} cell(s) left out of the {regime} aggregates and "
+                    "profiles (a method has no runs there): " + "; ".join(
+                        f"{r['env']} {r['tasks'][1]} (missing: " + ", ".join(
+                            m for m in agg["methods"] if not r["methods"].get(m, {}).get("runs"))
+                        + ")" for r in agg["left_out"]))
+            report.findings.append(
+                f"what each method knew in the {regime} regime, in full (its stored knowledge "
+                "record on the first cell it ran on):\n\n" + "\n".join(
+                    f"- **{m}**: {uses[m]}" for m in agg["methods"] if m in uses))
+            report.findings.append(f"{regime} regime, " + _cell_tables(
+                per_cell, agg["methods"], interval_text))
+            if failed:
+                report.findings.append(f"cells that failed in the {regime} regime: " + "; ".join(
+                    f"{f['env']} {f['tasks'][1]} ({f['error']})" for f in failed))
+            data["by_regime"][regime] = {
+                "cells": per_cell, "failed": failed, "aggregate": agg["aggregate"],
+                "profiles": agg["profiles"], "regimes": {k: sorted(v) for k, v in regimes.items()},
+                "knowledge_on_the_first_cell": uses}
+            if agg["common"]:
+                name = ("methods-profile.png" if regime == REGIMES_RUN[0]
+                        else f"methods-profile-{regime}.png")
+                report.figures.append(draw_profiles(
+                    PROFILE_TAUS, agg["profiles"]["methods"],
+                    f"performance profiles over {len(agg['common'])} cells ({regime} regime)",
+                    out / name, bands=False))
     report.data = data
     return report
 

@@ -19,7 +19,8 @@ from adpart.params import hook, setting, settings
 if TYPE_CHECKING:
     import numpy as np
 
-__all__ = ["LEARNER_FIELDS", "MAX_SEED", "Run", "SMDPQSettings", "fresh_seed", "require_mdp"]
+__all__ = ["LEARNER_FIELDS", "MAX_SEED", "Run", "SFGPISettings", "SMDPQSettings", "fresh_seed",
+           "require_mdp"]
 
 #: The largest seed: the knowledge base stores seeds as signed 64-bit integers.
 MAX_SEED = 2**63 - 1
@@ -111,3 +112,13 @@ class SMDPQSettings:
     intra_option: bool = setting(False)
     """also update every option consistent with each primitive step (intra-option Q-learning,
     Sutton, Precup & Singh 1999)."""
+
+
+@settings
+class SFGPISettings:
+    """The settings of successor features with GPI (:mod:`adpart.learning.sf_gpi`) beyond its
+    run."""
+
+    dynamics: str = setting("estimated", choices=("estimated", "true-model"))
+    """what the successor features of the earlier runs' policies are computed on: those runs'
+    counts (estimated) or the environment's true model (true-model, declared as such)."""

@@ -165,3 +165,15 @@ def test_the_cli_transfers_the_named_runs_policies(tmp_path):
         distinct = len(np.unique(np.vstack(first_pis), axis=0))
         assert knows["uses"][0] == (f"successor features of {distinct} policies of run:1 on "
                                     "their counts model")
+    true = CliRunner().invoke(cli, ["learn", "two-rooms", "--task", "goal:x=1,y=4", "--learner",
+                                    "sf-gpi", "--dynamics", "true-model", "--model",
+                                    "two-rooms@experience:run:1", "--runs", "3", "--episodes",
+                                    "30", "--kb", kb, "-q", "--out", str(tmp_path / "c")])
+    assert true.exit_code == 0, true.output
+    with KnowledgeBase.open(kb) as base:
+        knows = base.get("run", 3).metrics["knowledge"]
+        assert knows["dynamics"] == "true-model"  # the same policies, the true model declared
+        assert knows["uses"][0].endswith("earlier policies on the true dynamics")
+    bad = CliRunner().invoke(cli, ["learn", "two-rooms", "--learner", "sf-gpi", "--dynamics",
+                                   "exact", "--kb", kb, "-q", "--out", str(tmp_path / "d")])
+    assert bad.exit_code == 2 and "--dynamics" in bad.output

@@ -7,7 +7,7 @@ from collections.abc import Callable
 from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
-from adpart.learning.settings import LEARNER_FIELDS, Run
+from adpart.learning.settings import LEARNER_FIELDS, Run, SFGPISettings
 from adpart.params import build_settings, settings_params
 from adpart.plugins.hookspecs import hookimpl
 from adpart.plugins.registry import Registrar
@@ -122,13 +122,19 @@ class SFGPILearner(RunLearner):
     name = "sf-gpi"
     description = ("successor features of the earlier runs' policies + GPI, reward weights "
                    "learned online (Barreto et al. 2017)")
-    params = LEARNER_PARAMS
+    params = (*settings_params(SFGPISettings), *LEARNER_PARAMS)
     accepts = frozenset({"experience", "policies"})
+
+    def __init__(self, **values: Any) -> None:
+        super().__init__(**values)
+        self.settings = build_settings(SFGPISettings, self.values)
 
     def learn_run(self, mdp: FiniteMDP, run: Run, experience: Experience | None = None,
                   policies: np.ndarray | None = None) -> object:
         from adpart.learning.sf_gpi import sf_gpi_learning
 
+        if self.settings.dynamics == "true-model":
+            experience = None  # the policies are the named runs'; the dynamics the true model
         return sf_gpi_learning(mdp, run, policies=policies, experience=experience)
 
 
