@@ -118,23 +118,23 @@ def rehearsal_task(domain: EstimatedDomain, first: str, goal: int) -> FiniteMDP:
 
 
 def rehearsal_verdict(ratios: list[float | None], steps: list[float | None] | None = None
-                      ) -> tuple[bool, float | None]:
-    """``(fallback, median ratio)`` from the per-goal ratios of the layer's KM median episodes
-    over flat's (None where neither reached the bound; ``inf`` where only flat did, 0 where only
-    the layer did): fall back when the median of the defined ratios exceeds 1. A median of
-    exactly 1 is a tie at the rehearsal's resolution (both learners reached the bound at the
-    same scoring point, :data:`REHEARSAL_EVAL_EVERY` episodes apart); ``steps``, the same
-    ratios in primitive steps (which have no such resolution), then decide: fall back when
-    their median exceeds 1."""
+                      ) -> tuple[bool, float | None, float | None]:
+    """``(fallback, median ratio, steps median)`` from the per-goal ratios of the layer's KM
+    median episodes over flat's (None where neither reached the bound; ``inf`` where only flat
+    did, 0 where only the layer did): fall back when the median of the defined ratios exceeds
+    1. A median of exactly 1 is a tie at the rehearsal's resolution (both learners reached the
+    bound at the same scoring point, :data:`REHEARSAL_EVAL_EVERY` episodes apart); ``steps``,
+    the same ratios in primitive steps (which have no such resolution), then decide: fall back
+    when their median exceeds 1. The steps median is returned when it decided, else None."""
     defined = [r for r in ratios if r is not None]
     if not defined:
-        return False, None
+        return False, None, None
     median = float(np.median(defined))
-    if median == 1.0 and steps is not None:
-        finer = [r for r in steps if r is not None]
-        if finer:
-            return float(np.median(finer)) > 1.0, median
-    return median > 1.0, median
+    finer = [r for r in steps or () if r is not None]
+    if median == 1.0 and finer:
+        steps_median = float(np.median(finer))
+        return steps_median > 1.0, median, steps_median
+    return median > 1.0, median, None
 
 
 def _ratio(layer: float, flat: float) -> float | None:
@@ -196,12 +196,8 @@ def rehearse(domain: EstimatedDomain, first: str, layer_inputs: dict[str, Any],
                          "flat_episodes": medians["episodes"][1],
                          "ratio": _ratio(*medians["episodes"]),
                          "steps_ratio": _ratio(*medians["steps"])})
-    falls, median = rehearsal_verdict([g["ratio"] for g in per_goal],
-                                      [g["steps_ratio"] for g in per_goal])
-    steps_median = (float(np.median([g["steps_ratio"] for g in per_goal
-                                     if g["steps_ratio"] is not None]))
-                    if median == 1.0 and any(g["steps_ratio"] is not None for g in per_goal)
-                    else None)
+    falls, median, steps_median = rehearsal_verdict([g["ratio"] for g in per_goal],
+                                                    [g["steps_ratio"] for g in per_goal])
     told = ", ".join(
         f"state {g['goal']}: {_episodes(g['layer_episodes'])} against "
         f"{_episodes(g['flat_episodes'])}" for g in per_goal)
