@@ -95,7 +95,7 @@ test-all: $(STAMP)
 # (adpart experiment comparisons, about 50 minutes on two cores), on 20 randomly moved goals
 # of three-floor (adpart experiment random-goals, about 40) and on the 32 cells of toy text,
 # MiniGrid and the built-in domains (adpart experiment benchmark, about 15; the field's methods on
-# the same cells in both regimes, adpart experiment methods, about 35), their summaries and
+# the same cells in both regimes, adpart experiment methods, about 60), their summaries and
 # figures copied to docs/results/.
 results: $(BASE)
 	$(ADPART) experiment comparisons --out build/results/comparisons
@@ -107,8 +107,7 @@ results: $(BASE)
 	cp build/results/benchmark/summary.md docs/results/benchmark.md
 	cp build/results/benchmark/benchmark-profile.png docs/results/
 	cp build/results/methods/summary.md docs/results/methods.md
-	cp build/results/methods/methods-profile.png build/results/methods/methods-profile-true-model.png \
-		docs/results/
+	cp build/results/methods/methods-cells.md build/results/methods/methods-*.png docs/results/
 
 bench: $(VENV)/.installed-bench
 	$(PY) -m benchmarks

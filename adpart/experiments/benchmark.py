@@ -31,7 +31,7 @@ from adpart.experiments.base import ExperimentConfig, ExperimentReport, experime
 from adpart.experiments.comparisons import Cell
 
 __all__ = ["BENCHMARK_CELLS", "LOSS_BOUND", "PROFILE_TAUS", "QUICK_BENCHMARK_CELLS", "CellResult",
-           "chain_times", "draw_profiles"]
+           "chain_times", "draw_profiles", "profile_lines"]
 
 #: A cell loses when the lower end of the chain's ratio-to-flat CI lies above this.
 LOSS_BOUND = 1.1
@@ -225,21 +225,22 @@ def _profiles(results: list[CellResult], seed: int) -> dict[str, Any] | None:
     return out
 
 
-def draw_profiles(taus: np.ndarray, curves: dict[str, dict[str, Any]], title: str,
-                  path: Path, *, bands: bool = True) -> str:
-    """Run-score performance profiles on one log-tau axis: per name, its ``fraction`` of runs
-    within tau (and its ``low``-``high`` band when ``bands``); a dotted line at tau = 1."""
+def profile_lines(ax: Any, taus: np.ndarray, curves: dict[str, dict[str, Any]], *,
+                  bands: bool = True, groups: list[str] | None = None) -> None:
+    """Run-score performance profiles on ``ax``'s log-tau axis: per name, its ``fraction`` of
+    runs within tau (and its ``low``-``high`` band when ``bands``); a dotted line at tau = 1.
+
+    One colour per group - the option source of ``"learner [source]"``, or the plain method's
+    name - in the order of ``groups`` (so that panels of one figure agree), else of ``curves``;
+    SMDP Q dashed, flat dotted."""
     import matplotlib as mpl
 
-    from adpart.plotting import legend_below, new_figure
-
-    fig, ax = new_figure((7.2, 4.8) if len(curves) > 2 else (6.4, 4.2))
-    # one colour per option source ("learner [source]") or per plain method, from tab10
-    groups = list(dict.fromkeys(name.split("[", 1)[-1] for name in curves))
+    order = list(groups or [])
+    order += [g for g in dict.fromkeys(_group(name) for name in curves) if g not in order]
     palette = mpl.colormaps["tab10"].colors
     for name, prof in curves.items():
         style = "--" if name.startswith("smdp-q") else (":" if name == "flat" else "-")
-        colour = palette[groups.index(name.split("[", 1)[-1]) % len(palette)]
+        colour = palette[order.index(_group(name)) % len(palette)]
         ax.plot(taus, prof["fraction"], style, color=colour, label=name)
         if bands:
             ax.fill_between(taus, prof["low"], prof["high"], color=colour, alpha=0.2)
@@ -248,6 +249,20 @@ def draw_profiles(taus: np.ndarray, curves: dict[str, dict[str, Any]], title: st
     ax.set_ylim(0.0, 1.02)
     ax.set_xlabel("episodes to the bound / flat's Kaplan-Meier median (tau)")
     ax.set_ylabel("fraction of runs within tau")
+
+
+def _group(name: str) -> str:
+    """The colour group of a method's name: its option source, or the name itself."""
+    return name.split("[", 1)[-1].rstrip("]")
+
+
+def draw_profiles(taus: np.ndarray, curves: dict[str, dict[str, Any]], title: str,
+                  path: Path, *, bands: bool = True) -> str:
+    """:func:`profile_lines` of ``curves`` on one axis, titled, saved to ``path``."""
+    from adpart.plotting import legend_below, new_figure
+
+    fig, ax = new_figure((7.2, 4.8) if len(curves) > 2 else (6.4, 4.2))
+    profile_lines(ax, taus, curves, bands=bands)
     ax.set_title(title)
     legend_below(ax, columns=3 if len(curves) > 2 else 2)
     fig.savefig(path, dpi=110, bbox_inches="tight")

@@ -13,10 +13,12 @@ second task), in each knowledge regime (:data:`REGIMES_RUN`):
 
 The methods:
 
-* **Option sources** (subgoal detectors, :data:`SOURCES`): the seed's count metric
-  (``count-exhaustive``, section 4.1), betweenness (Şimşek & Barto 2008), eigenoptions' sinks
-  (Machado et al. 2017) and covering options' ends (Jinnai et al. 2019), each run on the
-  regime's model (docs/subgoals.md); the options to their subgoals are solved on it too.
+* **Option sources** (subgoal detectors, :data:`SOURCES`): the seed's count metric, exhaustive
+  and Monte Carlo (``count-exhaustive``, ``count-mc``, section 4.1), and with the reward states
+  added (``reward-variation``, 4.3.1), betweenness (Şimşek & Barto 2008), eigenoptions' sinks
+  (Machado et al. 2017), covering options' ends (Jinnai et al. 2019) and the ``simpleoptions``
+  package's diffusion options, each run on the regime's model (docs/subgoals.md); the options
+  to their subgoals are solved on it too.
 * **Transfer learners over a source's options**: the decision layer with inconsistency
   refinement (``hierarchical``, the seed's chain without the rehearsal's fallback, so that the
   method itself is measured; ``adpart experiment benchmark`` measures the default chain), and
@@ -34,9 +36,11 @@ the same run, with a 95 % bootstrap CI (censored runs stay censored). Per method
 the same cells for all: the interquartile mean of each run's episodes over the cell's scale
 (flat's median, or its budget where the median lies beyond it) with a stratified bootstrap CI,
 the probability that a run of the method reaches the bound sooner than a flat run of the same
-cell, and the run-score performance profile (``methods-profile.png``, learned-model;
-``methods-profile-true-model.png``). A cell whose pipeline raises is recorded and the rest still
-run. Every setting is in the summary's settings record.
+cell, and the run-score performance profile. Figures per regime (the true-model regime's names
+end in ``-true-model``): ``methods-profile.png`` (the profiles, a panel per option learner),
+``methods-iqm.png`` and ``methods-probability.png`` (each aggregate with its CI); a table per
+cell in ``methods-cells.md``. A cell whose pipeline raises is recorded and the rest still run.
+Every setting is in the summary's settings record.
 """
 
 from __future__ import annotations
@@ -47,17 +51,32 @@ from typing import Any
 import numpy as np
 
 from adpart.experiments.base import ExperimentConfig, ExperimentReport, experiment
-from adpart.experiments.benchmark import (
-    BENCHMARK_CELLS,
-    PROFILE_TAUS,
-    QUICK_BENCHMARK_CELLS,
-    draw_profiles,
+from adpart.experiments.benchmark import BENCHMARK_CELLS, PROFILE_TAUS, QUICK_BENCHMARK_CELLS
+from adpart.experiments.methods_figures import (
+    cell_tables,
+    draw_intervals,
+    draw_profile_panels,
+    ratio_text,
 )
 
 __all__ = ["BASELINE", "MODEL_BASED", "OPTION_LEARNERS", "REGIMES_RUN", "SOURCES", "method_times"]
 
-#: The option sources: subgoal detector plugins, each run on the first task's estimated model.
-SOURCES = ("count-exhaustive", "betweenness", "eigenoptions", "covering")
+#: The option sources: a name -> its subgoal detector plugin and that plugin's parameters, each
+#: run on the regime's model. ``reward-variation`` adds the first task's reward states to the count
+#: metric's subgoals (section 4.3.1); ``diffusion`` is the ``simpleoptions`` package's diffusion
+#: options, keeping the top 4 local maxima of the diffusion score, as betweenness keeps its top 4
+#: (it needs the optional package: without it the source is left out and the summary says so).
+SOURCES: dict[str, tuple[str, dict[str, Any]]] = {
+    "count-exhaustive": ("count-exhaustive", {}),
+    "count-mc": ("count-mc", {}),
+    "reward-variation": ("reward-variation", {}),
+    "betweenness": ("betweenness", {}),
+    "eigenoptions": ("eigenoptions", {}),
+    "covering": ("covering", {}),
+    "diffusion": ("simpleoptions", {"generator": "diffusion", "top": 4}),
+}
+#: The sources that need an optional package, and the package.
+OPTIONAL_SOURCES = {"diffusion": "simpleoptions"}
 #: The learners over a source's options (their row names).
 OPTION_LEARNERS = ("layer", "smdp-q")
 #: The flat planner that knows what the layer learner knows of the dynamics, by regime.
@@ -78,12 +97,12 @@ GAP_FRACTION = 0.1
 
 
 def method_times(curve: Any, flat: Any, fraction: float
-                 ) -> tuple[np.ndarray, np.ndarray, float, dict[str, Any]]:
+                 ) -> tuple[np.ndarray, np.ndarray, float, float, dict[str, Any]]:
     """Per run of ``curve``: its episodes to the bound (inf: censored) and those over the
     cell's scale - flat's Kaplan-Meier median, or flat's budget where that median lies beyond
     it (which overstates every method's ratio on that cell: flat's true median is larger) -;
-    the scale; and the KM-median ratio to flat with its CI
-    (:func:`adpart.learning.comparison.time_ratio`)."""
+    the scale; the curve's own KM median (inf: beyond its budget); and the KM-median ratio to
+    flat with its CI (:func:`adpart.learning.comparison.time_ratio`)."""
     from adpart.learning.comparison import success_bound, time_ratio
     from adpart.learning.transfer_metrics import km_median, metrics_from_curve
 
@@ -91,8 +110,9 @@ def method_times(curve: Any, flat: Any, fraction: float
     median = km_median(*metrics_from_curve(flat, bound).event_times("episodes")).estimate
     scale = float(median) if np.isfinite(median) and median > 0 else float(flat.n_episodes)
     times, censored = metrics_from_curve(curve, bound).event_times("episodes")
+    own = float(km_median(times, censored).estimate)
     episodes = np.where(censored, np.inf, times).astype(np.float64)
-    return episodes, episodes / scale, scale, time_ratio(curve, flat, fraction, 0)
+    return episodes, episodes / scale, scale, own, time_ratio(curve, flat, fraction, 0)
 
 
 def _within(curve: Any, flat: Any, fraction: float) -> str:
@@ -105,7 +125,7 @@ def _within(curve: Any, flat: Any, fraction: float) -> str:
 
 
 def _cell_methods(kb: Any, cell: Any, sizes: dict[str, Any], config: ExperimentConfig,
-                  out: Path, regime: str
+                  out: Path, regime: str, sources: list[str]
                   ) -> tuple[dict[str, Any], dict[str, str], list[str], set[str]]:
     """One cell in one knowledge regime: every method's curve (label -> curve), its knowledge
     label, notes, and the methods that learned flat because their source found no subgoal."""
@@ -128,9 +148,10 @@ def _cell_methods(kb: Any, cell: Any, sizes: dict[str, Any], config: ExperimentC
     base = {"eval_every": 1, **sizes, **cell.options}
     defaults = episode_defaults(cell.env)
     model_env = first_run = None
-    for source in SOURCES:
-        pcfg = PipelineConfig(env=cell.env, tasks=cell.tasks, seed=config.seed, detector=source,
-                              fallback=False, regime=regime, **base)
+    for source in sources:
+        detector, params = SOURCES[source]
+        pcfg = PipelineConfig(env=cell.env, tasks=cell.tasks, seed=config.seed, detector=detector,
+                              detector_params=dict(params), fallback=False, regime=regime, **base)
         pipe = run_pipeline(kb, pcfg, out=out / f"{folder_name(cell.env)}-{source}",
                             progress=config.progress)
         rows = {r["learner"]: r for r in pipe.rows if r["task"] == task}
@@ -178,6 +199,17 @@ def _cell_methods(kb: Any, cell: Any, sizes: dict[str, Any], config: ExperimentC
     return curves, knows, notes, flat_instead
 
 
+def available_sources() -> tuple[list[str], list[str]]:
+    """The sources that can run here, and a note per source left out (its package missing)."""
+    from importlib.util import find_spec
+
+    missing = {source: package for source, package in OPTIONAL_SOURCES.items()
+               if find_spec(package) is None}
+    return ([s for s in SOURCES if s not in missing],
+            [f"{s} left out: the optional package {p!r} is not installed "
+             f"(pip install 'adpart[{p}]')" for s, p in missing.items()])
+
+
 def _row_order(labels: list[str]) -> list[str]:
     order = [f"{learner} [{source}]" for source in SOURCES for learner in OPTION_LEARNERS]
     order += ["sf-gpi", *MODEL_BASED, BASELINE]
@@ -185,8 +217,9 @@ def _row_order(labels: list[str]) -> list[str]:
 
 
 def _regime_cells(kb: Any, cells: Any, sizes: dict[str, Any], config: ExperimentConfig,
-                  out: Path, regime: str) -> tuple[list[dict[str, Any]], list[dict[str, str]],
-                                                   dict[str, set[str]], dict[str, str]]:
+                  out: Path, regime: str, sources: list[str]
+                  ) -> tuple[list[dict[str, Any]], list[dict[str, str]], dict[str, set[str]],
+                             dict[str, str]]:
     """Every cell's methods in ``regime``: the per-cell rows, the failed cells, each method's
     knowledge heads and its full record on the first cell it ran on."""
     from adpart.errors import AdpartError
@@ -201,7 +234,7 @@ def _regime_cells(kb: Any, cells: Any, sizes: dict[str, Any], config: Experiment
                         f"{' -> '.join(cell.tasks)}")
         try:
             curves, knows, notes, flat_instead = _cell_methods(
-                kb, cell, sizes, config, out / regime / f"{number:02d}", regime)
+                kb, cell, sizes, config, out / regime / f"{number:02d}", regime, sources)
         except AdpartError as err:  # recorded; the other cells still run
             failed.append({"env": cell.env, "tasks": list(cell.tasks),
                            "error": str(err).splitlines()[0]})
@@ -214,7 +247,8 @@ def _regime_cells(kb: Any, cells: Any, sizes: dict[str, Any], config: Experiment
         row: dict[str, Any] = {"env": cell.env, "tasks": list(cell.tasks), "notes": notes,
                                "methods": {}}
         for method in _row_order(list(curves)):
-            episodes, times, scale, ratio = method_times(curves[method], flat, fraction)
+            episodes, times, scale, median, ratio = method_times(curves[method], flat,
+                                                                 fraction)
             row["scale"] = scale
             row["flat_median_within_budget"] = scale < flat.n_episodes
             label = knows.get(method, "not declared")
@@ -222,6 +256,7 @@ def _regime_cells(kb: Any, cells: Any, sizes: dict[str, Any], config: Experiment
             uses.setdefault(method, label)
             row["methods"][method] = {
                 "within": _within(curves[method], flat, fraction), "ratio_to_flat": ratio,
+                "km_median": median,
                 "episodes": episodes.tolist(), "runs": times.tolist(),
                 "knowledge": knows.get(method), "flat_instead": method in flat_instead}
         per_cell.append(row)
@@ -279,51 +314,94 @@ def methods(config: ExperimentConfig) -> ExperimentReport:
     cells = QUICK_BENCHMARK_CELLS[:2] if config.quick else BENCHMARK_CELLS
     sizes = ({"runs": min(config.runs, 3), "episodes": 60, "first_episodes": 150}
              if config.quick else {"runs": config.runs})
+    sources, left_out = available_sources()
     report = ExperimentReport("methods", "the field's methods on the benchmark cells")
     report.seed_reports = ["(the dissertation compares its chain with flat Q-learning only)"]
     data: dict[str, Any] = {
         "settings": {"seed": config.seed, "eval_every": 1, **sizes, "regimes": list(REGIMES_RUN),
-                     "sources": list(SOURCES), "option_learners": list(OPTION_LEARNERS),
+                     "sources": {s: {"detector": SOURCES[s][0], "params": SOURCES[s][1]}
+                                 for s in sources},
+                     "option_learners": list(OPTION_LEARNERS),
                      "plain_learners": ["sf-gpi", *MODEL_BASED], "baseline": BASELINE,
                      "gap_fraction": GAP_FRACTION, "layer_fallback": False,
                      "smdp_q": {"include-primitives": True}},
         "by_regime": {}}
+    report.findings += left_out
+    per_regime: dict[str, list[dict[str, Any]]] = {}
     with working_kb(config.kb, "methods") as kb:
         for regime in REGIMES_RUN:
             per_cell, failed, regimes, uses = _regime_cells(kb, cells, sizes, config, out,
-                                                            regime)
+                                                            regime, sources)
+            per_regime[regime] = per_cell
             agg = _aggregate(per_cell, config.seed)
-            report.findings.append(f"**{regime} regime** ({REGIME_TEXT[regime]}): "
-                                   + _aggregate_table(agg["aggregate"], regimes, interval_text))
-            if agg["left_out"]:
-                report.findings.append(
-                    f"{len(agg['left_out'])} cell(s) left out of the {regime} aggregates and "
-                    "profiles (a method has no runs there): " + "; ".join(
-                        f"{r['env']} {r['tasks'][1]} (missing: " + ", ".join(
-                            m for m in agg["methods"] if not r["methods"].get(m, {}).get("runs"))
-                        + ")" for r in agg["left_out"]))
-            report.findings.append(
-                f"what each method knew in the {regime} regime, in full (its stored knowledge "
-                "record on the first cell it ran on):\n\n" + "\n".join(
-                    f"- **{m}**: {uses[m]}" for m in agg["methods"] if m in uses))
-            report.findings.append(f"{regime} regime, " + _cell_tables(
-                per_cell, agg["methods"], interval_text))
-            if failed:
-                report.findings.append(f"cells that failed in the {regime} regime: " + "; ".join(
-                    f"{f['env']} {f['tasks'][1]} ({f['error']})" for f in failed))
+            report.findings += _regime_findings(regime, agg, regimes, uses, per_cell, failed,
+                                                interval_text)
             data["by_regime"][regime] = {
                 "cells": per_cell, "failed": failed, "aggregate": agg["aggregate"],
                 "profiles": agg["profiles"], "regimes": {k: sorted(v) for k, v in regimes.items()},
                 "knowledge_on_the_first_cell": uses}
             if agg["common"]:
-                name = ("methods-profile.png" if regime == REGIMES_RUN[0]
-                        else f"methods-profile-{regime}.png")
-                report.figures.append(draw_profiles(
-                    PROFILE_TAUS, agg["profiles"]["methods"],
-                    f"performance profiles over {len(agg['common'])} cells ({regime} regime)",
-                    out / name, bands=False))
+                report.figures += _regime_figures(agg, regime, sources, out)
+    (out / CELLS_PAGE).write_text(cell_tables(per_regime, REGIME_TEXT, interval_text))
+    report.findings.append(f"a table per cell, a row per method, in each regime: "
+                           f"[{CELLS_PAGE}]({CELLS_PAGE})")
     report.data = data
     return report
+
+
+#: The page of per-cell tables the experiment writes beside its summary.
+CELLS_PAGE = "methods-cells.md"
+
+
+def _regime_findings(regime: str, agg: dict[str, Any], regimes: dict[str, set[str]],
+                     uses: dict[str, str], per_cell: list[dict[str, Any]],
+                     failed: list[dict[str, str]], interval_text: Any) -> list[str]:
+    """The summary's findings of one regime: the aggregates, the cells left out of them, what
+    each method knew, the per-cell overview and the failed cells."""
+    found = [f"**{regime} regime** ({REGIME_TEXT[regime]}): "
+             + _aggregate_table(agg["aggregate"], regimes, interval_text)]
+    if agg["left_out"]:
+        found.append(
+            f"{len(agg['left_out'])} cell(s) left out of the {regime} aggregates and "
+            "profiles (a method has no runs there): " + "; ".join(
+                f"{r['env']} {r['tasks'][1]} (missing: " + ", ".join(
+                    m for m in agg["methods"] if not r["methods"].get(m, {}).get("runs"))
+                + ")" for r in agg["left_out"]))
+    found.append(
+        f"what each method knew in the {regime} regime, in full (its stored knowledge "
+        "record on the first cell it ran on):\n\n" + "\n".join(
+            f"- **{m}**: {uses[m]}" for m in agg["methods"] if m in uses))
+    found.append(f"{regime} regime, " + _overview_table(per_cell, agg["methods"],
+                                                           interval_text))
+    if failed:
+        found.append(f"cells that failed in the {regime} regime: " + "; ".join(
+            f"{f['env']} {f['tasks'][1]} ({f['error']})" for f in failed))
+    return found
+
+
+def _regime_figures(agg: dict[str, Any], regime: str, sources: list[str], out: Path
+                    ) -> list[str]:
+    """The regime's profile panels and a figure per aggregate (IQM, probability sooner)."""
+    suffix = "" if regime == REGIMES_RUN[0] else f"-{regime}"
+    groups = [*sources, "sf-gpi", *MODEL_BASED, BASELINE]
+    cells = len(agg["common"])
+    aggregate = agg["aggregate"]
+    return [
+        draw_profile_panels(PROFILE_TAUS, agg["profiles"]["methods"], OPTION_LEARNERS, groups,
+                            f"performance profiles over {cells} cells ({regime} regime)",
+                            out / f"methods-profile{suffix}.png"),
+        draw_intervals({m: a["iqm"] for m, a in aggregate.items()}, groups,
+                       xlabel="IQM of episodes to the bound / flat's median (1: flat)",
+                       reference=1.0, log=True,
+                       title=f"interquartile mean over {cells} cells, 95 % CI ({regime} regime)",
+                       path=out / f"methods-iqm{suffix}.png"),
+        draw_intervals({m: a["probability_sooner"] for m, a in aggregate.items()}, groups,
+                       xlabel="probability that a run reaches the bound sooner than flat's",
+                       reference=0.5, log=False,
+                       title=f"probability of improvement over {cells} cells, 95 % CI "
+                             f"({regime} regime)",
+                       path=out / f"methods-probability{suffix}.png"),
+    ]
 
 
 def _times(row: dict[str, Any], method: str) -> np.ndarray:
@@ -349,30 +427,20 @@ def _aggregate_table(aggregate: dict[str, Any], regimes: dict[str, set[str]],
             + "\n".join(lines))
 
 
-def _cell_tables(per_cell: list[dict[str, Any]], methods_seen: list[str],
-                 interval_text: Any) -> str:
-    def text(entry: dict[str, Any] | None) -> str:
-        if entry is None:
-            return "-"
-        if entry.get("flat_instead"):
-            return "flat (no subgoals)"
-        q = entry["ratio_to_flat"]
-        if q.get("ratio") is None:
-            if "at_most" in q:
-                return f"{entry['within']}, <= {q['at_most']:.3g}"
-            if "at_least" in q:
-                return f"{entry['within']}, >= {q['at_least']:.3g}"
-            return f"{entry['within']}, never"
-        return f"{entry['within']}, {interval_text(q['ratio'], *q['ci95'], inf='never')}"
-
+def _overview_table(per_cell: list[dict[str, Any]], methods_seen: list[str],
+                    interval_text: Any) -> str:
+    """One row per cell, one column per method: its KM-median ratio to flat [95 % CI] (the
+    runs within the bound and the medians are in the per-cell tables)."""
     header = "| # | environment | second task | " + " | ".join(methods_seen) + " |"
     lines = [header, "|" + "---|" * (3 + len(methods_seen))]
     for i, row in enumerate(per_cell, 1):
-        cells = " | ".join(text(row["methods"].get(m)) for m in methods_seen)
+        entries = [row["methods"].get(m) for m in methods_seen]
+        cells = " | ".join("-" if e is None else ratio_text(e, interval_text) for e in entries)
         mark = "" if row.get("flat_median_within_budget", True) else " (scale: budget)"
         lines.append(f"| {i} | `{row['env']}` | `{row['tasks'][1]}`{mark} | {cells} |")
-    return ("per cell, each method's runs within the bound and its ratio of KM-median episodes "
-            "to flat's [95 % CI] (`flat (no subgoals)`: its source found no subgoal there and "
-            "the chain learned flat; `(scale: budget)`: flat's median lies beyond its budget, "
-            "so the aggregates divide by the budget there):\n\n"
+    return ("per cell, each method's ratio of KM-median episodes to flat's [95 % CI] (`flat (no "
+            "subgoals)`: its source found no subgoal there and the chain learned flat; `(scale: "
+            "budget)`: flat's median lies beyond its budget, so the aggregates divide by the "
+            "budget there; each cell's own table has the runs within the bound and the "
+            f"medians, [{CELLS_PAGE}]({CELLS_PAGE})):\n\n"
             + "\n".join(lines))

@@ -12,7 +12,13 @@ from matplotlib.image import imread
 from scipy.stats import trim_mean
 
 from adpart.experiments.base import ExperimentConfig, run_experiment
-from adpart.experiments.methods import BASELINE, OPTION_LEARNERS, REGIMES_RUN, SOURCES
+from adpart.experiments.methods import (
+    BASELINE,
+    CELLS_PAGE,
+    OPTION_LEARNERS,
+    REGIMES_RUN,
+    available_sources,
+)
 
 
 def _runs(values: list) -> np.ndarray:
@@ -33,7 +39,8 @@ def test_every_method_runs_in_each_regime_and_the_aggregates_recompute(tmp_path)
     md = (out / "summary.md").read_text()
     for regime, found in data["by_regime"].items():
         assert found["failed"] == [] and len(found["cells"]) == 2
-        expected = {f"{learner} [{source}]" for source in SOURCES for learner in OPTION_LEARNERS}
+        sources, _ = available_sources()
+        expected = {f"{learner} [{source}]" for source in sources for learner in OPTION_LEARNERS}
         expected |= {"sf-gpi", PLANNER[regime], BASELINE}
         for cell in found["cells"]:
             assert set(cell["methods"]) == expected  # no subgoals: the source's learners flat
@@ -69,9 +76,28 @@ def test_every_method_runs_in_each_regime_and_the_aggregates_recompute(tmp_path)
             pooled = np.concatenate([_runs(c["methods"][method]["runs"]) for c in common])
             np.testing.assert_allclose(prof["fraction"], (pooled[:, None] < taus).mean(axis=0))
         assert f"**{regime} regime**" in md
-    for name in ("methods-profile.png", "methods-profile-true-model.png"):
-        image = imread(out / name)
-        assert image.shape[0] > 200 and image[..., :3].std() > 0.05  # drawn, not blank
+    for figure in ("profile", "iqm", "probability"):  # a figure per aggregate and regime
+        for suffix in ("", "-true-model"):
+            image = imread(out / f"methods-{figure}{suffix}.png")
+            assert image.shape[0] > 200 and image[..., :3].std() > 0.05  # drawn, not blank
+    # a table per cell and regime, a row per method, each row its stored figures
+    page = (out / CELLS_PAGE).read_text()
+    for regime, found in data["by_regime"].items():
+        for number, cell in enumerate(found["cells"], 1):
+            section = page.split(f"### {regime} {number}: ", 1)[1].split("###", 1)[0]
+            rows = re.findall(r"^\| (\S[^|]*?) \| ([^|]+) \| (\d+/\d+) \| ([^|]+) \|",
+                              section, flags=re.MULTILINE)
+            assert [r[0] for r in rows] == list(cell["methods"])
+            for method, known, within, median in rows:
+                entry = cell["methods"][method]
+                assert within == entry["within"]
+                assert entry["knowledge"].startswith(known)
+                assert median.strip() == ("never" if entry["km_median"] is None
+                                          else f"{entry['km_median']:.4g}")
+                episodes = _runs(entry["episodes"])
+                if np.isfinite(episodes).all():  # no censoring: KM's median is the lower median
+                    assert entry["km_median"] == np.quantile(episodes, 0.5,
+                                                             method="inverted_cdf")
     assert "| sf-gpi | dynamics estimated, rewards observed |" in md
     assert "| sf-gpi | dynamics true-model, rewards observed |" in md
     rows = re.findall(r"^\| \d+ \| `", md, flags=re.MULTILINE)
