@@ -505,7 +505,7 @@ def so_diffusion(mdp: FiniteMDP, settings: SimpleOptionsSettings | None = None) 
     env = mdp_environment(mdp, s)
     gen = impl.DiffusionOptionGenerator(s.top or mdp.n_states, s.time_scale, 1.0, 0.0, 1.0, 0, 1,
                                         0.0)
-    stg, nodes, adj, deg, empty = gen._extract_graph_matrices(env)
+    stg, nodes, adj, deg, empty = _diffusion_graph(env)
     if len(nodes) - len(empty) < 2:
         raise TaskError("diffusion options need a state-transition graph of at least 2 states "
                         "with moves; the start states here reach fewer")
@@ -525,6 +525,35 @@ def so_diffusion(mdp: FiniteMDP, settings: SimpleOptionsSettings | None = None) 
     return _as_vector(scores, mdp.n_states), np.asarray(subgoals, dtype=np.int64), stats
 
 
+def _diffusion_graph(env: Any) -> tuple[Any, list[Any], np.ndarray, np.ndarray, np.ndarray]:
+    """``DiffusionOptionGenerator._extract_graph_matrices`` with its removal of the states that
+    have no out-edge repeated until none is left: ``(undirected graph, node list, adjacency,
+    degree matrix, removed node indices)``.
+
+    The package removes such states once; a state whose only out-edges led to removed states
+    then has degree 0, and the package's ``D^-1/2`` is infinite (its ``scipy.linalg.polar`` ends
+    in ``ValueError: array must not contain infs or NaNs``; met on a counts model of FrozenLake
+    8x8, where a state's only observed successors are holes). Where one pass leaves none, the
+    result is the package's own; the states removed later get its removed states' score, 0."""
+    import networkx as nx
+    import numpy as np
+
+    stg = env.generate_interaction_graph()
+    undirected = stg.to_undirected()
+    nodes = list(undirected.nodes)
+    adj = np.asarray(nx.adjacency_matrix(stg, nodelist=nodes).todense())
+    keep = np.ones(len(nodes), dtype=bool)
+    while True:
+        inside = np.flatnonzero(keep)
+        dead = inside[adj[np.ix_(inside, inside)].sum(axis=1) == 0]
+        if dead.size == 0:
+            break
+        keep[dead] = False
+    inside = np.flatnonzero(keep)
+    adj = adj[np.ix_(inside, inside)]
+    return undirected, nodes, adj, np.diag(adj.sum(axis=1)), np.flatnonzero(~keep)
+
+
 # --------------------------------------------------------------------------- the detector
 
 
@@ -541,6 +570,21 @@ def detect_simpleoptions(mdp: FiniteMDP, settings: SimpleOptionsSettings | None 
 
     s = given(SimpleOptionsSettings, settings)
     t0 = time.perf_counter()
+    try:
+        scores, subgoals, stats = _generated(mdp, s)
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError) as err:  # the package's own
+        raise TaskError(f"simpleoptions' {s.generator} generator failed on {mdp.name}: "
+                        f"{err}") from err
+    stats = {**stats, "time_s": time.perf_counter() - t0, "simpleoptions": _version()}
+    return SubgoalResult(subgoals, scores, None, stats, settings_dict(s), name)
+
+
+def _generated(mdp: FiniteMDP, s: SimpleOptionsSettings) -> tuple[
+    np.ndarray, np.ndarray, dict[str, object]
+]:
+    """``(scores, subgoals, stats)`` of the settings' generator (:func:`detect_simpleoptions`)."""
+    import numpy as np
+
     if s.generator == "eigenoptions":
         options, stats = so_eigenoptions(mdp, s)
         ends = [o.subgoals for o in options]
@@ -552,8 +596,7 @@ def detect_simpleoptions(mdp: FiniteMDP, settings: SimpleOptionsSettings | None 
         scores, subgoals, stats = so_diffusion(mdp, s)
     else:
         scores, subgoals, stats = so_betweenness(mdp, s)
-    stats = {**stats, "time_s": time.perf_counter() - t0, "simpleoptions": _version()}
-    return SubgoalResult(subgoals, scores, None, stats, settings_dict(s), name)
+    return scores, subgoals, stats
 
 
 def _version() -> str:

@@ -318,6 +318,50 @@ def test_diffusion_subgoals_are_the_generators():
     assert four.scores[four.subgoals].min() > 0
 
 
+def dead_end_chain() -> FiniteMDP:
+    """0 <-> 1 <-> 2 <-> 3 -> 4 -> 5, 5 only staying in place: 5 has no out-edge on the
+    papers' graph, and 4's only out-edge leads to 5."""
+    S, A = 6, 2  # action 0 left, action 1 right
+    left = [max(s - 1, 0) for s in range(S)]
+    right = [min(s + 1, S - 1) for s in range(S)]
+    left[4], left[5] = 5, 5  # 4 and 5 lead only onwards
+    P = sp.csr_array((np.ones(A * S), (np.arange(A * S), left + right)), shape=(A * S, S))
+    return FiniteMDP(P, np.full((S, A), -1.0), 0.9, initial=np.eye(S)[0])
+
+
+def test_diffusion_survives_a_state_left_without_edges_by_the_packages_removal():
+    """The package removes the states without an out-edge once, so 4 (whose only out-edge led
+    to 5) keeps degree 0 and its eigendecomposition fails; the bridge repeats the removal, and
+    the other states' scores are the package's on the graph without 4 and 5."""
+    impl = import_simpleoptions()
+    mdp = dead_end_chain()
+    gen = impl.DiffusionOptionGenerator(mdp.n_states, 8, 1.0, 0.0, 1.0, 0, 1, 0.0)
+    _, _, adj, deg, _ = gen._extract_graph_matrices(mdp_environment(mdp))
+    assert (np.asarray(deg).diagonal() == 0).any()  # 4, after one removal
+    with pytest.raises(ValueError, match="infs or NaNs"), np.errstate(all="ignore"):
+        gen._compute_eigendecomp(deg, adj)  # the package's own path
+    scores, subgoals, stats = so_diffusion(mdp)
+    assert np.isfinite(scores).all() and scores[[4, 5]].tolist() == [0.0, 0.0]
+    # the same scores as the package gives on the chain that never had 4 and 5
+    short = FiniteMDP(sp.csr_array((np.ones(8), (np.arange(8), [0, 0, 1, 2, 1, 2, 3, 3])),
+                                   shape=(8, 4)), np.full((4, 2), -1.0), 0.9,
+                      initial=np.eye(4)[0])
+    theirs, _, _ = so_diffusion(short)
+    np.testing.assert_allclose(scores[:4], theirs, atol=1e-10)
+    assert stats["graph_states"] == 6 and set(subgoals.tolist()) <= {0, 1, 2, 3}
+
+
+def test_a_failure_inside_the_package_is_named_as_an_adpart_error(monkeypatch):
+    import adpart.subgoals.simpleoptions_bridge as bridge
+
+    def broken(mdp, settings):
+        raise ValueError("array must not contain infs or NaNs")
+
+    monkeypatch.setattr(bridge, "so_diffusion", broken)
+    with pytest.raises(TaskError, match="simpleoptions' diffusion generator failed on .*NaNs"):
+        detect_simpleoptions(dead_end_chain(), SimpleOptionsSettings(generator="diffusion"))
+
+
 # --------------------------------------------------------------------------- settings, plugin, CLI
 
 
