@@ -14,6 +14,7 @@ from adpart.learning.qlearning import q_learning
 from adpart.learning.settings import Run
 from adpart.workflows.experience import EstimatedDomain
 from adpart.workflows.rehearsal import (
+    REHEARSAL_GOALS,
     rehearsal_goals,
     rehearsal_task,
     rehearsal_verdict,
@@ -104,7 +105,8 @@ def test_the_rehearsal_decides_the_fallback_from_the_agents_model(tmp_path, env,
     summary = json.loads(res.output)
     [stage] = [s for s in summary["stages"] if s["stage"] == "rehearse"]
     assert stage["result"] == branch
-    assert len(stage["detail"]["goals"]) == 6 and "hypothetical goals" in stage["detail"]["reason"]
+    assert len(stage["detail"]["goals"]) == REHEARSAL_GOALS
+    assert "hypothetical goals" in stage["detail"]["reason"]
     learners = {r["learner"] for r in summary["tasks"] if r["task"] == tasks.split(",", 1)[1]}
     assert ("flat-fallback" in learners) == (branch == "flat")
     assert ("hierarchical" in learners) == (branch == "layer")

@@ -358,7 +358,7 @@ def test_a_failure_inside_the_package_is_named_as_an_adpart_error(monkeypatch):
         raise ValueError("array must not contain infs or NaNs")
 
     monkeypatch.setattr(bridge, "so_diffusion", broken)
-    with pytest.raises(TaskError, match="simpleoptions' diffusion generator failed on .*NaNs"):
+    with pytest.raises(TaskError, match=r"simpleoptions' diffusion generator failed on .*NaNs"):
         detect_simpleoptions(dead_end_chain(), SimpleOptionsSettings(generator="diffusion"))
 
 
