@@ -45,6 +45,11 @@ Every setting is in the summary's settings record.
 
 from __future__ import annotations
 
+import os
+import sys
+import tempfile
+from contextlib import nullcontext
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -306,6 +311,7 @@ def _aggregate(per_cell: list[dict[str, Any]], seed: int) -> dict[str, Any]:
 )
 def methods(config: ExperimentConfig) -> ExperimentReport:
     """Run every method on every cell in each regime and aggregate (module docstring)."""
+    from adpart.execution import LocalExecutor
     from adpart.learning.comparison import interval_text
     from adpart.workflows.working_kb import working_kb
 
@@ -328,10 +334,17 @@ def methods(config: ExperimentConfig) -> ExperimentReport:
         "by_regime": {}}
     report.findings += left_out
     per_regime: dict[str, list[dict[str, Any]]] = {}
-    with working_kb(config.kb, "methods") as kb:
-        for regime in REGIMES_RUN:
-            per_cell, failed, regimes, uses = _regime_cells(kb, cells, sizes, config, out,
-                                                            regime, sources)
+    with (tempfile.TemporaryDirectory(prefix="adpart-methods-") if config.kb is None
+          else nullcontext(config.kb)) as where:
+        with working_kb(where, "methods"):  # made once, before the workers open it
+            pass
+        jobs = [RegimeJob(regime, str(where), str(out), tuple(cells), sizes, tuple(sources),
+                          config.seed, config.runs, config.quick) for regime in REGIMES_RUN]
+        config.progress(f"{len(jobs)} regimes x {len(cells)} cells, a worker process per "
+                        "regime (each prints its cells on stderr)")
+        with LocalExecutor(workers=min(len(jobs), os.cpu_count() or 1)) as pool:
+            results = pool.map(run_regime, jobs)
+        for regime, (per_cell, failed, regimes, uses) in zip(REGIMES_RUN, results, strict=True):
             per_regime[regime] = per_cell
             agg = _aggregate(per_cell, config.seed)
             report.findings += _regime_findings(regime, agg, regimes, uses, per_cell, failed,
@@ -347,6 +360,38 @@ def methods(config: ExperimentConfig) -> ExperimentReport:
                            f"[{CELLS_PAGE}]({CELLS_PAGE})")
     report.data = data
     return report
+
+
+@dataclass(frozen=True)
+class RegimeJob:
+    """One regime's cells, as a worker process runs them (:func:`run_regime`)."""
+
+    regime: str
+    kb: str
+    out: str
+    cells: tuple[Any, ...]
+    sizes: dict[str, Any]
+    sources: tuple[str, ...]
+    seed: int
+    runs: int
+    quick: bool
+
+
+def run_regime(job: RegimeJob) -> tuple[list[dict[str, Any]], list[dict[str, str]],
+                                        dict[str, set[str]], dict[str, str]]:
+    """:func:`_regime_cells` of ``job`` on the knowledge base at ``job.kb`` (shared with the
+    other regime's worker: the store takes concurrent writers), its progress on stderr."""
+    from adpart.workflows.working_kb import working_kb
+
+    config = ExperimentConfig(out=Path(job.out), runs=job.runs, seed=job.seed, quick=job.quick,
+                              kb=job.kb, progress=_to_stderr)
+    with working_kb(job.kb, "methods") as kb:
+        return _regime_cells(kb, job.cells, job.sizes, config, Path(job.out), job.regime,
+                             list(job.sources))
+
+
+def _to_stderr(message: str) -> None:
+    print(f"methods: {message}", file=sys.stderr, flush=True)
 
 
 #: The page of per-cell tables the experiment writes beside its summary.
