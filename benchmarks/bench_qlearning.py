@@ -14,13 +14,18 @@ for like:
 
 End to end: :func:`adpart.learning.q_learning` on the 10^5-state rooms grid
 (``benchmarks._models.rooms_grid_mdp``, intended move 0.8, 0.1 to each side), K = 50 runs, 1 M
-agent-steps, one evaluation at the end. The call's time is split into the kernel, the scoring
-(:class:`adpart.mdp.start_value.StartValueSolver`: each distinct greedy policy's start value,
-warm-started from the last one solved, within 1e-10) and the rest, the learner's overhead; the
-call's time is printed as a ratio of the kernel's. The same call with the evaluation step of
-commit de831d6 swapped in (greedy policies from every visited row, all K policies re-scored by
-one sparse LU each, :func:`adpart.learning.curves.start_values`; :class:`_BeforeStyle`) runs
-alternately beside it as the exact reference: the two curves must agree within 1e-9.
+agent-steps, one evaluation at the end (50 policies scored), against the kernel alone driven the
+same way (:func:`_kernel_alone`: same state, seeds and trajectories, timed around the kernel
+calls). Both sides are measured in steady state: after a small call that loads the compiled code,
+full-size calls of each side are made and discarded (a process's first full-size call pays
+first-touch page faults that later calls do not), then the two sides alternate; the ratio is
+printed as median / median and best / best. Each end-to-end call is split into the kernel, the
+scoring (:class:`adpart.learning.curves.StartValues`), the experience
+(:meth:`adpart.mdp.experience.Experience.from_positions`) and the rest. The final scores are
+checked against one sparse LU per distinct policy (:func:`adpart.learning.curves.start_values`,
+the exact reference): they must agree within 1e-9. ``repeated_evaluations()`` runs ``make
+demo``'s two-rooms learning with today's evaluation step and the one of commit de831d6
+(:class:`_BeforeStyle`) for the same comparison over many evaluations.
 
 For scale, Gymnasium's Taxi-v4 is stepped through ``gymnasium.Env.step`` with random actions.
 Figures are agent-steps per second of wall time, including the refills of the uniform buffers;
@@ -139,14 +144,52 @@ class _BeforeStyle:
         self.q._initial_state, self.q.StartValues = self.saved
 
 
+def _kernel_alone(mdp, run: Run) -> float:
+    """The kernel's side of the end-to-end ratio: the lock-step kernel driven exactly as
+    :func:`adpart.learning.q_learning` drives it (same state, settings, seeds and blocks, so the
+    same trajectories), timed around the kernel calls only; no scoring, no result."""
+    from adpart.learning import qlearning
+
+    mu = start_distribution(mdp)
+    st = qlearning._initial_state(mdp, run.runs, run.episodes, run.max_steps_per_episode,
+                                  run.alpha, run.epsilon, run.start_q, mu)
+    rngs = np.random.default_rng(run.seed).spawn(run.runs)
+    st.state[:] = [st.start_state(rng.random()) for rng in rngs]
+    kernel = _kernels.KERNELS[qlearning.default_kernel()]
+    seconds = 0.0
+    for boundary in sorted({*range(run.eval_every, run.episodes + 1, run.eval_every),
+                            run.episodes}):
+        st.target[:] = boundary
+        while True:
+            t0 = time.perf_counter()
+            more = kernel(st)
+            seconds += time.perf_counter() - t0
+            if not more:
+                break
+            for k in np.flatnonzero((st.cursor == BLOCK_ROWS) & (st.episode < st.target)):
+                rngs[k].random(out=st.U[k])
+                st.cursor[k] = 0
+    return seconds
+
+
 def end_to_end(n_states: int = 100_000, runs: int = 50, agent_steps: int = 1_000_000,
-               horizon: int = 200, repeats: int = 3, evaluations: int = 1) -> dict:
-    """Kernel, scoring and overhead of ``q_learning()`` (each the best of ``repeats`` calls: the
-    machine is shared), today's evaluation step and the before-style one (:class:`_BeforeStyle`)
-    alternating call by call."""
+               horizon: int = 200, repeats: int = 7, warm: int = 2, evaluations: int = 1
+               ) -> dict:
+    """``q_learning()`` end to end against its kernel alone, both in steady state.
+
+    A small call loads the compiled code; then ``warm`` full-size calls of each side are made
+    and discarded (the first full-size call of a process pays first-touch page faults and
+    allocator growth that later calls do not); then ``repeats`` rounds alternate one end-to-end
+    call and one kernel-alone run (:func:`_kernel_alone`), so both see the same machine load.
+    Each call is split into the kernel, the scoring (``curves.StartValues``), the experience
+    (``Experience.from_positions``) and the rest. The ratio is printed as median / median and
+    best / best over the rounds, and per call against the call's own kernel time. The final
+    evaluation's scores are checked against the one-LU-per-policy reference
+    (:func:`adpart.learning.curves.start_values` of the returned greedy policies), which is
+    timed once."""
     from adpart.learning import curves, qlearning
-    from adpart.mdp import start_value
     from adpart.mdp.evaluation import policy_evaluation
+    from adpart.mdp.experience import Experience
     from adpart.mdp.solvers import solve
     from benchmarks._models import rooms_grid_mdp
 
@@ -154,7 +197,10 @@ def end_to_end(n_states: int = 100_000, runs: int = 50, agent_steps: int = 1_000
     V = policy_evaluation(mdp, solve(mdp, 1e-10).policy)
     episodes = max(1, agent_steps // (runs * horizon))
     eval_every = max(1, episodes // evaluations)
-    timers = {"kernel": 0.0, "scoring": 0.0}
+    run = Run(runs=runs, episodes=episodes, max_steps_per_episode=horizon,
+              eval_every=eval_every, reference_values=V, seed=0)
+    parts = ("kernel", "scoring", "experience")
+    timers = dict.fromkeys(parts, 0.0)
 
     def timed(f, key):
         def g(*args, **kwargs):
@@ -165,79 +211,76 @@ def end_to_end(n_states: int = 100_000, runs: int = 50, agent_steps: int = 1_000
         return g
 
     def call():
-        timers.update(kernel=0.0, scoring=0.0)
+        timers.update(dict.fromkeys(parts, 0.0))
         t0 = time.perf_counter()
-        result = qlearning.q_learning(mdp, Run(runs=runs, episodes=episodes,
-                                               max_steps_per_episode=horizon,
-                                               eval_every=eval_every, reference_values=V, seed=0))
+        result = qlearning.q_learning(mdp, run)
         total = time.perf_counter() - t0
         row = {"total_s": total, **{f"{k}_s": v for k, v in timers.items()}}
-        row["overhead_s"] = total - timers["kernel"] - timers["scoring"]
-        row["overhead_per_kernel"] = row["overhead_s"] / row["kernel_s"]
+        row["rest_s"] = total - sum(timers.values())
         return row, result
 
     name = qlearning.default_kernel()
-    kernel, evaluate = _kernels.KERNELS[name], curves.policy_evaluation
-    solve_one = start_value.StartValueSolver.__call__
+    kernel, score = _kernels.KERNELS[name], curves.StartValues.__call__
+    from_positions = Experience.__dict__["from_positions"]
+    rows: list[dict] = []
+    alone: list[float] = []
     _kernels.KERNELS[name] = timed(kernel, "kernel")
-    curves.policy_evaluation = timed(evaluate, "scoring")  # the before-style LU
-    start_value.StartValueSolver.__call__ = timed(solve_one, "scoring")  # today's
-    rows: dict[str, list[dict]] = {"today": [], "before": []}
-    curves_seen: dict[str, np.ndarray] = {}
+    curves.StartValues.__call__ = timed(score, "scoring")
+    Experience.from_positions = classmethod(timed(from_positions.__func__, "experience"))
     try:
         qlearning.q_learning(mdp, Run(runs=2, episodes=1, max_steps_per_episode=5,
-                                      reference_values=V, seed=0))  # warm-up (compiled code)
-        for _ in range(repeats):  # alternate, so both see the same machine load
-            for style in ("today", "before"):
-                if style == "before":
-                    with _BeforeStyle(qlearning):
-                        row, res = call()
-                else:
-                    row, res = call()
-                    result = res
-                rows[style].append(row)
-                curves_seen[style] = res.curve["eval_value"]
+                                      reference_values=V, seed=0))  # loads compiled code
+        for _ in range(warm):  # discarded: first full-size calls
+            _, result = call()
+            _kernels.KERNELS[name] = kernel
+            _kernel_alone(mdp, run)
+            _kernels.KERNELS[name] = timed(kernel, "kernel")
+        for _ in range(repeats):  # alternate, so both sides see the same machine load
+            row, result = call()
+            rows.append(row)
+            _kernels.KERNELS[name] = kernel
+            alone.append(_kernel_alone(mdp, run))
+            _kernels.KERNELS[name] = timed(kernel, "kernel")
     finally:
-        _kernels.KERNELS[name], curves.policy_evaluation = kernel, evaluate
-        start_value.StartValueSolver.__call__ = solve_one
-    difference = float(np.nanmax(np.abs(curves_seen["today"] - curves_seen["before"])))
+        _kernels.KERNELS[name], curves.StartValues.__call__ = kernel, score
+        Experience.from_positions = from_positions
+    mu = curves.start_distribution(mdp)
+    t0 = time.perf_counter()
+    reference = curves.start_values(mdp, result.greedy_policies(), mu)
+    reference_s = time.perf_counter() - t0
+    scores = result.curve.matrix("eval_value")[:, -1]
+    difference = float(np.max(np.abs(scores - reference)))
     same = difference <= 1e-9
     steps = int(result.curve["steps"].sum())
     n_distinct = curves.distinct_rows(result.greedy_policies())[0].size
+    totals = np.array([r["total_s"] for r in rows])
+    alone_a = np.array(alone)
+    med = {k: float(np.median([r[k] for r in rows]))
+           for k in ("total_s", "kernel_s", "scoring_s", "experience_s", "rest_s")}
+    ratio_median = float(np.median(totals) / np.median(alone_a))
+    ratio_best = float(totals.min() / alone_a.min())
+    per_call = [r["total_s"] / r["kernel_s"] for r in rows]
     print(f"bench_qlearning end to end: q_learning() on rooms_grid_mdp({n_states:_}) "
           f"({mdp.n_states:,} states, slip 0.8/0.1/0.1), K={runs}, {steps:,} agent-steps, "
-          f"{len(result.curve.evaluated_episodes())} evaluation(s); each part the best of "
-          f"{repeats} calls")
-    best = {}
-    for style in ("today", "before"):
-        b = {key: min(r[key] for r in rows[style])
-             for key in ("total_s", "kernel_s", "scoring_s", "overhead_s")}
-        b["overhead_per_kernel"] = b["overhead_s"] / b["kernel_s"]
-        b["outside_kernel_per_kernel"] = (b["total_s"] - b["kernel_s"]) / b["kernel_s"]
-        b["per_call_ratios"] = [round(r["overhead_per_kernel"], 3) for r in rows[style]]
-        best[style] = b
-        b["total_per_kernel"] = b["total_s"] / b["kernel_s"]
-        b["per_call_totals"] = [round(r["total_s"] / r["kernel_s"], 3) for r in rows[style]]
-        label = "today " if style == "today" else "before-style (de831d6 evaluation step)"
-        print(f"  {label}: end to end {b['total_s']:.3f} s, kernel {b['kernel_s']:.3f} s, "
-              f"scoring {b['scoring_s']:.3f} s, overhead {b['overhead_s']:.3f} s")
-        print(f"    end to end / kernel = {b['total_per_kernel']:.2f}  (target <= 1.5; per call "
-              f"{b['per_call_totals']})")
-        print(f"    overhead ratio (end to end - kernel - scoring) / kernel = "
-              f"{b['overhead_per_kernel']:.3f}  (target <= 0.20; per call "
-              f"{b['per_call_ratios']});  (end to end - kernel) / kernel = "
-              f"{b['outside_kernel_per_kernel']:.2f}")
-    fastest = min(b["kernel_s"] for b in best.values())  # one kernel: the load sets its time
-    print(f"  against the fastest kernel time of all calls ({fastest:.3f} s): overhead ratio "
-          f"today {best['today']['overhead_s'] / fastest:.3f}, before-style "
-          f"{best['before']['overhead_s'] / fastest:.3f}")
-    print(f"  {n_distinct} distinct final policies; scoring today / before-style "
-          f"{best['today']['scoring_s'] / best['before']['scoring_s']:.4f}; largest |eval_value "
-          f"today - before| = {difference:.1e} (must be <= 1e-9: {same})")
-    return {**best, "agent_steps": steps, "identical": same, "difference": difference,
-            "fastest_kernel_s": fastest,
-            "overhead_per_kernel": best["today"]["overhead_per_kernel"],
-            "total_per_kernel": best["today"]["total_per_kernel"]}
+          f"{len(result.curve.evaluated_episodes())} evaluation(s) of {runs} policies "
+          f"({n_distinct} distinct); steady state: {warm} discarded full-size call(s) of each "
+          f"side, then {repeats} alternating rounds")
+    print(f"  end to end (s):   median {np.median(totals):.3f}, best {totals.min():.3f}; "
+          f"per call {[round(float(x), 3) for x in totals]}")
+    print(f"  kernel alone (s): median {np.median(alone_a):.3f}, best {alone_a.min():.3f}; "
+          f"per run {[round(float(x), 3) for x in alone_a]}")
+    print(f"  end to end / kernel alone = {ratio_median:.2f} (median / median), "
+          f"{ratio_best:.2f} (best / best)  (target <= 1.5)")
+    print(f"  per call, end to end / its own kernel: {[round(float(x), 2) for x in per_call]}")
+    print(f"  parts, median over calls (s): kernel {med['kernel_s']:.3f}, scoring "
+          f"{med['scoring_s']:.3f}, experience {med['experience_s']:.3f}, rest {med['rest_s']:.3f}"
+          f"  (of {med['total_s']:.3f})")
+    print(f"  scores: largest |eval_value - one LU per policy| = {difference:.1e} (must be <= "
+          f"1e-9: {same}); the reference scoring took {reference_s:.3f} s")
+    return {"rows": rows, "kernel_alone_s": alone, "ratio_median": ratio_median,
+            "ratio_best": ratio_best, "per_call_ratios": per_call, "parts_median": med,
+            "agent_steps": steps, "difference": difference, "identical": same,
+            "reference_s": reference_s, "total_per_kernel": ratio_median}
 
 
 def repeated_evaluations(runs: int = 10, episodes: int = 300, eval_every: int = 25) -> dict:
