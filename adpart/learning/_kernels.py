@@ -48,7 +48,12 @@ scoring between evaluation blocks therefore reads no Q and re-scores only runs w
 Because each agent reads only its own uniforms and writes only its own rows, a run's trajectory
 is independent of the order in which agents are advanced, of the stride, of numba's thread count
 and of how many other agents run beside it; the two kernels differ only in speed
-(benchmarks/bench_qlearning.py prints both rates).
+(benchmarks/bench_qlearning.py prints both rates). The one array agents share is the experience
+count ``n_next``: each thread adds the transitions of the agents it advances to its own row, and
+only the rows' sum (integers: exact in any order) is read, so it too is the same for every
+thread count and order (the runs' experience, :class:`adpart.mdp.experience.Experience`). It
+replaces a (K, nnz) count per run, whose summing and first touch cost about half as much as the
+kernel itself at 10^5 states (docs/learning.md).
 """
 
 from __future__ import annotations
@@ -61,7 +66,7 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
-from numba import prange
+from numba import get_thread_id, prange
 
 from adpart.errors import UnknownNameError
 from adpart.mdp._sampling import first_above
@@ -179,8 +184,11 @@ class LockStepState(ScheduledAgents):
     positive start probability; ``gamma``; ``horizon`` (steps per episode).
 
     Per agent (K leading axis), the table: ``Q`` (K, S, A) with ``-inf`` on inadmissible pairs;
-    ``n_sa`` (K, S, A) and ``n_s`` (K, S) visit counts; ``n_next`` (K, nnz) the agent's
-    experience, how often each transition (CSR entry ``a*S + s -> s'``) was taken; the agents:
+    ``n_sa`` (K, S, A) and ``n_s`` (K, S) visit counts; ``n_next`` (T, nnz) the agents'
+    experience, how often each transition (CSR entry ``a*S + s -> s'``) was taken, summed over
+    the agents each of the kernel's ``T`` threads advanced (row ``numba.get_thread_id()``; ``T``
+    at least numba's thread count, see :func:`experience_rows`; the sum over the rows is the
+    runs' experience whatever agent ran on which thread); the agents:
     ``state``; ``episode`` (completed episodes); ``target`` (episodes to complete before
     returning); ``t_ep``, ``ret``, ``dret``, ``gpow`` (steps, undiscounted and discounted
     return, ``gamma**t`` of the current episode); ``alpha_ep`` / ``eps_ep`` (``scale *
@@ -272,6 +280,7 @@ def lockstep(model, schedules, stride, table, agents, outputs):
         if not any_active:
             return 0
         for k in prange(K):  # agents are independent: each reads and writes only its own rows
+            tid = get_thread_id()  # ... but the experience counts, one row per thread
             for _ in range(stride):
                 if episode[k] >= target[k] or cursor[k] == B:
                     break
@@ -316,7 +325,7 @@ def lockstep(model, schedules, stride, table, agents, outputs):
                 hi = indptr[row + 1]
                 pos = min(first_above(keys, row + u2, indptr[row], hi), hi - 1)
                 s2 = indices[pos]
-                n_next[k, pos] += 1
+                n_next[tid, pos] += 1
                 r = R[s, a]
                 n_sa[k, s, a] += 1
                 alpha = alpha_ep[k]
@@ -385,10 +394,21 @@ NUMBA_STRIDE = 1 << 30
 _compiled_lockstep = njit_lazily(lockstep, parallel=True)
 
 
+def experience_rows() -> int:
+    """Rows of a kernel state's ``n_next``: one per thread the numba kernel may run on now
+    (``numba.get_num_threads()``, which :func:`numba_kernel` checks before every call)."""
+    return int(numba.get_num_threads())
+
+
 def numba_kernel(st: LockStepState, stride: int = NUMBA_STRIDE) -> int:
     """:func:`lockstep` compiled with numba (once per process, cached on disk), the agents of a
     round on numba's threads (``NUMBA_NUM_THREADS``; one per core by default). ``stride = 1`` is
-    strict lock-step; results depend neither on the stride nor on the number of threads."""
+    strict lock-step; results depend neither on the stride nor on the number of threads. If the
+    thread count rose since ``st`` was made, ``st.n_next`` gains a zero row per new thread."""
+    missing = experience_rows() - st.n_next.shape[0]
+    if missing > 0:
+        st.n_next = np.concatenate([st.n_next, np.zeros((missing, st.n_next.shape[1]),
+                                                        dtype=st.n_next.dtype)])
     return int(_compiled_lockstep(*st.args(stride)))
 
 

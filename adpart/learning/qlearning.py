@@ -123,7 +123,8 @@ def _initial_state(
         Q=Q,
         n_sa=np.zeros((runs, S, A), dtype=np.int64),
         n_s=np.zeros((runs, S), dtype=np.int64),
-        n_next=np.zeros((runs, mdp.P.nnz), dtype=np.int64),
+        # the experience, one row per kernel thread (not per run: the sum is what is kept)
+        n_next=np.zeros((_kernels.experience_rows(), mdp.P.nnz), dtype=np.int64),
         state=np.zeros(runs, dtype=np.int64),
         episode=np.zeros(runs, dtype=np.int64),
         target=np.zeros(runs, dtype=np.int64),

@@ -188,6 +188,47 @@ def test_numba_kernel_does_not_depend_on_threads_or_stride(threads, stride, monk
         numba.set_num_threads(before)
     assert np.array_equal(res.Q, ref.Q)
     assert np.array_equal(res.curve.matrix("steps"), ref.curve.matrix("steps"))
+    # the experience, counted per thread and summed, is the same on any thread count
+    assert (res.experience.counts != ref.experience.counts).nnz == 0
+    assert np.array_equal(res.experience.pair_counts, res.visits.sum(axis=0))
+
+
+def test_experience_rows_grow_when_the_thread_count_rises():
+    numba = pytest.importorskip("numba")
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("numba has one thread")
+    from adpart.learning import _kernels
+    from adpart.learning.curves import start_distribution
+    from adpart.learning.qlearning import BLOCK_ROWS, _initial_state
+    from adpart.mdp.experience import Experience
+
+    mdp = slippery_grid(side=4, slip=0.3, gamma=0.9)
+    kw = {"runs": 6, "episodes": 10, "seed": 2, "max_steps_per_episode": 20, "eval_every": 10}
+    run = Run(**kw)
+    before = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        st = _initial_state(mdp, 6, 10, 20, run.alpha, run.epsilon, 0.0,
+                            start_distribution(mdp))
+    finally:
+        numba.set_num_threads(before)
+    assert st.n_next.shape == (1, mdp.P.nnz)
+    numba.set_num_threads(2)
+    try:
+        rngs = np.random.default_rng(2).spawn(6)
+        st.state[:] = [st.start_state(rng.random()) for rng in rngs]
+        st.target[:] = 10
+        while _kernels.numba_kernel(st):
+            for k in np.flatnonzero((st.cursor == BLOCK_ROWS) & (st.episode < st.target)):
+                rngs[k].random(out=st.U[k])
+                st.cursor[k] = 0
+    finally:
+        numba.set_num_threads(before)
+    assert st.n_next.shape == (2, mdp.P.nnz)
+    ref = q_learning(mdp, Run(kernel="python", **kw))
+    got = Experience.from_positions(mdp.P, st.n_next)
+    assert (got.counts != ref.experience.counts).nnz == 0
+    assert np.array_equal(st.Q, ref.Q)
 
 
 def test_both_kernels_run_one_source_of_the_rule():
