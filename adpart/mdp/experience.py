@@ -24,7 +24,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cache, cached_property
 from typing import Any
 
 import numpy as np
@@ -73,15 +73,41 @@ class Experience:
     def from_positions(cls, P: sp.csr_array, counts: np.ndarray,
                        sources: Iterable[str] = ()) -> Experience:
         """Counts kept per CSR entry of the transitions ``P`` (``counts[..., k]`` for entry
-        ``k``; a leading runs axis is summed): how the lock-step kernels count the successor
-        they draw. ``P`` supplies the layout (which entry is which ``s'``), never a value."""
-        counts = np.asarray(counts, dtype=np.int64)
-        if counts.ndim == 2:
-            counts = counts.sum(axis=0)
-        if counts.shape != (P.nnz,):
-            raise ModelError(f"{counts.shape} counts for a transition matrix of {P.nnz} entries")
-        matrix = sp.csr_array((counts, P.indices.copy(), P.indptr.copy()), shape=P.shape)
+        ``k``; a leading axis, of runs or of a kernel's threads, is summed): how the lock-step
+        kernels count the successor they draw. ``P`` supplies the layout (which entry is which
+        ``s'``), never a value.
+
+        One compiled pass sums the leading axis and keeps only the entries taken, so neither
+        the summed ``(nnz,)`` vector nor a matrix of ``P``'s every entry (zeros eliminated
+        after) is made; the result is the same matrix.
+        """
+        counts = np.asarray(counts)
+        if counts.ndim == 1:
+            counts = counts[None, :]
+        if counts.ndim != 2 or counts.shape[1] != P.nnz:
+            shape = counts.shape[1:] if counts.ndim == 2 and counts.shape[0] == 1 else counts.shape
+            raise ModelError(f"{shape} counts for a transition matrix of {P.nnz} entries")
+        counts = np.ascontiguousarray(counts, dtype=np.int64)
+        data, indices, indptr = _compact()(counts, P.indptr, P.indices)
+        if data.size and data.min() < 0:
+            raise ModelError("experience counts must be >= 0")
+        matrix = sp.csr_array((data, indices, indptr), shape=P.shape)
+        if P.has_canonical_format:  # a subset of canonical rows, without zeros, in order
+            matrix.has_canonical_format = True
+            return cls._canonical(matrix, tuple(sources))
         return cls(matrix, tuple(sources))
+
+    @classmethod
+    def _canonical(cls, counts: sp.csr_array, sources: tuple[str, ...]) -> Experience:
+        """An experience of counts already as ``__post_init__`` leaves them (int64 CSR,
+        canonical, sorted, no zeros, none negative, shape ``(A*S, S)``), unchecked."""
+        rows, cols = counts.shape
+        if cols <= 0 or rows % cols or counts.dtype != np.int64:
+            return cls(counts, sources)
+        experience = object.__new__(cls)
+        object.__setattr__(experience, "counts", counts)
+        object.__setattr__(experience, "sources", tuple(sources))
+        return experience
 
     @classmethod
     def from_table(cls, table: Any, n_states: int, n_actions: int,
@@ -165,3 +191,33 @@ class Experience:
         cols = np.concatenate([counts.indices.astype(np.int64), untried % S])
         data = np.concatenate([probs, np.ones(untried.size)])
         return sp.csr_array((data, (rows, cols)), shape=counts.shape)
+
+
+@cache
+def _compact():
+    """The kernel of :meth:`Experience.from_positions`, compiled by numba on first use."""
+    import numba
+
+    @numba.njit(cache=True, nogil=True, boundscheck=False)
+    def compact(counts, indptr, indices):
+        """Sum ``counts`` (T, nnz) over its rows and keep the nonzero entries as a CSR
+        ``(data, indices, indptr)`` of ``indptr``'s rows, entries in their order there."""
+        n_rows = indptr.shape[0] - 1
+        data = np.empty(counts.shape[1], dtype=np.int64)
+        kept = np.empty(counts.shape[1], dtype=indices.dtype)
+        out_ptr = np.empty(n_rows + 1, dtype=indptr.dtype)
+        out_ptr[0] = 0
+        m = 0
+        for row in range(n_rows):
+            for k in range(indptr[row], indptr[row + 1]):
+                c = 0
+                for t in range(counts.shape[0]):
+                    c += counts[t, k]
+                if c != 0:
+                    data[m] = c
+                    kept[m] = indices[k]
+                    m += 1
+            out_ptr[row + 1] = m
+        return data[:m].copy(), kept[:m].copy(), out_ptr
+
+    return compact

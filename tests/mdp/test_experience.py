@@ -99,3 +99,58 @@ def test_q_learning_records_what_its_runs_took():
     ref = q_learning(mdp, Run(runs=3, episodes=20, seed=5, max_steps_per_episode=30,
                               kernel="python"))
     assert (ref.experience.counts != exp.counts).nnz == 0
+
+
+def _positions_oracle(P, counts: np.ndarray) -> Experience:
+    """The earlier :meth:`Experience.from_positions`: the leading axis summed, the counts put on
+    every entry of ``P``'s layout, zeros eliminated by the constructor."""
+    import scipy.sparse as sp
+
+    counts = np.array(counts, dtype=np.int64)  # a copy: the constructor compacts it in place
+    if counts.ndim == 2:
+        counts = counts.sum(axis=0)
+    return Experience(sp.csr_array((counts, P.indices.copy(), P.indptr.copy()), shape=P.shape))
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 12), st.integers(1, 4), st.floats(0.05, 1.0), st.integers(0, 3),
+       st.sampled_from([np.int32, np.int64]), st.booleans(), st.integers(0, 10_000))
+def test_from_positions_is_the_summed_counts_on_p_layout(S, A, density, rows, index_dtype,
+                                                         shuffled, seed):
+    import scipy.sparse as sp
+
+    rng = np.random.default_rng(seed)
+    dense = rng.random((A * S, S)) * (rng.random((A * S, S)) < density)
+    P = sp.csr_array(dense)
+    P.indices, P.indptr = P.indices.astype(index_dtype), P.indptr.astype(index_dtype)
+    if shuffled and P.nnz:  # the same entries, each row's in another order (not canonical)
+        order = np.concatenate([rng.permutation(np.arange(P.indptr[r], P.indptr[r + 1]))
+                                for r in range(A * S)]).astype(np.int64)
+        P = sp.csr_array((P.data[order], P.indices[order], P.indptr), shape=P.shape)
+        P.has_sorted_indices = False
+    shape = (P.nnz,) if rows == 0 else (rows, P.nnz)
+    counts = rng.integers(0, 4, size=shape) * (rng.random(shape) < 0.5)
+    kept = counts.copy()
+    got = Experience.from_positions(P, counts, sources=("run:1",))
+    assert np.array_equal(counts, kept)  # the caller's counts are left as they were
+    want = _positions_oracle(P, counts)
+    for attr in ("data", "indices", "indptr"):
+        a, b = getattr(got.counts, attr), getattr(want.counts, attr)
+        assert a.dtype == b.dtype and np.array_equal(a, b), attr
+    assert got.counts.shape == want.counts.shape and got.counts.has_canonical_format
+    assert got.sources == ("run:1",) and got.steps == int(counts.sum())
+    assert np.array_equal(got.pair_counts, want.pair_counts)
+    narrow = Experience.from_positions(P, counts.astype(np.int32))  # any integer dtype
+    assert (narrow.counts != want.counts).nnz == 0
+
+
+def test_from_positions_refuses_bad_counts():
+    mdp = random_mdp(5, 2, density=0.5, seed=1)
+    counts = np.zeros((3, mdp.P.nnz), dtype=np.int64)
+    counts[1, 2] = -1
+    with pytest.raises(ModelError, match=">= 0"):
+        Experience.from_positions(mdp.P, counts)
+    with pytest.raises(ModelError, match="counts for a transition matrix"):
+        Experience.from_positions(mdp.P, np.zeros(mdp.P.nnz + 1, dtype=np.int64))
+    with pytest.raises(ModelError, match="counts for a transition matrix"):
+        Experience.from_positions(mdp.P, np.zeros((2, 2, mdp.P.nnz), dtype=np.int64))
