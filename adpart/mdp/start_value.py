@@ -17,7 +17,11 @@ answers each policy by what is asked:
    (its own equation solved), which zeroes ``r(s)`` and adds ``F_pi(p, s)`` times the change to
    each predecessor's residual. Work follows the states the policy change affects, not ``S``.
    When no residual exceeds ``theta`` the residual is computed afresh (no rounding carried
-   over) and the push resumes from any state still above it.
+   over) and the push resumes from any state still above it. "Afresh" is done where it can
+   change: on the states whose value, or a successor's value, moved since their residual was
+   last computed (tracked as the push goes); every other state's residual would come out the
+   same bits from the same inputs. So a check costs the states the push touched, not a pass
+   over all reachable states (the work counted for the budget is still one pass per check).
 4. **A stated error.** With ``rho`` the largest row mass of ``F_pi`` on the reachable states,
    ``V^pi - V = (I - F_pi)^{-1} r``, so ``|V^pi(s) - V(s)| <= max|r| / (1 - rho)`` there and the
    start value is within ``tol`` of the exact one once ``max|r| <= theta = tol (1 - rho)``
@@ -85,8 +89,11 @@ class StartValueSolver:
         self._last = np.zeros(S, dtype=np.int64)  # the policy the residual ``r`` is exact for
         self._carry = False  # whether it is (on every state)
         self._fresh = False  # whether every state has a value (after a call on all states)
+        # r, reach, members, fifo, queued, dirty, dirty list, rank (position in members)
         self._work = (np.zeros(S), np.zeros(S, dtype=np.bool_), np.empty(S, dtype=np.int64),
-                      np.empty(S, dtype=np.int64), np.zeros(S, dtype=np.bool_))
+                      np.empty(S, dtype=np.int64), np.zeros(S, dtype=np.bool_),
+                      np.zeros(S, dtype=np.bool_), np.empty(S, dtype=np.int64),
+                      np.empty(S, dtype=np.int64))
         self.pushed = 0  #: policies answered by the push (the others by the LU)
         self.factored = 0  #: policies answered by the LU of their reachable states
         self.work = 0.0  #: push work so far, in units of the reachable rows' nonzeros
@@ -230,22 +237,33 @@ def _kernel():
         push work in units of the reachable rows' nonzeros. With ``carry``, ``r`` is exact for
         ``V`` and the policy ``last`` on every state (the last call ended done, with every
         state reachable) and only the states whose action changed are recomputed; ``last``
-        becomes ``policy`` when done. ``fresh``: every state has a value already (``known``).
+        becomes ``policy`` when done. ``fresh``: every state has a value already (``known``),
+        and with ``full`` the identity ``members`` / ``rank`` are in place from the last call.
         Arrays by role: ``model`` = (indptr, indices, data, R_t), ``preds`` = (col_ptr, col_row,
         col_val, diag), ``values`` = (V, known, r), ``work_arrays`` = (reach, members, fifo,
-        queued), ``flags`` = (carry, fresh, full).
+        queued, dirty, dirty_list, rank), ``flags`` = (carry, fresh, full).
+
+        The residual "computed afresh" of step 3 is recomputed on the *dirty* states only: those
+        whose ``V`` or whose successor's ``V`` (under ``policy``) changed since their residual
+        was last computed. Every other state's ``r`` was computed by the same expression from
+        the same ``V`` entries and the same row, so recomputing it would give the same bits;
+        the dirty ones are recomputed in ``members`` order, so the states queued, their order
+        and every value are those of a pass over all reachable states. The work counted stays
+        one pass's worth per check (``nnz``), so the push-or-LU choice is unchanged.
         """
         indptr, indices, data, R_t = model
         col_ptr, col_row, col_val, diag = preds
         V, known, r = values
-        reach, members, fifo, queued = work_arrays
+        reach, members, fifo, queued, dirty, dirty_list, rank = work_arrays
         carry, fresh, full = flags
         S = R_t.shape[1]
         n = 0
         if full:
-            for s in range(S):
-                reach[s] = True
-                members[s] = s
+            if not fresh:  # the identity, written once: ``full`` never changes
+                for s in range(S):
+                    reach[s] = True
+                    members[s] = s
+                    rank[s] = s
             n = S
         else:
             reach[:] = False
@@ -253,6 +271,7 @@ def _kernel():
                 if mu[s] > 0.0:
                     reach[s] = True
                     members[n] = s
+                    rank[s] = n
                     n += 1
             head = 0
             while head < n:
@@ -264,6 +283,7 @@ def _kernel():
                     if not reach[t]:
                         reach[t] = True
                         members[n] = t
+                        rank[t] = n
                         n += 1
         if full and fresh:  # every state seen before: only the work unit to count
             nnz = S + (indptr[indptr.shape[0] - 1] * S) // (indptr.shape[0] - 1)
@@ -284,6 +304,7 @@ def _kernel():
         head = 0
         tail = 0
         count = 0
+        n_dirty = 0
         for i in range(n):  # the residual: of the changed rows, or afresh
             s = members[i]
             if carry and policy[s] == last[s]:
@@ -293,6 +314,7 @@ def _kernel():
             for k in range(indptr[row], indptr[row + 1]):
                 acc += data[k] * V[indices[k]]
             r[s] = acc + R_t[policy[s], s] - V[s]
+            last[s] = policy[s]
             if abs(r[s]) > theta:
                 fifo[tail] = s
                 tail += 1
@@ -313,12 +335,20 @@ def _kernel():
                 change = r[s] / (1.0 - diag[policy[s] * S + s])
                 V[s] += change
                 r[s] = 0.0
+                if not dirty[s]:
+                    dirty[s] = True
+                    dirty_list[n_dirty] = s
+                    n_dirty += 1
                 for k in range(col_ptr[s], col_ptr[s + 1]):
                     q = col_row[k]
                     p = q % S
                     if p == s or not reach[p] or q != policy[p] * S + p:
                         continue
                     r[p] += col_val[k] * change
+                    if not dirty[p]:
+                        dirty[p] = True
+                        dirty_list[n_dirty] = p
+                        n_dirty += 1
                     if not queued[p] and abs(r[p]) > theta:
                         queued[p] = True
                         fifo[tail] = p
@@ -334,27 +364,38 @@ def _kernel():
                         if head == S:
                             head = 0
                         count -= 1
+                    for j in range(n_dirty):
+                        dirty[dirty_list[j]] = False
                     return 0.0, 1, n, work / nnz
-            # the residual computed afresh (no rounding carried over): the bound's input
+            # the residual computed afresh (no rounding carried over), the bound's input: on
+            # the dirty states, in members order (the others' would come out the same)
             head = 0
             tail = 0
-            total = 0.0
-            for i in range(n):
-                s = members[i]
+            order = np.empty(n_dirty, dtype=np.int64)
+            for j in range(n_dirty):
+                order[j] = rank[dirty_list[j]]
+            order.sort()
+            for j in range(n_dirty):
+                s = members[order[j]]
+                dirty[s] = False
                 row = policy[s] * S + s
                 acc = 0.0
                 for k in range(indptr[row], indptr[row + 1]):
                     acc += data[k] * V[indices[k]]
                 r[s] = acc + R_t[policy[s], s] - V[s]
-                total += mu[s] * V[s]
                 last[s] = policy[s]
                 if abs(r[s]) > theta:
                     fifo[tail] = s
                     tail += 1
                     queued[s] = True
                     count += 1
+            n_dirty = 0
             work += nnz
             if count == 0:
+                total = 0.0
+                for i in range(n):
+                    s = members[i]
+                    total += mu[s] * V[s]
                 return total, 0, n, work / nnz
 
     return start_value_push

@@ -11,6 +11,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import scipy.sparse as sp
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from adpart.mdp.evaluation import policy_evaluation
 from adpart.mdp.generate import random_grid_mdp, random_mdp
@@ -130,3 +132,75 @@ def test_undiscounted_policies_take_the_lu_and_a_reachable_loop_scores_nan():
     assert solver(np.zeros(S, dtype=np.int64)) == pytest.approx(-2.0)
     assert np.isnan(solver(np.array([0, 1, 0, 0, 0])))
     assert solver.factored == 2 and solver.pushed == 0
+
+
+# ------------------------------------------------------------- against a dense solve, by chance
+
+
+def _dense_start_value(mdp: FiniteMDP, policy: np.ndarray, mu: np.ndarray) -> float:
+    """``mu . (I - gamma P_pi)^{-1} R_pi`` by a dense ``np.linalg.solve``, terminal states worth
+    0 (their rows and rewards zeroed): an oracle that shares no code with the solver."""
+    S = mdp.n_states
+    P = mdp.P.toarray().reshape(mdp.n_actions, S, S)
+    P_pi = P[policy, np.arange(S)] * ~mdp.terminal[:, None]
+    R_pi = np.where(mdp.terminal, 0.0, mdp.R[np.arange(S), policy])
+    return float(mu @ np.linalg.solve(np.eye(S) - mdp.gamma * P_pi, R_pi))
+
+
+def _fresh_residual(solver: StartValueSolver, policy: np.ndarray) -> np.ndarray:
+    """``R_pi + F_pi V - V`` of every state, each row summed in CSR order from 0 as the kernel
+    sums it (plain Python floats: IEEE doubles, the same operations in the same order)."""
+    L, V, S = solver._layout, solver.V, solver.V.size
+    r = np.empty(S)
+    for s in range(S):
+        row = int(policy[s]) * S + s
+        acc = 0.0
+        for k in range(L.indptr[row], L.indptr[row + 1]):
+            acc += float(L.data[k]) * float(V[L.indices[k]])
+        r[s] = acc + float(solver._R_t[policy[s], s]) - float(V[s])
+    return r
+
+
+@settings(max_examples=60, deadline=None)
+@given(S=st.integers(2, 25), A=st.integers(1, 4), gamma=st.floats(0.3, 0.99),
+       density=st.floats(0.05, 0.6), narrow=st.booleans(),
+       budget=st.sampled_from([0.0, 0.5, 8.0, 1e9]), seed=st.integers(0, 2**31 - 1))
+def test_every_path_equals_a_dense_solve(S, A, gamma, density, narrow, budget, seed):
+    # random models with terminal states, every state a start or a few, policies that move
+    # a few states or many between calls, and every budget from "always the LU" to "never"
+    rng = np.random.default_rng(seed)
+    base = random_mdp(S, A, density=density, seed=int(rng.integers(2**31)), gamma=gamma)
+    terminal = rng.random(S) < 0.2
+    terminal[0] = False
+    if narrow:
+        initial = np.zeros(S)
+        initial[rng.choice(np.flatnonzero(~terminal), size=1)] = 1.0
+    else:
+        initial = np.where(terminal, 0.0, rng.uniform(0.1, 1.0, S))
+    mu = initial / initial.sum()
+    mdp = FiniteMDP(base.P, rng.normal(0, 5, size=(S, A)), gamma, terminal=terminal,
+                    initial=mu)
+    solver = StartValueSolver(mdp, mu, budget=budget)
+    pol = rng.integers(0, A, size=S)
+    for _ in range(8):
+        value = solver(pol)
+        assert abs(value - _dense_start_value(mdp, pol, mu)) <= EXACT
+        if solver._carry:  # the residual carried to the next call is exact, bit for bit
+            assert np.array_equal(solver._work[0], _fresh_residual(solver, pol))
+        flips = rng.choice(S, size=int(rng.integers(0, S + 1)), replace=False)
+        pol = pol.copy()
+        pol[flips] = rng.integers(0, A, size=flips.size)
+
+
+def test_the_carried_residual_is_recomputed_wherever_it_moved():
+    # the check after a push recomputes the residual only where V (or a successor's V) moved;
+    # on a grid, where a push spreads through many states, the residual left for the next call
+    # must still be the one computed afresh on every state, bit for bit
+    rng = np.random.default_rng(0)
+    mdp = random_grid_mdp(400, gamma=0.95, seed=1)
+    mu = np.full(mdp.n_states, 1.0 / mdp.n_states)
+    solver = StartValueSolver(mdp, mu, budget=1e9)
+    for pol in _policies(rng, mdp.n_states, 4, 40, 5):
+        assert abs(solver(pol) - _exact(mdp, pol, mu)) <= EXACT
+        assert solver._carry
+        assert np.array_equal(solver._work[0], _fresh_residual(solver, pol))
