@@ -565,7 +565,7 @@ class StartValues:
                 self._store[key] = value  # most recently used last
                 self._values[k] = value
         for key, runs in todo.items():
-            policy = policies[runs[0]].astype(np.int64)
+            policy = policies[runs[0]]  # the learner's dtype (the solver reads int8 as is)
             if not self._all_admissible and not np.all(
                     self._smdp.admissible[np.arange(policy.size), policy]):
                 raise ModelError("a policy to score chooses an inadmissible action")

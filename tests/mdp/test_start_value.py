@@ -204,3 +204,21 @@ def test_the_carried_residual_is_recomputed_wherever_it_moved():
         assert abs(solver(pol) - _exact(mdp, pol, mu)) <= EXACT
         assert solver._carry
         assert np.array_equal(solver._work[0], _fresh_residual(solver, pol))
+
+
+def test_int8_policies_score_as_int64_ones():
+    # the learners hand their int8 greedy policies over as they are: same values, bit for bit,
+    # on both paths (the push, and the LU where the budget is spent)
+    rng = np.random.default_rng(11)
+    mdp = random_grid_mdp(400, gamma=0.95, seed=2)
+    mu = np.full(mdp.n_states, 1.0 / mdp.n_states)
+    for budget in (8.0, 0.0):
+        wide, narrow = StartValueSolver(mdp, mu, budget=budget), StartValueSolver(mdp, mu,
+                                                                                  budget=budget)
+        for pol in _policies(rng, mdp.n_states, 4, 12, 20):
+            assert wide(pol) == narrow(pol.astype(np.int8))
+        assert wide.pushed == narrow.pushed and wide.factored == narrow.factored
+    mixed = StartValueSolver(mdp, mu)  # int8 first, then int64: the same values as before
+    pols = _policies(rng, mdp.n_states, 4, 6, 20)
+    values = [mixed(p.astype(np.int8) if i % 2 == 0 else p) for i, p in enumerate(pols)]
+    assert all(abs(v - _exact(mdp, p, mu)) <= EXACT for v, p in zip(values, pols, strict=True))
