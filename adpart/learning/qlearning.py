@@ -32,6 +32,7 @@ Design choices (documented in ``docs/learning.md``):
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -88,6 +89,27 @@ def _policy_dtype(n_actions: int) -> np.dtype:
     return np.dtype(np.int64)
 
 
+_ADMISSIBLE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _admissible_arrays(mdp: FiniteMDP) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(adm_ptr, adm_idx, first)``: the admissible actions of every state in CSR form and the
+    lowest admissible action of each (0 where none is), made once per model (the kernel only
+    reads them)."""
+    arrays = _ADMISSIBLE.get(mdp)
+    if arrays is None:
+        S = mdp.n_states
+        rows, cols = np.nonzero(mdp.admissible)
+        adm_ptr = np.zeros(S + 1, dtype=np.int64)
+        np.cumsum(np.bincount(rows, minlength=S), out=adm_ptr[1:])
+        adm_idx = cols.astype(np.int64)
+        first = np.zeros(S, dtype=np.int64)
+        some = adm_ptr[1:] > adm_ptr[:-1]
+        first[some] = adm_idx[adm_ptr[:-1][some]]
+        arrays = _ADMISSIBLE[mdp] = (adm_ptr, adm_idx, first)
+    return arrays
+
+
 def _initial_state(
     mdp: FiniteMDP, runs: int, episodes: int, horizon: int, alpha: Schedule, epsilon: Schedule,
     q_init: float, mu: np.ndarray,
@@ -95,9 +117,7 @@ def _initial_state(
     S, A = mdp.n_states, mdp.n_actions
     keys, indptr, indices = mdp.sampler_arrays  # the keys FiniteMDP.sample_next searches
     adm = mdp.admissible
-    rows, cols = np.nonzero(adm)
-    adm_ptr = np.zeros(S + 1, dtype=np.int64)
-    np.cumsum(np.bincount(rows, minlength=S), out=adm_ptr[1:])
+    adm_ptr, adm_idx, first = _admissible_arrays(mdp)
     start_cdf = np.cumsum(mu)
     # One (K, S, A) allocation, written only where it is not 0: np.zeros maps untouched pages
     # lazily, so with q_init = 0 the kernel pays only for the rows it visits.
@@ -113,7 +133,7 @@ def _initial_state(
         R=np.ascontiguousarray(mdp.R, dtype=np.float64),
         terminal=np.ascontiguousarray(mdp.terminal, dtype=bool),
         adm_ptr=adm_ptr,
-        adm_idx=cols.astype(np.int64),
+        adm_idx=adm_idx,
         start_cdf=start_cdf,
         last_start=int(np.flatnonzero(mu > 0)[-1]),
         gamma=float(mdp.gamma),
@@ -134,7 +154,8 @@ def _initial_state(
         gpow=np.ones(runs),
         alpha_ep=np.zeros(runs),
         eps_ep=np.zeros(runs),
-        U=np.zeros((runs, BLOCK_ROWS, _kernels.UNIFORMS_PER_STEP)),
+        # written by the first refill before the kernel reads it (cursor at the end)
+        U=np.empty((runs, BLOCK_ROWS, _kernels.UNIFORMS_PER_STEP)),
         cursor=np.full(runs, BLOCK_ROWS, dtype=np.int64),
         out_steps=np.zeros((runs, episodes), dtype=np.int64),
         out_ret=np.zeros((runs, episodes)),
@@ -143,7 +164,10 @@ def _initial_state(
         policy=np.empty((runs, S), dtype=_policy_dtype(A)),
         changed=np.ones(runs, dtype=bool),
     )
-    st.policy[:] = greedy_policy(np.where(adm, float(q_init), -np.inf))
+    if q_init > -np.inf:  # every admissible entry equal and above -inf: the lowest one
+        st.policy[:] = first
+    else:
+        st.policy[:] = greedy_policy(np.where(adm, float(q_init), -np.inf))
     st.episode_factors(np.arange(runs))
     return st
 

@@ -336,6 +336,28 @@ def test_admissible_actions_only():
     assert np.all(res.visits.sum(axis=0)[adm & ~mdp.terminal[:, None]] > 0)
 
 
+@pytest.mark.parametrize("q_init", [0.0, -3.5, 7.0, np.inf, -np.inf])
+def test_the_initial_policy_is_the_greedy_one_of_the_initial_q(q_init):
+    # the kernel starts from the lowest admissible action of every state (kept per model), which
+    # must be the evaluated greedy policy of the initial table (greedy_policy, computed here)
+    from adpart.learning.curves import start_distribution
+    from adpart.learning.qlearning import _initial_state
+    from adpart.mdp.evaluation import greedy_policy
+
+    rng = np.random.default_rng(4)
+    base = random_mdp(40, 4, density=0.2, seed=3)
+    adm = rng.random((40, 4)) < 0.6
+    adm[np.arange(40), rng.integers(0, 4, 40)] = True
+    mdp = FiniteMDP(base.P, base.R, 0.9, admissible=adm)
+    run = Run()
+    for _ in range(2):  # a fresh model's arrays, then the kept ones
+        st = _initial_state(mdp, 3, 2, 5, run.alpha, run.epsilon, q_init,
+                            start_distribution(mdp))
+        want = greedy_policy(np.where(adm, q_init, -np.inf))
+        assert np.array_equal(st.policy, np.broadcast_to(want, (3, 40)))
+        assert np.array_equal(st.adm_idx[st.adm_ptr[:-1]], np.argmax(adm, axis=1))
+
+
 # ----------------------------------------------------------------------------- episode rules
 
 
