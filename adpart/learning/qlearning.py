@@ -220,8 +220,11 @@ def q_learning(mdp: FiniteMDP, run: Run | None = None) -> QLearningResult:
         st.target[:] = boundary
         while step_kernel(st):
             for k in np.flatnonzero((st.cursor == BLOCK_ROWS) & (st.episode < st.target)):
-                rngs[k].random(out=st.U[k])
-                st.cursor[k] = 0
+                # no more rows than the run can still use (all its episodes at the step limit),
+                # at the buffer's end: a run's stream is consumed in order either way
+                rows = min(BLOCK_ROWS, int((N - st.episode[k]) * H - st.t_ep[k]))
+                rngs[k].random(out=st.U[k, BLOCK_ROWS - rows:])
+                st.cursor[k] = BLOCK_ROWS - rows
         with world():
             eval_value[:, boundary - 1] = score(st.policy, st.changed)
         if progress is not None:
