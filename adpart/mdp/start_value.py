@@ -102,10 +102,10 @@ class StartValueSolver:
                       np.empty(S, dtype=np.int64), np.zeros(S, dtype=np.bool_),
                       np.zeros(S, dtype=np.bool_), np.empty(S, dtype=np.int64),
                       np.empty(S, dtype=np.int64))
-        # each row's residual as last computed afresh and 1.0 while it holds (module docstring,
+        # each row's residual as last computed afresh, NaN where it is not (module docstring,
         # step 3), state-major: a state's rows share a cache line, and the states a policy
         # change touches lie close together
-        self._row_residual = np.zeros((S, smdp.n_actions, 2))
+        self._row_residual = np.full((S, smdp.n_actions), np.nan)
         self.pushed = 0  #: policies answered by the push (the others by the LU)
         self.factored = 0  #: policies answered by the LU of their reachable states
         self.work = 0.0  #: push work so far, in units of the reachable rows' nonzeros
@@ -164,7 +164,7 @@ class StartValueSolver:
             return float("nan")
         self.V[members] = V
         self._known[members] = True
-        self._row_residual[:, :, 1] = 0.0  # every row that reads these values is stale
+        self._row_residual.fill(np.nan)  # every row that reads these values is stale
         # einsum, not BLAS ddot: a threaded ddot spin-waits on a loaded machine (solvers._dot)
         return float(np.einsum("i,i->", V, self._mu[members]))
 
@@ -273,11 +273,12 @@ def _kernel():
         and every value are those of a pass over all reachable states. The work counted stays
         one pass's worth per check (``nnz``), so the push-or-LU choice is unchanged.
 
-        Every residual computed afresh is kept per row (``row_r[s, o, 0]``, with
-        ``row_r[s, o, 1] = 1``) until a value it reads moves (``V(s)`` or a successor's: the
-        push clears the flag of the rows it affects, the LU all of them); with ``full`` and no
-        carry (the first call, or the first after an LU) every row's is computed in one pass in
-        memory order, so a policy change reads its residuals instead of its rows.
+        Every residual computed afresh is kept per row (``row_r[s, o]``; NaN where none is)
+        until a value it reads moves (``V(s)`` or a successor's: the push resets the rows it
+        affects to NaN, the LU all of them; a residual that is itself NaN is recomputed); with
+        ``full`` and no carry (the first call, or the first after an LU) every row's is computed
+        in one pass in memory order, so a policy change reads its residuals instead of its
+        rows.
         """
         indptr, indices, data, R_t = model
         col_ptr, col_row, col_val, diag = preds
@@ -331,13 +332,12 @@ def _kernel():
         if full and not carry:  # every row's residual, in one pass in memory order
             for o in range(n_opts):
                 for s in range(S):
-                    if row_r[s, o, 1] == 0.0:
+                    if np.isnan(row_r[s, o]):
                         row = o * S + s
                         acc = 0.0
                         for k in range(indptr[row], indptr[row + 1]):
                             acc += data[k] * V[indices[k]]
-                        row_r[s, o, 0] = acc + R_t[o, s] - V[s]
-                        row_r[s, o, 1] = 1.0
+                        row_r[s, o] = acc + R_t[o, s] - V[s]
         allowed = budget * nnz
         work = 0
         head = 0
@@ -354,13 +354,14 @@ def _kernel():
             s = dirty_list[i] if carry else members[i]
             row = policy[s] * S + s
             o = policy[s]
-            if row_r[s, o, 1] == 0.0:
+            x = row_r[s, o]
+            if np.isnan(x):
                 acc = 0.0
                 for k in range(indptr[row], indptr[row + 1]):
                     acc += data[k] * V[indices[k]]
-                row_r[s, o, 0] = acc + R_t[o, s] - V[s]
-                row_r[s, o, 1] = 1.0
-            r[s] = row_r[s, o, 0]
+                x = acc + R_t[o, s] - V[s]
+                row_r[s, o] = x
+            r[s] = x
             last[s] = policy[s]
             if abs(r[s]) > theta:
                 fifo[tail] = s
@@ -387,11 +388,11 @@ def _kernel():
                     dirty_list[n_dirty] = s
                     n_dirty += 1
                 for o in range(n_opts):  # every row of s reads V(s)
-                    row_r[s, o, 1] = 0.0
+                    row_r[s, o] = np.nan
                 for k in range(col_ptr[s], col_ptr[s + 1]):
                     q = col_row[k]
                     p = q % S
-                    row_r[p, q // S, 1] = 0.0  # a row with s as successor
+                    row_r[p, q // S] = np.nan  # a row with s as successor
                     if p == s or not reach[p] or q != policy[p] * S + p:
                         continue
                     r[p] += col_val[k] * change
@@ -430,13 +431,14 @@ def _kernel():
                 dirty[s] = False
                 row = policy[s] * S + s
                 o = policy[s]
-                if row_r[s, o, 1] == 0.0:
+                x = row_r[s, o]
+                if np.isnan(x):
                     acc = 0.0
                     for k in range(indptr[row], indptr[row + 1]):
                         acc += data[k] * V[indices[k]]
-                    row_r[s, o, 0] = acc + R_t[o, s] - V[s]
-                    row_r[s, o, 1] = 1.0
-                r[s] = row_r[s, o, 0]
+                    x = acc + R_t[o, s] - V[s]
+                    row_r[s, o] = x
+                r[s] = x
                 last[s] = policy[s]
                 if abs(r[s]) > theta:
                     fifo[tail] = s
