@@ -348,8 +348,9 @@ def _kernel():
         if carry:
             n_todo = 0
             for s in range(S):  # a tight scan first (the loop below is too big to run fast)
-                dirty_list[n_todo] = s
-                n_todo += policy[s] != last[s]
+                if policy[s] != last[s]:
+                    dirty_list[n_todo] = s
+                    n_todo += 1
         for i in range(n_todo):
             s = dirty_list[i] if carry else members[i]
             row = policy[s] * S + s
@@ -458,23 +459,21 @@ def _kernel():
                     part1 = 0.0
                     part2 = 0.0
                     part3 = 0.0
-                    i = lo
-                    while i + 4 <= hi:
-                        if full:
+                    if full:
+                        for i in range(lo, hi - 3, 4):
                             part0 += mu[i] * V[i]
                             part1 += mu[i + 1] * V[i + 1]
                             part2 += mu[i + 2] * V[i + 2]
                             part3 += mu[i + 3] * V[i + 3]
-                        else:
+                    else:
+                        for i in range(lo, hi - 3, 4):
                             part0 += mu[members[i]] * V[members[i]]
                             part1 += mu[members[i + 1]] * V[members[i + 1]]
                             part2 += mu[members[i + 2]] * V[members[i + 2]]
                             part3 += mu[members[i + 3]] * V[members[i + 3]]
-                        i += 4
-                    while i < hi:
+                    for i in range(hi - (hi - lo) % 4, hi):
                         s = i if full else members[i]
                         part0 += mu[s] * V[s]
-                        i += 1
                     total += (part0 + part1) + (part2 + part3)
                 return total, 0, n, work / nnz
 
