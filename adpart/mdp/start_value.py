@@ -68,6 +68,9 @@ _UNDISCOUNTED = 1e-12
 #: Kernel status codes.
 _DONE, _OVER_BUDGET = 0, 1
 
+#: States per block of the start value's sum (a power of two: the kernel shifts by its log).
+_BLOCK = 256
+
 
 class StartValueSolver:
     """``sum_s mu(s) V^pi(s)`` of deterministic policies of one model, each solved from the
@@ -106,6 +109,8 @@ class StartValueSolver:
         # step 3), state-major: a state's rows share a cache line, and the states a policy
         # change touches lie close together
         self._row_residual = np.full((S, smdp.n_actions), np.nan)
+        # sum_s mu(s) V(s) of every block of _BLOCK states, NaN where V moved since (with full)
+        self._block_sums = np.full(-(-S // _BLOCK), np.nan)
         self.pushed = 0  #: policies answered by the push (the others by the LU)
         self.factored = 0  #: policies answered by the LU of their reachable states
         self.work = 0.0  #: push work so far, in units of the reachable rows' nonzeros
@@ -125,7 +130,8 @@ class StartValueSolver:
             value, status, n, work = _kernel()(
                 (L.indptr, L.indices, L.data, self._R_t),
                 (L.col_ptr, L.col_row, L.col_val, L.diag), pol, self._last, self._mu,
-                (self.V, self._known, self._work[0], self._row_residual), self._work[1:],
+                (self.V, self._known, self._work[0], self._row_residual, self._block_sums),
+                self._work[1:],
                 (self._carry, self._fresh, self._full), self._tol * (1.0 - self._rho),
                 self._budget)
             self.work += work
@@ -165,6 +171,7 @@ class StartValueSolver:
         self.V[members] = V
         self._known[members] = True
         self._row_residual.fill(np.nan)  # every row that reads these values is stale
+        self._block_sums.fill(np.nan)
         # einsum, not BLAS ddot: a threaded ddot spin-waits on a loaded machine (solvers._dot)
         return float(np.einsum("i,i->", V, self._mu[members]))
 
@@ -262,7 +269,7 @@ def _kernel():
         becomes ``policy`` when done. ``fresh``: every state has a value already (``known``),
         and with ``full`` the identity ``members`` / ``rank`` are in place from the last call.
         Arrays by role: ``model`` = (indptr, indices, data, R_t), ``preds`` = (col_ptr, col_row,
-        col_val, diag), ``values`` = (V, known, r, row_r), ``work_arrays`` = (reach,
+        col_val, diag), ``values`` = (V, known, r, row_r, block_sums), ``work_arrays`` = (reach,
         members, fifo, queued, dirty, dirty_list, rank), ``flags`` = (carry, fresh, full).
 
         The residual "computed afresh" of step 3 is recomputed on the *dirty* states only: those
@@ -282,7 +289,7 @@ def _kernel():
         """
         indptr, indices, data, R_t = model
         col_ptr, col_row, col_val, diag = preds
-        V, known, r, row_r = values
+        V, known, r, row_r, block_sums = values
         reach, members, fifo, queued, dirty, dirty_list, rank = work_arrays
         carry, fresh, full = flags
         S = R_t.shape[1]
@@ -329,6 +336,7 @@ def _kernel():
                         mass += data[k]
                     V[s] = R_t[policy[s], s] / (1.0 - mass)
                     known[s] = True
+                    block_sums[s >> 8] = np.nan
         if full and not carry:  # every row's residual, in one pass in memory order
             for o in range(n_opts):
                 for s in range(S):
@@ -347,7 +355,18 @@ def _kernel():
         n_todo = n  # the residual: of the changed rows (with carry, which implies full), or afresh
         if carry:
             n_todo = 0
-            for s in range(S):  # a tight scan first (the loop below is too big to run fast)
+            # a tight scan first (the loop below is too big to run fast), eight bytes at a time
+            per_word = 8 // policy.itemsize
+            n_words = S // per_word
+            policy_words = policy[:n_words * per_word].view(np.uint64)
+            last_words = last[:n_words * per_word].view(np.uint64)
+            for w in range(n_words):
+                if policy_words[w] != last_words[w]:
+                    for s in range(w * per_word, (w + 1) * per_word):
+                        if policy[s] != last[s]:
+                            dirty_list[n_todo] = s
+                            n_todo += 1
+            for s in range(n_words * per_word, S):
                 if policy[s] != last[s]:
                     dirty_list[n_todo] = s
                     n_todo += 1
@@ -383,6 +402,7 @@ def _kernel():
                 queued[s] = False
                 change = r[s] / (1.0 - diag[policy[s] * S + s])
                 V[s] += change
+                block_sums[s >> 8] = np.nan
                 r[s] = 0.0
                 if not dirty[s]:
                     dirty[s] = True
@@ -451,9 +471,14 @@ def _kernel():
             if count == 0:
                 # sum mu V by blocks of 256 terms, each in four interleaved partial sums: one
                 # running sum waits on every addition (1 ms per ten policies at 10^5 states)
-                # and its rounding grows with S (3.7e-11 of a start value near -20 at 10^5)
+                # and its rounding grows with S (3.7e-11 of a start value near -20 at 10^5);
+                # with every state a start, a block's sum is kept until one of its values moves
                 total = 0.0
-                for lo in range(0, n, 256):
+                for block in range((n + 255) >> 8):
+                    if full and not np.isnan(block_sums[block]):
+                        total += block_sums[block]  # no value in it moved: the same bits
+                        continue
+                    lo = block << 8
                     hi = min(lo + 256, n)
                     part0 = 0.0
                     part1 = 0.0
@@ -474,7 +499,10 @@ def _kernel():
                     for i in range(hi - (hi - lo) % 4, hi):
                         s = i if full else members[i]
                         part0 += mu[s] * V[s]
-                    total += (part0 + part1) + (part2 + part3)
+                    block_total = (part0 + part1) + (part2 + part3)
+                    if full:
+                        block_sums[block] = block_total
+                    total += block_total
                 return total, 0, n, work / nnz
 
     return start_value_push

@@ -164,8 +164,9 @@ def _fresh_residual(solver: StartValueSolver, policy: np.ndarray) -> np.ndarray:
 @settings(max_examples=60, deadline=None)
 @given(S=st.integers(2, 25), A=st.integers(1, 4), gamma=st.floats(0.3, 0.99),
        density=st.floats(0.05, 0.6), narrow=st.booleans(),
-       budget=st.sampled_from([0.0, 0.5, 8.0, 1e9]), seed=st.integers(0, 2**31 - 1))
-def test_every_path_equals_a_dense_solve(S, A, gamma, density, narrow, budget, seed):
+       budget=st.sampled_from([0.0, 0.5, 8.0, 1e9]), int8=st.booleans(),
+       seed=st.integers(0, 2**31 - 1))
+def test_every_path_equals_a_dense_solve(S, A, gamma, density, narrow, budget, int8, seed):
     # random models with terminal states, every state a start or a few, policies that move
     # a few states or many between calls, and every budget from "always the LU" to "never"
     rng = np.random.default_rng(seed)
@@ -183,7 +184,7 @@ def test_every_path_equals_a_dense_solve(S, A, gamma, density, narrow, budget, s
     solver = StartValueSolver(mdp, mu, budget=budget)
     pol = rng.integers(0, A, size=S)
     for _ in range(8):
-        value = solver(pol)
+        value = solver(pol.astype(np.int8) if int8 else pol)
         assert abs(value - _dense_start_value(mdp, pol, mu)) <= EXACT
         if solver._carry:  # the residual carried to the next call is exact, bit for bit
             assert np.array_equal(solver._work[0], _fresh_residual(solver, pol))
@@ -192,18 +193,37 @@ def test_every_path_equals_a_dense_solve(S, A, gamma, density, narrow, budget, s
         pol[flips] = rng.integers(0, A, size=flips.size)
 
 
+def _blocked_sum(mu: np.ndarray, V: np.ndarray) -> float:
+    """``sum mu V`` as the solver adds it: blocks of 256 states, each in four partial sums
+    (state ``i`` into sum ``i % 4``, the block's last ``len % 4`` into the first), the blocks'
+    sums in order."""
+    total = 0.0
+    for lo in range(0, mu.size, 256):
+        hi = min(lo + 256, mu.size)
+        parts = [0.0, 0.0, 0.0, 0.0]
+        for i in range(lo, hi - (hi - lo) % 4):
+            parts[(i - lo) % 4] += float(mu[i]) * float(V[i])
+        for i in range(hi - (hi - lo) % 4, hi):
+            parts[0] += float(mu[i]) * float(V[i])
+        total += (parts[0] + parts[1]) + (parts[2] + parts[3])
+    return total
+
+
 def test_the_carried_residual_is_recomputed_wherever_it_moved():
-    # the check after a push recomputes the residual only where V (or a successor's V) moved;
-    # on a grid, where a push spreads through many states, the residual left for the next call
-    # must still be the one computed afresh on every state, bit for bit
+    # the check after a push recomputes the residual only where V (or a successor's V) moved,
+    # and the start value's sum only the blocks where V moved; on a grid, where a push spreads
+    # through many states, the residual left for the next call must still be the one computed
+    # afresh on every state, and the value the sum of every block afresh, bit for bit
     rng = np.random.default_rng(0)
     mdp = random_grid_mdp(400, gamma=0.95, seed=1)
-    mu = np.full(mdp.n_states, 1.0 / mdp.n_states)
+    mu = rng.dirichlet(np.ones(mdp.n_states))
     solver = StartValueSolver(mdp, mu, budget=1e9)
     for pol in _policies(rng, mdp.n_states, 4, 40, 5):
-        assert abs(solver(pol) - _exact(mdp, pol, mu)) <= EXACT
+        value = solver(pol.astype(np.int8))
+        assert abs(value - _exact(mdp, pol, mu)) <= EXACT
         assert solver._carry
         assert np.array_equal(solver._work[0], _fresh_residual(solver, pol))
+        assert value == _blocked_sum(mu, solver.V)
 
 
 def test_int8_policies_score_as_int64_ones():
