@@ -534,7 +534,8 @@ class StartValues:
     states (``benchmarks/bench_qlearning.py``) this took the end-to-end call's scoring from one
     LU per distinct policy to a fraction of the kernel's time. The dict replaces the int64 row
     hashes of :func:`distinct_rows` here: policies are stored in the learner's smallest action
-    dtype (int8: ``S`` bytes), and no ``(K, S)`` int64 copy is made.
+    dtype (int8: ``S`` bytes), and no int64 copy of a policy is made (the solver reads int8
+    policies as they are).
     The store keeps the most recently used policies up to ``store_bytes``.
     """
 

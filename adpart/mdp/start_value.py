@@ -39,8 +39,10 @@ answers each policy by what is asked:
 
 The start value itself is summed by blocks of 256 states in four partial sums each (a single
 running sum over ``S`` terms both waits on every addition and rounds off about 4e-11 of a start
-value near -20 at 10^5 states). Policies come as int8 (the learners' greedy policies) or any
-integer type. The compiled kernel loads with numba on the first call (``cache=True``).
+value near -20 at 10^5 states); when every state is a start, each block's sum is kept until a
+value in it moves. Policies come as int8 (the learners' greedy policies) or any integer type,
+and a policy is compared with the last one eight bytes at a time. The compiled kernel loads
+with numba on the first call (``cache=True``).
 """
 
 from __future__ import annotations
@@ -68,7 +70,7 @@ _UNDISCOUNTED = 1e-12
 #: Kernel status codes.
 _DONE, _OVER_BUDGET = 0, 1
 
-#: States per block of the start value's sum (a power of two: the kernel shifts by its log).
+#: States per block of the start value's sum (the kernel's blocks: it shifts state ids by 8).
 _BLOCK = 256
 
 
@@ -285,7 +287,8 @@ def _kernel():
         affects to NaN, the LU all of them; a residual that is itself NaN is recomputed); with
         ``full`` and no carry (the first call, or the first after an LU) every row's is computed
         in one pass in memory order, so a policy change reads its residuals instead of its
-        rows.
+        rows. With ``full``, ``block_sums[b]`` keeps ``mu . V`` over states ``256 b ..`` (NaN once
+        one of their values moves), so the start value re-adds only the blocks that changed.
         """
         indptr, indices, data, R_t = model
         col_ptr, col_row, col_val, diag = preds
