@@ -15,6 +15,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import shortest_path
 
 from adpart.mdp.generate import GRID_ACTION_NAMES, GRID_MOVES, _canonical_csr
 from adpart.mdp.model import FiniteMDP
@@ -60,3 +62,17 @@ def rooms_grid_mdp(
     return FiniteMDP(P, R, gamma, terminal=terminal, initial=initial,
                      features={"row": row, "col": col}, action_names=GRID_ACTION_NAMES,
                      name=f"rooms-grid-{n}")
+
+
+def distance_policy(mdp: FiniteMDP) -> np.ndarray:
+    """The policy greedy on the breadth-first distance to the nearest terminal state: in each
+    state the action whose expected next distance is least (ties to the lowest action). Optimal
+    for a deterministic grid with step cost -1; computed in one BFS, where value iteration at
+    10^6 states with gamma near 1 would dominate a benchmark."""
+    S, A = mdp.n_states, mdp.n_actions
+    P = mdp.P.tocoo()
+    graph = sp.csr_array((np.ones(P.nnz), (P.row % S, P.col)), shape=(S, S))
+    goals = np.flatnonzero(mdp.terminal)
+    distance = shortest_path(graph.T, unweighted=True, indices=goals, directed=True)
+    expected = (mdp.P @ np.atleast_2d(distance).min(axis=0)).reshape(A, S)
+    return expected.argmin(axis=0).astype(np.int64)

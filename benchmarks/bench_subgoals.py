@@ -1,9 +1,14 @@
 """Exhaustive vs Monte Carlo subgoal discovery (sections 4.1.1, 4.1.1.2; Figs. 5.7-5.8).
 
 Workloads: ``three-floor-arm`` (3,600 states, task ``deliver``, optimal policy from
-:func:`adpart.mdp.solvers.solve`), and slippery grids ``random_grid_mdp(n, slip=0.2)`` of 10^5
+:func:`adpart.mdp.solvers.solve`); slippery open grids ``random_grid_mdp(n, slip=0.2)`` of 10^5
 and 10^6 cells with one terminal goal in a corner, reward -1 per step, and the
-shortest-path policy of :func:`goal_grid`. Each detector runs with
+shortest-path policy of :func:`goal_grid` (both detectors find no subgoals there: a speed with an
+empty answer); and grids of rooms joined by doorways, ``rooms_grid_mdp(n, room, slip=0)`` of
+10^4-10^6 cells, goal in the south-east corner, the shortest-path policy of
+:func:`~benchmarks._models.distance_policy`, where the count metric finds subgoals in front of
+the doorways (:func:`rooms`: the sets, their agreement and the exhaustive set's own agreement
+across seeds are printed beside the speed). Each detector runs with
 seed 0, once with its defaults and once with the opt-in every-path ratios and predicted-agreement
 stop (:data:`CHOICES`); printed: wall time (best of ``repeats``), the number of subgoals of
 each and their overlap, the ratio exhaustive / Monte Carlo, and the MC samples and stop rule.
@@ -28,6 +33,7 @@ from adpart.params import build_settings
 from adpart.subgoals.discover import discover_exhaustive, discover_monte_carlo
 from adpart.subgoals.result import SubgoalResult
 from adpart.subgoals.settings import CountSettings, MonteCarloSettings
+from benchmarks._models import distance_policy, rooms_grid_mdp
 
 
 def goal_grid(n: int) -> tuple[FiniteMDP, np.ndarray]:
@@ -70,6 +76,7 @@ CHOICES: dict[str, tuple[CountSettings, MonteCarloSettings]] = {
 def run(label: str, mdp: FiniteMDP, policy: np.ndarray, repeats: int,
         choice: str = "defaults") -> None:
     ex_set, mc_set = CHOICES[choice]
+    discover_exhaustive(mdp, policy, np.random.default_rng(0), ex_set)  # compiled, caches warm
     te, ex = best(lambda: discover_exhaustive(mdp, policy, np.random.default_rng(0), ex_set),
                   repeats)
     tm, mc = best(lambda: discover_monte_carlo(mdp, policy, np.random.default_rng(0), mc_set),
@@ -130,7 +137,49 @@ def _jaccard(a: np.ndarray, b: np.ndarray) -> float:
     return np.intersect1d(a, b).size / union if union else 1.0
 
 
+ROOM_WORKLOADS = ((10**4, 20), (10**5, 30), (10**6, 100))
+
+
+def rooms(workloads: tuple[tuple[int, int], ...] = ROOM_WORKLOADS,
+          seeds: tuple[int, ...] = (0, 1, 2)) -> list[dict]:
+    """Both detectors on the rooms grids with doorways (deterministic moves, the shortest-path
+    policy), each choice and seed: times (warm, best of 2), subgoal counts, ``J`` (Monte Carlo
+    against the exhaustive set of the same seed) and ``exh~0`` (the exhaustive set against
+    seed 0's: how much the answer itself depends on the seed)."""
+    print("rooms grids with doorways: exhaustive (eq. 4.1) vs Monte Carlo (def. 4.4)")
+    print(f"{'workload':<22} {'choice':<26} {'seed':>4} {'exh s':>7} {'MC s':>7} {'MC/exh':>7} "
+          f"{'#exh':>5} {'#MC':>5} {'J':>5} {'exh~0':>5} {'samples':>7} stop")
+    rows = []
+    for n, room in workloads:
+        mdp = rooms_grid_mdp(n, room=room, slip=0.0)
+        policy = distance_policy(mdp)
+        label = f"rooms {mdp.n_states:,} ({room})"
+        for choice, (ex_set, mc_set) in CHOICES.items():
+            discover_exhaustive(mdp, policy, np.random.default_rng(0), ex_set)  # warm
+            first = None
+            for seed in seeds:
+                te, ex = best(lambda m=mdp, p=policy, c=ex_set, s=seed: discover_exhaustive(
+                    m, p, np.random.default_rng(s), c), 2)
+                tm, mc = best(lambda m=mdp, p=policy, c=mc_set, s=seed: discover_monte_carlo(
+                    m, p, np.random.default_rng(s), c), 2)
+                first = ex.subgoals if first is None else first
+                row = {"n_states": mdp.n_states, "room": room, "choice": choice, "seed": seed,
+                       "time_exhaustive": te, "time_mc": tm, "ratio_time": tm / te,
+                       "n_exhaustive": int(ex.subgoals.size), "n_mc": int(mc.subgoals.size),
+                       "jaccard": _jaccard(ex.subgoals, mc.subgoals),
+                       "jaccard_exhaustive": _jaccard(ex.subgoals, first),
+                       "samples": mc.stats["samples"], "stop": mc.stats["stop_reason"]}
+                rows.append(row)
+                print(f"{label:<22} {choice:<26} {seed:>4} {te:>7.3f} {tm:>7.3f} "
+                      f"{tm / te:>7.3f} {row['n_exhaustive']:>5} {row['n_mc']:>5} "
+                      f"{row['jaccard']:>5.2f} {row['jaccard_exhaustive']:>5.2f} "
+                      f"{row['samples']:>7} {row['stop']}", flush=True)
+    print()
+    return rows
+
+
 def main() -> None:
+    rooms()
     for choice in CHOICES:
         agreement(choice=choice)
     arm = get_domain("three-floor-arm").mdp("deliver")

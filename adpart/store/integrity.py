@@ -122,7 +122,9 @@ class _Layout:
         self.names = [c.name for c in columns]
         self.values = operator.itemgetter(*self.names)
         self.times = [i for i, c in enumerate(columns) if isinstance(c.type, DateTime)]
-        self.head = hashlib.sha256(_encode([table.name, self.names]).encode())
+        #: the digest's first bytes; a row's digest hashes them and the row's text in one call
+        #: (the same digest as continuing a copy of their hash, and cheaper than copying one)
+        self.head = _encode([table.name, self.names]).encode()
 
     def digest(self, values: Iterable[Any], parents: Iterable[int] | None = None) -> str:
         """The row hash of the hashed columns' ``values`` (in :attr:`names` order)."""
@@ -131,9 +133,7 @@ class _Layout:
             row[i] = _micros(row[i])
         if parents is not None:
             row.append(sorted(int(p) for p in parents))
-        digest = self.head.copy()
-        digest.update(_encode(row).encode())
-        return digest.hexdigest()
+        return hashlib.sha256(self.head + _encode(row).encode()).hexdigest()
 
 
 _LAYOUTS: dict[str, _Layout] = {}
