@@ -236,11 +236,11 @@ def profile_lines(ax: Any, taus: np.ndarray, curves: dict[str, dict[str, Any]], 
     import matplotlib as mpl
 
     order = list(groups or [])
-    order += [g for g in dict.fromkeys(_group(name) for name in curves) if g not in order]
+    order += [g for g in dict.fromkeys(colour_group(name) for name in curves) if g not in order]
     palette = mpl.colormaps["tab10"].colors
     for name, prof in curves.items():
         style = "--" if name.startswith("smdp-q") else (":" if name == "flat" else "-")
-        colour = palette[order.index(_group(name)) % len(palette)]
+        colour = palette[order.index(colour_group(name)) % len(palette)]
         ax.plot(taus, prof["fraction"], style, color=colour, label=name)
         if bands:
             ax.fill_between(taus, prof["low"], prof["high"], color=colour, alpha=0.2)
@@ -251,7 +251,7 @@ def profile_lines(ax: Any, taus: np.ndarray, curves: dict[str, dict[str, Any]], 
     ax.set_ylabel("fraction of runs within tau")
 
 
-def _group(name: str) -> str:
+def colour_group(name: str) -> str:
     """The colour group of a method's name: its option source, or the name itself."""
     return name.split("[", 1)[-1].rstrip("]")
 

@@ -48,7 +48,9 @@ def draw_intervals(estimates: dict[str, Sequence[float]], groups: Sequence[str],
     probability), a dotted line at ``reference`` (a tie with flat). An infinite value is drawn at
     the axis's right end with a right-pointing marker and labelled ``never``."""
     import matplotlib as mpl
+    from matplotlib import ticker
 
+    from adpart.experiments.benchmark import colour_group
     from adpart.plotting import new_figure
 
     names = sorted(estimates, key=lambda m: float(estimates[m][0]), reverse=not log)
@@ -63,11 +65,11 @@ def draw_intervals(estimates: dict[str, Sequence[float]], groups: Sequence[str],
     shown = np.where(np.isfinite(values), values, right)
     palette = mpl.colormaps["tab10"].colors
     order = list(groups)
-    order += [g for g in dict.fromkeys(_group(m) for m in names) if g not in order]
+    order += [g for g in dict.fromkeys(colour_group(m) for m in names) if g not in order]
     fig, ax = new_figure((7.6, 0.34 * len(names) + 1.4))
     y = np.arange(len(names))[::-1]
     for row, name in enumerate(names):
-        colour = palette[order.index(_group(name)) % len(palette)]
+        colour = palette[order.index(colour_group(name)) % len(palette)]
         est, low, high = shown[row]
         ax.plot([low, high], [y[row], y[row]], color=colour, linewidth=2.2, alpha=0.6)
         never = not np.isfinite(values[row, 0])
@@ -76,8 +78,11 @@ def draw_intervals(estimates: dict[str, Sequence[float]], groups: Sequence[str],
             ax.annotate("never", (est, y[row]), xytext=(-8, 0), textcoords="offset points",
                         ha="right", va="center", fontsize="small")
     ax.axvline(reference, color="0.5", linewidth=0.9, linestyle=":")
-    if log:
+    if log:  # ticks at 1, 2 and 5 of each decade, as plain numbers
         ax.set_xscale("log")
+        ax.xaxis.set_major_locator(ticker.LogLocator(subs=(1.0, 2.0, 5.0)))
+        ax.xaxis.set_major_formatter(ticker.FormatStrFormatter("%g"))
+        ax.xaxis.set_minor_formatter(ticker.NullFormatter())
     ax.set_xlim(left, right * (1.02 if not log else 1.0))
     ax.set_yticks(y, names)
     ax.set_ylim(-0.7, len(names) - 0.3)
@@ -85,10 +90,6 @@ def draw_intervals(estimates: dict[str, Sequence[float]], groups: Sequence[str],
     ax.set_title(title)
     fig.savefig(path, dpi=110, bbox_inches="tight")
     return str(path)
-
-
-def _group(name: str) -> str:
-    return name.split("[", 1)[-1].rstrip("]")
 
 
 def cell_tables(by_regime: dict[str, list[dict[str, Any]]], regime_text: dict[str, str],
