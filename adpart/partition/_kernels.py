@@ -1,5 +1,5 @@
 """numba kernels of the partition refiners: greedy interval cuts, the exact-lumping worklist, the
-delta worklist and the predecessor lists it reads.
+delta worklist and the predecessor lists both read (with the two plain functions that size them).
 
 They are sequential by nature (a greedy cut depends on where the previous group started; a worklist
 pops one splitter at a time; a transpose scatters), so they are compiled rather than vectorised.
@@ -31,13 +31,14 @@ def first_seen_labels(flat, n_labels):  # pragma: no cover - compiled
 
 
 @njit(cache=True, inline="always")
-def add_masses(ptr, idx, val, row, w, marked, touched, nt):  # pragma: no cover - compiled
-    """``w[idx[k]] += val[k]`` over the entries ``k`` of CSR row ``row``; a column touched for
-    the first time is marked and appended to ``touched`` (first-touch order). Returns the new
-    number of touched columns. The splitter step of both worklists (exact lumping and delta):
-    the mass every state sends into the popped block."""
+def add_masses(ptr, off, val, row, t, w, marked, touched, nt):  # pragma: no cover - compiled
+    """``w[s] += val[k]`` over the entries ``k`` of predecessor list ``row`` of target ``t``, where
+    ``s = t + off[k]`` (:func:`predecessor_fill`); a state touched for the first time is marked
+    and appended to ``touched`` (first-touch order). Returns the new number of touched states.
+    The splitter step of both worklists (exact lumping and delta): the mass every state sends
+    into the popped block under one option."""
     for k in range(ptr[row], ptr[row + 1]):
-        s = idx[k]
+        s = t + off[k]
         if not marked[s]:
             marked[s] = True
             touched[nt] = s
@@ -112,22 +113,30 @@ def move_to(elems, pos, s, q):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def lump(n, n_act, pred_ptr, pred_row, pred_val, init_labels, n_init, tol):
+def lump(n, n_act, pred_ptr, pred_off, pred_val, init_labels, n_init, tol):
     """Coarsest exact lumping of ``n`` states under ``n_act`` matched actions (worklist refinement).
 
     A Valmari-Franceschinis style splitter worklist for weighted transition systems with action
-    labels: popping a splitter block ``C``, the mass ``w(s, a) = sum_{t in C} F(t | s, a)`` is
-    accumulated over the *predecessors* of ``C`` only, and every block holding a touched state is
-    split by ``w(., a)`` (untouched states have mass 0), action after action. New blocks join the
-    worklist; when a block that was not waiting is split, its largest part is left out, because
-    stability with respect to it follows from the parent and the other parts
-    (``w(s, largest) = w(s, parent) - sum of the others``). Each state is thus re-scanned
+    labels: popping a splitter block ``C``, then action after action, the mass
+    ``w(s) = sum_{t in C} F(t | s, a)`` is accumulated over the *predecessors* of ``C`` under
+    ``a`` only, and every block holding a touched state is split by ``w`` (untouched states have
+    mass 0). New blocks join the worklist; when a block that was not waiting is split, its largest
+    part is left out, because stability with respect to it follows from the parent and the other
+    parts (``w(s, largest) = w(s, parent) - sum of the others``). Each state is thus re-scanned
     ``O(log n)`` times and the whole run costs ``O(m log n)`` for ``m`` transitions.
+
+    ``C``'s members are copied when it is popped, so every action sees the ``C`` that was popped
+    (an earlier action's cut may split it); each state's mass sums the same terms in the same
+    order (``C``'s members in turn) as one pass over all actions at once would, and the touched
+    states of one action come in the same first-touch order, so the cuts are those of that pass,
+    with one mass slot per state instead of one per (state, action).
 
     Args:
         n, n_act: number of states and of actions.
-        pred_ptr, pred_row, pred_val: CSR of the transposed model: for a target ``t``, entries
-            ``pred_ptr[t]:pred_ptr[t+1]`` hold rows ``a*n + s`` and masses ``F(t | s, a) > 0``.
+        pred_ptr, pred_off, pred_val: predecessor lists from :func:`predecessor_fill`: for a
+            target ``t`` and action ``a``, entries ``k`` in ``pred_ptr[t*n_act + a]`` up to
+            ``pred_ptr[t*n_act + a + 1]`` hold the states ``t + pred_off[k]`` with
+            ``F(t | s, a) > 0``, increasing, and the masses ``pred_val[k]``.
         init_labels: ``(n,)`` int64 initial blocks ``0..n_init-1``.
         tol: masses within ``tol`` of a group's first (sorted) mass are equal; masses ``<= tol``
             count as zero.
@@ -147,9 +156,10 @@ def lump(n, n_act, pred_ptr, pred_row, pred_val, init_labels, n_init, tol):
         top += 1
         inwl[b] = True
 
-    w = np.zeros(n_act * n, dtype=np.float64)
-    marked = np.zeros(n_act * n, dtype=np.bool_)
-    touched = np.empty(n_act * n, dtype=np.int64)
+    w = np.zeros(n, dtype=np.float64)
+    marked = np.zeros(n, dtype=np.bool_)
+    touched = np.empty(n, dtype=np.int64)
+    splitter = np.empty(n, dtype=np.int64)
     bmark = np.zeros(n + 1, dtype=np.int64)
     tblocks = np.empty(n + 1, dtype=np.int64)
     gstart = np.empty(n + 1, dtype=np.int64)
@@ -158,17 +168,20 @@ def lump(n, n_act, pred_ptr, pred_row, pred_val, init_labels, n_init, tol):
         top -= 1
         c = wl[top]
         inwl[c] = False
-        nt = 0
-        for i in range(bstart[c], bend[c]):
-            nt = add_masses(pred_ptr, pred_row, pred_val, elems[i], w, marked, touched, nt)
+        nc = bend[c] - bstart[c]
+        for i in range(nc):
+            splitter[i] = elems[bstart[c] + i]
         for a in range(n_act):
-            base = a * n
+            nt = 0
+            for i in range(nc):
+                t = splitter[i]
+                nt = add_masses(pred_ptr, pred_off, pred_val, t * n_act + a, t, w, marked,
+                                touched, nt)
             ntb = 0
             for i in range(nt):
-                r = touched[i]
-                if r < base or r >= base + n or w[r] <= tol:
+                s = touched[i]
+                if w[s] <= tol:
                     continue
-                s = r - base
                 b = blk[s]
                 if bmark[b] == 0:
                     tblocks[ntb] = b
@@ -183,7 +196,7 @@ def lump(n, n_act, pred_ptr, pred_row, pred_val, init_labels, n_init, tol):
                 size = bend[b] - lo
                 keys = np.empty(m, dtype=np.float64)
                 for i in range(m):
-                    keys[i] = w[base + elems[lo + i]]
+                    keys[i] = w[elems[lo + i]]
                 if m == size and keys.max() - keys.min() <= tol:
                     continue
                 order = np.argsort(keys)
@@ -192,7 +205,7 @@ def lump(n, n_act, pred_ptr, pred_row, pred_val, init_labels, n_init, tol):
                     s = moved[order[i]]
                     elems[lo + i] = s
                     pos[s] = lo + i
-                    keys[i] = w[base + s]
+                    keys[i] = w[s]
                 # greedy groups over the sorted touched region
                 ng = 1
                 gstart[0] = lo
@@ -235,10 +248,10 @@ def lump(n, n_act, pred_ptr, pred_row, pred_val, init_labels, n_init, tol):
                     wl[top] = b
                     top += 1
                     inwl[b] = True
-        for i in range(nt):
-            r = touched[i]
-            w[r] = 0.0
-            marked[r] = False
+            for i in range(nt):
+                s = touched[i]
+                w[s] = 0.0
+                marked[s] = False
     return blk, nb
 
 
@@ -284,55 +297,64 @@ def _heap_pop(hkey, hval, size):
 
 
 @njit(cache=True)
-def predecessors_by_option(n, n_act, indptr, indices, data):  # pragma: no cover - compiled
-    """Predecessor lists of the stacked rows ``F`` (``(n_act*n, n)`` CSR), one per (target, option).
+def predecessor_counts(n, indptr, indices, data, options, states, keep
+                       ):  # pragma: no cover - compiled
+    """Pass 1 of the predecessor lists (:func:`predecessor_fill`): where each target's entries
+    start, and how far a predecessor lies from its target.
 
-    Entries ``ptr[t*n_act + a]:ptr[t*n_act + a + 1]`` of ``src`` / ``val`` are the states ``s``
-    with ``F(t | s, a) > 0`` in increasing ``s``, and those masses (exact zeros are dropped, as
-    ``eliminate_zeros`` would). This is the transpose of ``F`` (column ``t``'s entries in row
-    order, which groups them by option), built by one counting pass and one scatter pass over
-    ``F``; the option boundaries are recorded while the rows of each option are scattered.
-    ``src`` holds states (not rows), in the dtype of ``indices``.
+    The rows read are those :func:`predecessor_fill` scatters: option ``options[j]``'s row of the
+    ``i``-th of ``states`` where ``keep[i, j]``, exact zeros skipped.
+
+    Returns:
+        ``(start, far)``: ``(n + 1,)`` int64, ``start[t]`` the first entry of target ``t`` and
+        ``start[n]`` the number of entries; ``far = max |s - t|`` over the entries (0 if none).
     """
-    return predecessors_of_rows(n, indptr, indices, data, np.arange(n_act, dtype=np.int64),
-                                np.arange(n, dtype=np.int64), np.ones((n, n_act), dtype=np.bool_))
+    k = options.size
+    start = np.zeros(n + 1, dtype=np.int64)
+    far = 0
+    for j in range(k):
+        base = options[j] * n
+        for i in range(states.size):
+            if keep[i, j]:
+                s = states[i]
+                r = base + s
+                for q in range(indptr[r], indptr[r + 1]):
+                    if data[q] != 0.0:
+                        t = indices[q]
+                        start[t + 1] += 1
+                        far = max(far, s - t if s >= t else t - s)
+    for t in range(n):
+        start[t + 1] += start[t]
+    return start, far
 
 
 @njit(cache=True)
-def predecessors_of_rows(n, indptr, indices, data, options, states, keep
-                         ):  # pragma: no cover - compiled
-    """:func:`predecessors_by_option` of the rows of ``states`` alone, read from the model.
+def predecessor_fill(n, indptr, indices, data, options, states, keep, start, ptr, off, val
+                     ):  # pragma: no cover - compiled
+    """Pass 2: the predecessor lists of the selected rows, one per (target, option), in place.
 
     The stacked matrix is ``F`` (``(O*n, n)`` CSR of every option); the ``j``-th option of the
-    result is column ``options[j]``, and its row for the ``i``-th of ``states`` (sorted, distinct)
-    is ``F[options[j]*n + states[i]]`` where ``keep[i, j]``, empty elsewhere. The lists are the
-    ones :func:`predecessors_by_option` builds from that masked matrix (same order: by option,
-    then increasing state), without forming it: the work is the selected rows' entries plus the
-    ``n * k`` list heads.
+    lists is ``options[j]``, and its row for the ``i``-th of ``states`` (sorted, distinct) is
+    ``F[options[j]*n + states[i]]`` where ``keep[i, j]``, empty elsewhere - the masked rows
+    (zero where an option is not admissible, eq. 4.6 compares admissible options only), read
+    straight from the model without forming them.
+
+    Entries ``ptr[t*k + j]:ptr[t*k + j + 1]`` of ``off`` / ``val`` are the states ``s`` with
+    ``F(t | s, options[j]) > 0`` in increasing ``s``, stored as ``off = s - t``, and those masses
+    (exact zeros are dropped, as ``eliminate_zeros`` would). This is the transpose of the masked
+    rows (column ``t``'s entries in row order, which groups them by option), scattered in one
+    pass over the rows; ``start`` is :func:`predecessor_counts`'s. ``ptr`` (``(n*k + 1,)``),
+    ``off`` and ``val`` (``(start[n],)``) are allocated by the caller, which picks their dtypes:
+    an offset needs fewer bytes than a state when predecessors lie near their targets (a grid's
+    do), and ``val`` holds the masses in the order the worklists read them.
     """
     k = options.size
-    m_states = states.size
-    count = np.zeros(n + 1, dtype=np.int64)
-    for j in range(k):
-        base = options[j] * n
-        for i in range(m_states):
-            if keep[i, j]:
-                r = base + states[i]
-                for q in range(indptr[r], indptr[r + 1]):
-                    if data[q] != 0.0:
-                        count[indices[q] + 1] += 1
-    for t in range(n):
-        count[t + 1] += count[t]
-    m = count[n]
-    fill = count[:n].copy()
-    ptr = np.empty(n * k + 1, dtype=np.int64)
-    src = np.empty(m, dtype=indices.dtype)
-    val = np.empty(m, dtype=np.float64)
+    fill = start[:n].copy()
     for j in range(k):
         for t in range(n):
             ptr[t * k + j] = fill[t]
         base = options[j] * n
-        for i in range(m_states):
+        for i in range(states.size):
             if keep[i, j]:
                 s = states[i]
                 r = base + s
@@ -341,11 +363,48 @@ def predecessors_of_rows(n, indptr, indices, data, options, states, keep
                     if x != 0.0:
                         t = indices[q]
                         f = fill[t]
-                        src[f] = s
+                        off[f] = s - t
                         val[f] = x
                         fill[t] = f + 1
-    ptr[n * k] = m
-    return ptr, src, val
+    ptr[n * k] = start[n]
+
+
+def offset_dtype(far: int) -> type:
+    """The narrowest signed int of 16, 32 or 64 bits holding every ``s - t``, ``|s - t| <= far``."""
+    for dtype in (np.int16, np.int32):
+        if far <= np.iinfo(dtype).max:
+            return dtype
+    return np.int64
+
+
+def predecessors_of_rows(n, indptr, indices, data, options, states, keep, off_dtype=None):
+    """The predecessor lists ``(ptr, off, val)`` of :func:`predecessor_fill` (two compiled passes).
+
+    ``ptr`` is int32 when the entries number fewer than 2^31 (int64 otherwise); ``off`` has
+    :func:`offset_dtype` of the farthest predecessor unless ``off_dtype`` is given (wide enough);
+    ``val`` is float64. Of the transients only the ``(n + 1,)`` starts and fill cursors remain
+    beside them: at 10^6 grid states and 20 options the lists take 10 bytes per entry (an int16
+    offset and the mass) against the model's 12 (an int32 column and the mass).
+    """
+    options = np.ascontiguousarray(options, dtype=np.int64)
+    states = np.ascontiguousarray(states, dtype=np.int64)
+    data = np.asarray(data, dtype=np.float64)
+    start, far = predecessor_counts(n, indptr, indices, data, options, states, keep)
+    m = int(start[n])
+    ptr = np.empty(n * options.size + 1, dtype=np.int32 if m < 2**31 else np.int64)
+    off = np.empty(m, dtype=offset_dtype(int(far)) if off_dtype is None else off_dtype)
+    val = np.empty(m, dtype=np.float64)
+    predecessor_fill(n, indptr, indices, data, options, states, keep, start, ptr, off, val)
+    return ptr, off, val
+
+
+def predecessors_by_option(n, n_act, indptr, indices, data, off_dtype=None):
+    """:func:`predecessors_of_rows` of every row of the stacked ``(n_act*n, n)`` CSR ``F``: for
+    target ``t`` and option ``a``, ``ptr[t*n_act + a]:ptr[t*n_act + a + 1]`` are the states
+    ``t + off`` with ``F(t | s, a) > 0``, increasing, and those masses."""
+    keep = np.broadcast_to(np.True_, (n, n_act))  # every row kept, no (n, n_act) mask stored
+    return predecessors_of_rows(n, indptr, indices, data, np.arange(n_act), np.arange(n), keep,
+                                off_dtype)
 
 
 @njit(cache=True)
@@ -376,7 +435,7 @@ def _stable_sort_by_key(keys, items, lo, hi):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def delta_worklist(n, n_act, pred_ptr, pred_src, pred_val, init_labels, n_init, width,
+def delta_worklist(n, n_act, pred_ptr, pred_off, pred_val, init_labels, n_init, width,
                    max_pops):  # pragma: no cover - compiled
     """delta-refinement to a fixpoint with a splitter worklist (eq. 4.6, DESIGN.md's split rule).
 
@@ -407,7 +466,7 @@ def delta_worklist(n, n_act, pred_ptr, pred_src, pred_val, init_labels, n_init, 
 
     Args:
         n, n_act: states and stacked options.
-        pred_ptr, pred_src, pred_val: predecessor lists from :func:`predecessors_by_option`.
+        pred_ptr, pred_off, pred_val: predecessor lists from :func:`predecessor_fill`.
         init_labels: ``(n,)`` int64 initial blocks ``0..n_init-1``.
         width: ``delta + atol``.
         max_pops: give up after this many splitters (returns ``pops = -1``); ``<= 0``: no cap.
@@ -450,7 +509,8 @@ def delta_worklist(n, n_act, pred_ptr, pred_src, pred_val, init_labels, n_init, 
             # masses into C under option a, first-touch order
             nt = 0
             for i in range(nc):
-                nt = add_masses(pred_ptr, pred_src, pred_val, splitter[i] * n_act + a, w, marked,
+                t = splitter[i]
+                nt = add_masses(pred_ptr, pred_off, pred_val, t * n_act + a, t, w, marked,
                                 touched, nt)
             ntb = 0
             for i in range(nt):

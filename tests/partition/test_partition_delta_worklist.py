@@ -147,18 +147,35 @@ def test_predecessor_lists_are_the_transpose_grouped_by_option(case):
     model, _ = case
     F = sp.csr_array(model.F)
     S, k = model.n_states, model.n_actions
-    ptr, src, val = predecessors_by_option(S, k, F.indptr, F.indices, F.data)
-    wide = predecessors_by_option(S, k, F.indptr.astype(np.int64), F.indices.astype(np.int64),
-                                  F.data)  # large models come with int64 indices
-    for x, y in zip((ptr, src, val), wide, strict=True):
-        assert np.array_equal(x, y)
+    ptr, off, val = predecessors_by_option(S, k, F.indptr, F.indices, F.data)
+    assert ptr.dtype == np.int32 and off.dtype == np.int16  # offsets from the target fit 16 bits
+    # large models come with int64 indices; far predecessors need wider offsets
+    for wide in (predecessors_by_option(S, k, F.indptr.astype(np.int64),
+                                        F.indices.astype(np.int64), F.data),
+                 predecessors_by_option(S, k, F.indptr, F.indices, F.data, off_dtype=np.int64)):
+        for x, y in zip((ptr, off, val), wide, strict=True):
+            assert np.array_equal(x, y)
     Fd = F.toarray()
     for t in range(S):
         for a in range(k):
             lo, hi = ptr[t * k + a], ptr[t * k + a + 1]
             expect = np.flatnonzero(Fd[a * S:(a + 1) * S, t])
-            assert np.array_equal(src[lo:hi], expect)
+            assert np.array_equal(t + off[lo:hi], expect)
             assert np.array_equal(val[lo:hi], Fd[a * S + expect, t])
+
+
+def test_offsets_widen_with_the_farthest_predecessor():
+    from adpart.partition._kernels import offset_dtype
+
+    assert offset_dtype(0) == np.int16 and offset_dtype(2**15 - 1) == np.int16
+    assert offset_dtype(2**15) == np.int32 and offset_dtype(2**31 - 1) == np.int32
+    assert offset_dtype(2**31) == np.int64
+    # a chain whose last state steps back to the first: offsets -(S-1) .. 1
+    S = 2**15 + 2
+    F = sp.csr_array((np.full(S, 0.9), (np.arange(S), (np.arange(S) + 1) % S)), shape=(S, S))
+    off = predecessors_by_option(S, 1, F.indptr, F.indices, F.data)[1]
+    assert off.dtype == np.int32
+    assert np.array_equal(np.arange(S) + off, (np.arange(S) - 1) % S)
 
 
 @settings(max_examples=40, deadline=None)
