@@ -31,19 +31,49 @@ def first_seen_labels(flat, n_labels):  # pragma: no cover - compiled
 
 
 @njit(cache=True, inline="always")
-def add_masses(ptr, off, val, row, t, w, marked, touched, nt):  # pragma: no cover - compiled
-    """``w[s] += val[k]`` over the entries ``k`` of predecessor list ``row`` of target ``t``, where
-    ``s = t + off[k]`` (:func:`predecessor_fill`); a state touched for the first time is marked
-    and appended to ``touched`` (first-touch order). Returns the new number of touched states.
-    The splitter step of both worklists (exact lumping and delta): the mass every state sends
-    into the popped block under one option."""
-    for k in range(ptr[row], ptr[row + 1]):
+def add_masses(lo, hi, off, val, t, w, marked, touched, nt):  # pragma: no cover - compiled
+    """``w[s] += val[k]`` over the entries ``lo <= k < hi`` of one predecessor list of target
+    ``t``, where ``s = t + off[k]`` (:func:`predecessor_fill`); a state touched for the first time
+    is marked and appended to ``touched`` (first-touch order). Returns the new number of touched
+    states."""
+    for k in range(lo, hi):
         s = t + off[k]
         if not marked[s]:
             marked[s] = True
             touched[nt] = s
             nt += 1
         w[s] += val[k]
+    return nt
+
+
+@njit(cache=True, inline="always")
+def take_splitter(c, elems, bstart, bend, pred_start, splitter, cursor
+                  ):  # pragma: no cover - compiled
+    """Copy block ``c``'s members into ``splitter`` (every option then sees the block that was
+    popped, though an earlier option's cut may split it) and point each member's ``cursor`` at
+    its first predecessor entry (option 0's list). Returns the number of members."""
+    nc = bend[c] - bstart[c]
+    for i in range(nc):
+        t = elems[bstart[c] + i]
+        splitter[i] = t
+        cursor[i] = pred_start[t]
+    return nc
+
+
+@njit(cache=True, inline="always")
+def splitter_masses(nc, n_act, splitter, cursor, pred_len, pred_off, pred_val, w, marked,
+                    touched, a):  # pragma: no cover - compiled
+    """The splitter step of both worklists: ``w(s) = sum_{t in C} F(t | s, a)`` for option ``a``
+    over the predecessors of the popped block ``C`` (its ``nc`` members in ``splitter``), member
+    after member; the options are taken in increasing order, each member's ``cursor`` advancing
+    over its lists. Returns the number of touched states (first-touch order in ``touched``)."""
+    nt = 0
+    for i in range(nc):
+        t = splitter[i]
+        lo = cursor[i]
+        hi = lo + pred_len[t * n_act + a]
+        cursor[i] = hi
+        nt = add_masses(lo, hi, pred_off, pred_val, t, w, marked, touched, nt)
     return nt
 
 
@@ -79,11 +109,12 @@ def refinable_partition(n, init_labels, n_init):  # pragma: no cover - compiled
     ``elems[bstart[b]:bend[b]]`` (arrays sized ``n + 1``: blocks never outnumber states).
     ``elems`` is the stable order of ``init_labels`` (a stable argsort's), built by one counting
     sort: the labels are ``0..n_init-1``, and numba's merge sort took most of a one-block
-    refinement's time.
+    refinement's time. Every array has the int type of ``init_labels`` (int32 below 2^31 states
+    halves them).
     """
     blk = init_labels.copy()
-    bstart = np.zeros(n + 1, dtype=np.int64)
-    bend = np.zeros(n + 1, dtype=np.int64)
+    bstart = np.zeros(n + 1, dtype=init_labels.dtype)
+    bend = np.zeros(n + 1, dtype=init_labels.dtype)
     for i in range(n):
         bend[init_labels[i]] += 1
     acc = 0
@@ -91,8 +122,8 @@ def refinable_partition(n, init_labels, n_init):  # pragma: no cover - compiled
         bstart[b] = acc
         acc += bend[b]
         bend[b] = bstart[b]  # the fill cursor until every state is placed
-    elems = np.empty(n, dtype=np.int64)
-    pos = np.empty(n, dtype=np.int64)
+    elems = np.empty(n, dtype=init_labels.dtype)
+    pos = np.empty(n, dtype=init_labels.dtype)
     for i in range(n):
         q = bend[init_labels[i]]
         elems[q] = i
@@ -113,7 +144,7 @@ def move_to(elems, pos, s, q):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def lump(n, n_act, pred_ptr, pred_off, pred_val, init_labels, n_init, tol):
+def lump(n, n_act, pred_start, pred_len, pred_off, pred_val, init_labels, n_init, tol):
     """Coarsest exact lumping of ``n`` states under ``n_act`` matched actions (worklist refinement).
 
     A Valmari-Franceschinis style splitter worklist for weighted transition systems with action
@@ -133,11 +164,10 @@ def lump(n, n_act, pred_ptr, pred_off, pred_val, init_labels, n_init, tol):
 
     Args:
         n, n_act: number of states and of actions.
-        pred_ptr, pred_off, pred_val: predecessor lists from :func:`predecessor_fill`: for a
-            target ``t`` and action ``a``, entries ``k`` in ``pred_ptr[t*n_act + a]`` up to
-            ``pred_ptr[t*n_act + a + 1]`` hold the states ``t + pred_off[k]`` with
-            ``F(t | s, a) > 0``, increasing, and the masses ``pred_val[k]``.
-        init_labels: ``(n,)`` int64 initial blocks ``0..n_init-1``.
+        pred_start, pred_len, pred_off, pred_val: predecessor lists from
+            :func:`predecessor_fill`.
+        init_labels: ``(n,)`` initial blocks ``0..n_init-1`` (int32 or int64: the int type of
+            the state and block arrays).
         tol: masses within ``tol`` of a group's first (sorted) mass are equal; masses ``<= tol``
             count as zero.
 
@@ -148,8 +178,9 @@ def lump(n, n_act, pred_ptr, pred_off, pred_val, init_labels, n_init, tol):
     elems, pos, blk, bstart, bend = refinable_partition(n, init_labels, n_init)
     nb = n_init
 
+    idx = init_labels.dtype
     inwl = np.zeros(n + 1, dtype=np.bool_)
-    wl = np.empty(n + 1, dtype=np.int64)
+    wl = np.empty(n + 1, dtype=idx)
     top = 0
     for b in range(n_init):
         wl[top] = b
@@ -158,25 +189,21 @@ def lump(n, n_act, pred_ptr, pred_off, pred_val, init_labels, n_init, tol):
 
     w = np.zeros(n, dtype=np.float64)
     marked = np.zeros(n, dtype=np.bool_)
-    touched = np.empty(n, dtype=np.int64)
-    splitter = np.empty(n, dtype=np.int64)
-    bmark = np.zeros(n + 1, dtype=np.int64)
-    tblocks = np.empty(n + 1, dtype=np.int64)
-    gstart = np.empty(n + 1, dtype=np.int64)
+    touched = np.empty(n, dtype=idx)
+    splitter = np.empty(n, dtype=idx)
+    cursor = np.empty(n, dtype=pred_start.dtype)
+    bmark = np.zeros(n + 1, dtype=idx)
+    tblocks = np.empty(n + 1, dtype=idx)
+    gstart = np.empty(n + 1, dtype=idx)
 
     while top > 0:
         top -= 1
         c = wl[top]
         inwl[c] = False
-        nc = bend[c] - bstart[c]
-        for i in range(nc):
-            splitter[i] = elems[bstart[c] + i]
+        nc = take_splitter(c, elems, bstart, bend, pred_start, splitter, cursor)
         for a in range(n_act):
-            nt = 0
-            for i in range(nc):
-                t = splitter[i]
-                nt = add_masses(pred_ptr, pred_off, pred_val, t * n_act + a, t, w, marked,
-                                touched, nt)
+            nt = splitter_masses(nc, n_act, splitter, cursor, pred_len, pred_off, pred_val, w,
+                                 marked, touched, a)
             ntb = 0
             for i in range(nt):
                 s = touched[i]
@@ -300,18 +327,21 @@ def _heap_pop(hkey, hval, size):
 def predecessor_counts(n, indptr, indices, data, options, states, keep
                        ):  # pragma: no cover - compiled
     """Pass 1 of the predecessor lists (:func:`predecessor_fill`): where each target's entries
-    start, and how far a predecessor lies from its target.
+    start, how far a predecessor lies from its target, and the longest list.
 
     The rows read are those :func:`predecessor_fill` scatters: option ``options[j]``'s row of the
     ``i``-th of ``states`` where ``keep[i, j]``, exact zeros skipped.
 
     Returns:
-        ``(start, far)``: ``(n + 1,)`` int64, ``start[t]`` the first entry of target ``t`` and
-        ``start[n]`` the number of entries; ``far = max |s - t|`` over the entries (0 if none).
+        ``(start, far, longest)``: ``(n + 1,)`` int64 ``start``, ``start[t]`` the first entry
+        of target ``t`` and ``start[n]`` the number of entries; ``far = max |s - t|`` over the
+        entries and ``longest`` the most entries of one (target, option) list (0 if none).
     """
     k = options.size
     start = np.zeros(n + 1, dtype=np.int64)
+    count = np.zeros(n, dtype=np.int64)
     far = 0
+    longest = 0
     for j in range(k):
         base = options[j] * n
         for i in range(states.size):
@@ -321,38 +351,43 @@ def predecessor_counts(n, indptr, indices, data, options, states, keep
                 for q in range(indptr[r], indptr[r + 1]):
                     if data[q] != 0.0:
                         t = indices[q]
-                        start[t + 1] += 1
+                        count[t] += 1
                         far = max(far, s - t if s >= t else t - s)
+        for t in range(n):
+            start[t + 1] += count[t]
+            longest = max(longest, count[t])
+            count[t] = 0
     for t in range(n):
         start[t + 1] += start[t]
-    return start, far
+    return start, far, longest
 
 
 @njit(cache=True)
-def predecessor_fill(n, indptr, indices, data, options, states, keep, start, ptr, off, val
+def predecessor_fill(n, indptr, indices, data, options, states, keep, start, length, off, val
                      ):  # pragma: no cover - compiled
     """Pass 2: the predecessor lists of the selected rows, one per (target, option), in place.
 
     The stacked matrix is ``F`` (``(O*n, n)`` CSR of every option); the ``j``-th option of the
     lists is ``options[j]``, and its row for the ``i``-th of ``states`` (sorted, distinct) is
     ``F[options[j]*n + states[i]]`` where ``keep[i, j]``, empty elsewhere - the masked rows
-    (zero where an option is not admissible, eq. 4.6 compares admissible options only), read
+    (zero where an option is not admissible: eq. 4.6 compares admissible options only), read
     straight from the model without forming them.
 
-    Entries ``ptr[t*k + j]:ptr[t*k + j + 1]`` of ``off`` / ``val`` are the states ``s`` with
+    Target ``t``'s entries are ``start[t]:start[t + 1]`` of ``off`` / ``val``, option after
+    option, ``length[t*k + j]`` of them for the ``j``-th: the states ``s`` with
     ``F(t | s, options[j]) > 0`` in increasing ``s``, stored as ``off = s - t``, and those masses
     (exact zeros are dropped, as ``eliminate_zeros`` would). This is the transpose of the masked
     rows (column ``t``'s entries in row order, which groups them by option), scattered in one
-    pass over the rows; ``start`` is :func:`predecessor_counts`'s. ``ptr`` (``(n*k + 1,)``),
+    pass over the rows; ``start`` is :func:`predecessor_counts`'s. ``length`` (``(n*k,)``),
     ``off`` and ``val`` (``(start[n],)``) are allocated by the caller, which picks their dtypes:
+    a list's length fits a byte or two where a head pointer per list would take four or eight,
     an offset needs fewer bytes than a state when predecessors lie near their targets (a grid's
     do), and ``val`` holds the masses in the order the worklists read them.
     """
     k = options.size
     fill = start[:n].copy()
+    begun = start[:n].copy()
     for j in range(k):
-        for t in range(n):
-            ptr[t * k + j] = fill[t]
         base = options[j] * n
         for i in range(states.size):
             if keep[i, j]:
@@ -366,7 +401,15 @@ def predecessor_fill(n, indptr, indices, data, options, states, keep, start, ptr
                         off[f] = s - t
                         val[f] = x
                         fill[t] = f + 1
-    ptr[n * k] = start[n]
+        for t in range(n):
+            length[t * k + j] = fill[t] - begun[t]
+            begun[t] = fill[t]
+
+
+def index_labels(labels: np.ndarray) -> np.ndarray:
+    """A copy of ``labels`` in the int type the worklists index states and blocks with: int32
+    below 2^31 - 1 states (their arrays then take half the bytes), int64 beyond."""
+    return labels.astype(np.int32 if labels.size < 2**31 - 1 else np.int64)
 
 
 def offset_dtype(far: int) -> type:
@@ -377,31 +420,45 @@ def offset_dtype(far: int) -> type:
     return np.int64
 
 
-def predecessors_of_rows(n, indptr, indices, data, options, states, keep, off_dtype=None):
-    """The predecessor lists ``(ptr, off, val)`` of :func:`predecessor_fill` (two compiled passes).
+def length_dtype(longest: int) -> type:
+    """The narrowest of uint8, uint16 and int64 holding every list length ``<= longest``."""
+    for dtype in (np.uint8, np.uint16):
+        if longest <= np.iinfo(dtype).max:
+            return dtype
+    return np.int64
 
-    ``ptr`` is int32 when the entries number fewer than 2^31 (int64 otherwise); ``off`` has
-    :func:`offset_dtype` of the farthest predecessor unless ``off_dtype`` is given (wide enough);
-    ``val`` is float64. Of the transients only the ``(n + 1,)`` starts and fill cursors remain
-    beside them: at 10^6 grid states and 20 options the lists take 10 bytes per entry (an int16
-    offset and the mass) against the model's 12 (an int32 column and the mass).
+
+def predecessors_of_rows(n, indptr, indices, data, options, states, keep, off_dtype=None):
+    """The predecessor lists ``(start, length, off, val)`` of :func:`predecessor_fill` (two
+    compiled passes).
+
+    ``start`` is int32 when the entries number fewer than 2^31 (int64 otherwise), ``length``
+    has :func:`length_dtype` of the longest list and ``off`` :func:`offset_dtype` of the farthest
+    predecessor unless ``off_dtype`` is given (wide enough); ``val`` is float64.
+    Beside them only pass 1's ``(n + 1,)`` starts remain: on the 10^6-state rooms grid with 20
+    options the lists take 10 bytes per entry (an int16 offset and the mass) and one byte per
+    (target, option), against the model's 12 per entry (an int32 column and the mass) and four
+    per row.
     """
     options = np.ascontiguousarray(options, dtype=np.int64)
     states = np.ascontiguousarray(states, dtype=np.int64)
     data = np.asarray(data, dtype=np.float64)
-    start, far = predecessor_counts(n, indptr, indices, data, options, states, keep)
+    start, far, longest = predecessor_counts(n, indptr, indices, data, options, states, keep)
     m = int(start[n])
-    ptr = np.empty(n * options.size + 1, dtype=np.int32 if m < 2**31 else np.int64)
+    if m < 2**31:
+        start = start.astype(np.int32)
+    length = np.empty(n * options.size, dtype=length_dtype(int(longest)))
     off = np.empty(m, dtype=offset_dtype(int(far)) if off_dtype is None else off_dtype)
     val = np.empty(m, dtype=np.float64)
-    predecessor_fill(n, indptr, indices, data, options, states, keep, start, ptr, off, val)
-    return ptr, off, val
+    predecessor_fill(n, indptr, indices, data, options, states, keep, start, length, off, val)
+    return start, length, off, val
 
 
 def predecessors_by_option(n, n_act, indptr, indices, data, off_dtype=None):
-    """:func:`predecessors_of_rows` of every row of the stacked ``(n_act*n, n)`` CSR ``F``: for
-    target ``t`` and option ``a``, ``ptr[t*n_act + a]:ptr[t*n_act + a + 1]`` are the states
-    ``t + off`` with ``F(t | s, a) > 0``, increasing, and those masses."""
+    """:func:`predecessors_of_rows` of every row of the stacked ``(n_act*n, n)`` CSR ``F``:
+    target ``t``'s entries from ``start[t]`` on are its lists for options ``0, 1, ...``,
+    ``length[t*n_act + a]`` entries for option ``a``: the states ``t + off`` with
+    ``F(t | s, a) > 0``, increasing, and those masses."""
     keep = np.broadcast_to(np.True_, (n, n_act))  # every row kept, no (n, n_act) mask stored
     return predecessors_of_rows(n, indptr, indices, data, np.arange(n_act), np.arange(n), keep,
                                 off_dtype)
@@ -435,7 +492,7 @@ def _stable_sort_by_key(keys, items, lo, hi):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def delta_worklist(n, n_act, pred_ptr, pred_off, pred_val, init_labels, n_init, width,
+def delta_worklist(n, n_act, pred_start, pred_len, pred_off, pred_val, init_labels, n_init, width,
                    max_pops):  # pragma: no cover - compiled
     """delta-refinement to a fixpoint with a splitter worklist (eq. 4.6, DESIGN.md's split rule).
 
@@ -466,8 +523,10 @@ def delta_worklist(n, n_act, pred_ptr, pred_off, pred_val, init_labels, n_init, 
 
     Args:
         n, n_act: states and stacked options.
-        pred_ptr, pred_off, pred_val: predecessor lists from :func:`predecessor_fill`.
-        init_labels: ``(n,)`` int64 initial blocks ``0..n_init-1``.
+        pred_start, pred_len, pred_off, pred_val: predecessor lists from
+            :func:`predecessor_fill`.
+        init_labels: ``(n,)`` initial blocks ``0..n_init-1`` (int32 or int64: the int type of
+            the state and block arrays).
         width: ``delta + atol``.
         max_pops: give up after this many splitters (returns ``pops = -1``); ``<= 0``: no cap.
 
@@ -478,9 +537,10 @@ def delta_worklist(n, n_act, pred_ptr, pred_off, pred_val, init_labels, n_init, 
     nb = n_init
 
     # the worklist: a min-heap on block size (a block is in it at most once: <= n entries)
+    idx = init_labels.dtype
     inwl = np.zeros(n + 1, dtype=np.bool_)
-    hkey = np.empty(n + 1, dtype=np.int64)
-    hval = np.empty(n + 1, dtype=np.int64)
+    hkey = np.empty(n + 1, dtype=idx)
+    hval = np.empty(n + 1, dtype=idx)
     hsize = 0
     for b in range(n_init):
         hsize = _heap_push(hkey, hval, hsize, bend[b] - bstart[b], b)
@@ -488,12 +548,13 @@ def delta_worklist(n, n_act, pred_ptr, pred_off, pred_val, init_labels, n_init, 
 
     w = np.zeros(n, dtype=np.float64)
     marked = np.zeros(n, dtype=np.bool_)
-    touched = np.empty(n, dtype=np.int64)
-    splitter = np.empty(n, dtype=np.int64)
+    touched = np.empty(n, dtype=idx)
+    splitter = np.empty(n, dtype=idx)
+    cursor = np.empty(n, dtype=pred_start.dtype)
     keys = np.empty(n, dtype=np.float64)
-    bmark = np.zeros(n + 1, dtype=np.int64)
-    tblocks = np.empty(n + 1, dtype=np.int64)
-    gstart = np.empty(n + 2, dtype=np.int64)
+    bmark = np.zeros(n + 1, dtype=idx)
+    tblocks = np.empty(n + 1, dtype=idx)
+    gstart = np.empty(n + 2, dtype=idx)
     pops = 0
 
     while hsize > 0:
@@ -502,16 +563,11 @@ def delta_worklist(n, n_act, pred_ptr, pred_off, pred_val, init_labels, n_init, 
         c, hsize = _heap_pop(hkey, hval, hsize)  # the smallest waiting splitter first
         inwl[c] = False
         pops += 1
-        nc = bend[c] - bstart[c]
-        for i in range(nc):
-            splitter[i] = elems[bstart[c] + i]
+        nc = take_splitter(c, elems, bstart, bend, pred_start, splitter, cursor)
         for a in range(n_act):
             # masses into C under option a, first-touch order
-            nt = 0
-            for i in range(nc):
-                t = splitter[i]
-                nt = add_masses(pred_ptr, pred_off, pred_val, t * n_act + a, t, w, marked,
-                                touched, nt)
+            nt = splitter_masses(nc, n_act, splitter, cursor, pred_len, pred_off, pred_val, w,
+                                 marked, touched, a)
             ntb = 0
             for i in range(nt):
                 s = touched[i]

@@ -26,7 +26,7 @@ import scipy.sparse as sp
 
 from adpart.errors import ModelError
 from adpart.mdp.model import SMDPModel
-from adpart.partition._kernels import lump, predecessors_by_option
+from adpart.partition._kernels import index_labels, lump, predecessors_by_option
 from adpart.partition._validate import (
     DEFAULT_ATOL,
     as_model,
@@ -86,8 +86,7 @@ def exact_lumping(
         start = initial.labels
     else:
         raise ModelError(f"initial must be a Partition or None, got {type(initial).__name__}")
-    pattern = row_codes(adm[:, sel])
-    labels = combine_labels(start, pattern)
+    labels = combine_labels(start, row_codes(adm[:, sel]))
     if use_rewards:
         R = check_rewards(smdp.R if rewards is None else rewards, smdp)
         labels = canonical_labels(reward_split(labels, R, adm, sel, tol))
@@ -109,11 +108,10 @@ def lump_labels(labels: np.ndarray, F: sp.csr_array, k: int, atol: float) -> np.
                       k, atol)
 
 
-def lump_lists(labels: np.ndarray, preds: tuple[np.ndarray, np.ndarray, np.ndarray], k: int,
+def lump_lists(labels: np.ndarray, preds: tuple[np.ndarray, ...], k: int,
                atol: float) -> np.ndarray:
     """Canonical labels of the coarsest lumping of the ``k`` options whose predecessor lists
     (:func:`adpart.partition._kernels.predecessor_fill`) are ``preds``; it refines ``labels``."""
-    ptr, off, val = preds
-    out, _ = lump(labels.size, k, ptr, off, val, np.ascontiguousarray(labels, dtype=np.int64),
-                  int(labels.max()) + 1, float(atol))
+    out, _ = lump(labels.size, k, *preds, index_labels(labels), int(labels.max()) + 1,
+                  float(atol))
     return canonical_labels(out)

@@ -43,6 +43,7 @@ from adpart.mdp.model import SMDPModel
 from adpart.partition._kernels import (
     delta_worklist,
     greedy_groups,
+    index_labels,
     predecessors_by_option,
     predecessors_of_rows,
 )
@@ -186,14 +187,14 @@ def delta_refine(
 
 def model_predecessors(
     model: SMDPModel, options: np.ndarray, states: np.ndarray | None, keep: np.ndarray | None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The predecessor lists of the masked rows (eq. 4.6 compares admissible options only), read
     straight from ``model.F``: the ``j``-th option is ``options[j]``, its row for the ``i``-th of
     ``states`` (sorted, distinct; None: every state) is kept where ``keep[i, j]`` (None: every
     row), every other row is empty (:func:`adpart.partition._kernels.predecessor_fill`).
 
     No masked or stacked copy of ``F`` is formed (:func:`adpart.partition._validate.masked_rows`
-    builds one): only the lists, 10 bytes per kept entry on a grid.
+    builds one): only the lists, 10 bytes per kept entry and one per (state, option) on a grid.
     """
     F = model.F if isinstance(model.F, sp.csr_array) else sp.csr_array(model.F)
     S = model.n_states
@@ -230,16 +231,15 @@ def delta_refine_rows(
     return _worklist(labels, preds, k, delta, atol, max_rounds)
 
 
-def _worklist(labels: np.ndarray, preds: tuple[np.ndarray, np.ndarray, np.ndarray], k: int,
-              delta: float, atol: float, max_rounds: int | None) -> tuple[np.ndarray, int]:
-    ptr, off, val = preds
+def _worklist(labels: np.ndarray, preds: tuple[np.ndarray, ...], k: int, delta: float,
+              atol: float, max_rounds: int | None) -> tuple[np.ndarray, int]:
     out, _, pops = delta_worklist(
-        labels.size, k, ptr, off, val, labels.copy(), int(labels.max()) + 1,
+        labels.size, k, *preds, index_labels(labels), int(labels.max()) + 1,
         float(delta + atol), 0 if max_rounds is None else int(max_rounds),
     )
     if pops < 0:
         raise ModelError(f"delta refinement did not reach a fixpoint in {max_rounds} splitters")
-    return out, int(pops)
+    return out.astype(np.int64), int(pops)
 
 
 def delta_refine_rounds(
@@ -349,8 +349,7 @@ def refine(
     adm = selected_admissible(smdp, sel)
     if require_admissible:
         require_cover(adm, sel)
-    pattern = row_codes(adm[:, sel])
-    labels = combine_labels(partition.labels, pattern)
+    labels = combine_labels(partition.labels, row_codes(adm[:, sel]))
     if e is not None:
         R = check_rewards(smdp.R if rewards is None else rewards, smdp)
         labels = canonical_labels(reward_split(labels, R, adm, sel, e + tol))
