@@ -31,13 +31,31 @@ def first_seen_labels(flat, n_labels):  # pragma: no cover - compiled
 
 
 @njit(cache=True, inline="always")
-def add_masses(lo, hi, off, val, t, w, marked, touched, nt):  # pragma: no cover - compiled
+def short_way(d, n):  # pragma: no cover - compiled
+    """``d = s - t`` taken the shorter way round the ``n`` state indices: ``d`` or ``d -+ n``,
+    whichever lies in ``[-(n // 2), n // 2]`` (a predecessor across a grid's wrapped edge - a
+    cylinder's or a torus's - is then as near as one inside it)."""
+    half = n // 2
+    if d > half:
+        return d - n
+    if d < -half:
+        return d + n
+    return d
+
+
+@njit(cache=True, inline="always")
+def add_masses(lo, hi, off, val, t, ring, w, marked, touched, nt):  # pragma: no cover - compiled
     """``w[s] += val[k]`` over the entries ``lo <= k < hi`` of one predecessor list of target
-    ``t``, where ``s = t + off[k]`` (:func:`predecessor_fill`); a state touched for the first time
-    is marked and appended to ``touched`` (first-touch order). Returns the new number of touched
-    states."""
+    ``t``, where ``s = t + off[k]``, taken mod ``ring`` when the lists wrap round (``ring = n``,
+    else 0: :func:`predecessor_fill`); a state touched for the first time is marked and appended
+    to ``touched`` (first-touch order). Returns the new number of touched states."""
     for k in range(lo, hi):
         s = t + off[k]
+        if ring:  # the same every entry: compiled as two loops, one without the test
+            if s < 0:
+                s += ring
+            elif s >= ring:
+                s -= ring
         if not marked[s]:
             marked[s] = True
             touched[nt] = s
@@ -61,7 +79,7 @@ def take_splitter(c, elems, bstart, bend, pred_start, splitter, cursor
 
 
 @njit(cache=True, inline="always")
-def splitter_masses(nc, n_act, splitter, cursor, pred_len, pred_off, pred_val, w, marked,
+def splitter_masses(ring, nc, n_act, splitter, cursor, pred_len, pred_off, pred_val, w, marked,
                     touched, a):  # pragma: no cover - compiled
     """The splitter step of both worklists: ``w(s) = sum_{t in C} F(t | s, a)`` for option ``a``
     over the predecessors of the popped block ``C`` (its ``nc`` members in ``splitter``), member
@@ -73,7 +91,7 @@ def splitter_masses(nc, n_act, splitter, cursor, pred_len, pred_off, pred_val, w
         lo = cursor[i]
         hi = lo + pred_len[t * n_act + a]
         cursor[i] = hi
-        nt = add_masses(lo, hi, pred_off, pred_val, t, w, marked, touched, nt)
+        nt = add_masses(lo, hi, pred_off, pred_val, t, ring, w, marked, touched, nt)
     return nt
 
 
@@ -144,7 +162,8 @@ def move_to(elems, pos, s, q):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def lump(n, n_act, pred_start, pred_len, pred_off, pred_val, init_labels, n_init, tol):
+def lump(n, n_act, pred_start, pred_len, pred_off, pred_val, pred_ring, init_labels, n_init,
+         tol):
     """Coarsest exact lumping of ``n`` states under ``n_act`` matched actions (worklist refinement).
 
     A Valmari-Franceschinis style splitter worklist for weighted transition systems with action
@@ -164,8 +183,8 @@ def lump(n, n_act, pred_start, pred_len, pred_off, pred_val, init_labels, n_init
 
     Args:
         n, n_act: number of states and of actions.
-        pred_start, pred_len, pred_off, pred_val: predecessor lists from
-            :func:`predecessor_fill`.
+        pred_start, pred_len, pred_off, pred_val, pred_ring: predecessor lists from
+            :func:`predecessors_of_rows`.
         init_labels: ``(n,)`` initial blocks ``0..n_init-1`` (int32 or int64: the int type of
             the state and block arrays).
         tol: masses within ``tol`` of a group's first (sorted) mass are equal; masses ``<= tol``
@@ -202,8 +221,8 @@ def lump(n, n_act, pred_start, pred_len, pred_off, pred_val, init_labels, n_init
         inwl[c] = False
         nc = take_splitter(c, elems, bstart, bend, pred_start, splitter, cursor)
         for a in range(n_act):
-            nt = splitter_masses(nc, n_act, splitter, cursor, pred_len, pred_off, pred_val, w,
-                                 marked, touched, a)
+            nt = splitter_masses(pred_ring, nc, n_act, splitter, cursor, pred_len, pred_off,
+                                 pred_val, w, marked, touched, a)
             ntb = 0
             for i in range(nt):
                 s = touched[i]
@@ -333,15 +352,18 @@ def predecessor_counts(n, indptr, indices, data, options, states, keep
     ``i``-th of ``states`` where ``keep[i, j]``, exact zeros skipped.
 
     Returns:
-        ``(start, far, longest)``: ``(n + 1,)`` int64 ``start``, ``start[t]`` the first entry
-        of target ``t`` and ``start[n]`` the number of entries; ``far = max |s - t|`` over the
-        entries and ``longest`` the most entries of one (target, option) list (0 if none).
+        ``(start, far, longest, wraps)``: ``(n + 1,)`` int64 ``start``, ``start[t]`` the first
+        entry of target ``t`` and ``start[n]`` the number of entries; ``far`` the largest
+        ``|short_way(s - t, n)|`` over the entries, ``longest`` the most entries of one
+        (target, option) list (0 if none), and whether some offset is the way round
+        (``short_way(s - t, n) != s - t``).
     """
     k = options.size
     start = np.zeros(n + 1, dtype=np.int64)
     count = np.zeros(n, dtype=np.int64)
     far = 0
     longest = 0
+    wraps = False
     for j in range(k):
         base = options[j] * n
         for i in range(states.size):
@@ -352,14 +374,16 @@ def predecessor_counts(n, indptr, indices, data, options, states, keep
                     if data[q] != 0.0:
                         t = indices[q]
                         count[t] += 1
-                        far = max(far, s - t if s >= t else t - s)
+                        d = short_way(s - t, n)
+                        far = max(far, d if d >= 0 else -d)
+                        wraps |= d != s - t
         for t in range(n):
             start[t + 1] += count[t]
             longest = max(longest, count[t])
             count[t] = 0
     for t in range(n):
         start[t + 1] += start[t]
-    return start, far, longest
+    return start, far, longest, wraps
 
 
 @njit(cache=True)
@@ -375,14 +399,15 @@ def predecessor_fill(n, indptr, indices, data, options, states, keep, start, len
 
     Target ``t``'s entries are ``start[t]:start[t + 1]`` of ``off`` / ``val``, option after
     option, ``length[t*k + j]`` of them for the ``j``-th: the states ``s`` with
-    ``F(t | s, options[j]) > 0`` in increasing ``s``, stored as ``off = s - t``, and those masses
-    (exact zeros are dropped, as ``eliminate_zeros`` would). This is the transpose of the masked
-    rows (column ``t``'s entries in row order, which groups them by option), scattered in one
-    pass over the rows; ``start`` is :func:`predecessor_counts`'s. ``length`` (``(n*k,)``),
-    ``off`` and ``val`` (``(start[n],)``) are allocated by the caller, which picks their dtypes:
-    a list's length fits a byte or two where a head pointer per list would take four or eight,
-    an offset needs fewer bytes than a state when predecessors lie near their targets (a grid's
-    do), and ``val`` holds the masses in the order the worklists read them.
+    ``F(t | s, options[j]) > 0`` in increasing ``s``, stored as ``off = short_way(s - t, n)``
+    (``s = (t + off) mod n``), and those masses (exact zeros are dropped, as ``eliminate_zeros``
+    would). This is the transpose of the masked rows (column ``t``'s entries in row order, which
+    groups them by option), scattered in one pass over the rows; ``start`` is
+    :func:`predecessor_counts`'s. ``length`` (``(n*k,)``), ``off`` and ``val`` (``(start[n],)``)
+    are allocated by the caller, which picks their dtypes: a list's length fits a byte or two
+    where a head pointer per list would take four or eight, an offset needs fewer bytes than a
+    state when predecessors lie near their targets, the shorter way round (a grid's do, a
+    cylinder's too), and ``val`` holds the masses in the order the worklists read them.
     """
     k = options.size
     fill = start[:n].copy()
@@ -398,7 +423,7 @@ def predecessor_fill(n, indptr, indices, data, options, states, keep, start, len
                     if x != 0.0:
                         t = indices[q]
                         f = fill[t]
-                        off[f] = s - t
+                        off[f] = short_way(s - t, n)
                         val[f] = x
                         fill[t] = f + 1
         for t in range(n):
@@ -413,7 +438,7 @@ def index_labels(labels: np.ndarray) -> np.ndarray:
 
 
 def offset_dtype(far: int) -> type:
-    """The narrowest signed int of 16, 32 or 64 bits holding every ``s - t``, ``|s - t| <= far``."""
+    """The narrowest signed int of 16, 32 or 64 bits holding every offset ``|off| <= far``."""
     for dtype in (np.int16, np.int32):
         if far <= np.iinfo(dtype).max:
             return dtype
@@ -429,8 +454,9 @@ def length_dtype(longest: int) -> type:
 
 
 def predecessors_of_rows(n, indptr, indices, data, options, states, keep, off_dtype=None):
-    """The predecessor lists ``(start, length, off, val)`` of :func:`predecessor_fill` (two
-    compiled passes).
+    """The predecessor lists ``(start, length, off, val, ring)`` of :func:`predecessor_fill` (two
+    compiled passes): ``ring = n`` when some offset is the way round (a state is then
+    ``(t + off) mod n``), else 0 (``t + off``, and the worklists skip the test).
 
     ``start`` is int32 when the entries number fewer than 2^31 (int64 otherwise), ``length``
     has :func:`length_dtype` of the longest list and ``off`` :func:`offset_dtype` of the farthest
@@ -443,7 +469,8 @@ def predecessors_of_rows(n, indptr, indices, data, options, states, keep, off_dt
     options = np.ascontiguousarray(options, dtype=np.int64)
     states = np.ascontiguousarray(states, dtype=np.int64)
     data = np.asarray(data, dtype=np.float64)
-    start, far, longest = predecessor_counts(n, indptr, indices, data, options, states, keep)
+    start, far, longest, wraps = predecessor_counts(n, indptr, indices, data, options, states,
+                                                    keep)
     m = int(start[n])
     if m < 2**31:
         start = start.astype(np.int32)
@@ -451,14 +478,14 @@ def predecessors_of_rows(n, indptr, indices, data, options, states, keep, off_dt
     off = np.empty(m, dtype=offset_dtype(int(far)) if off_dtype is None else off_dtype)
     val = np.empty(m, dtype=np.float64)
     predecessor_fill(n, indptr, indices, data, options, states, keep, start, length, off, val)
-    return start, length, off, val
+    return start, length, off, val, n if wraps else 0
 
 
 def predecessors_by_option(n, n_act, indptr, indices, data, off_dtype=None):
     """:func:`predecessors_of_rows` of every row of the stacked ``(n_act*n, n)`` CSR ``F``:
     target ``t``'s entries from ``start[t]`` on are its lists for options ``0, 1, ...``,
-    ``length[t*n_act + a]`` entries for option ``a``: the states ``t + off`` with
-    ``F(t | s, a) > 0``, increasing, and those masses."""
+    ``length[t*n_act + a]`` entries for option ``a``: the states ``(t + off) mod n`` with
+    ``F(t | s, a) > 0``, increasing, and those masses; last ``ring``."""
     keep = np.broadcast_to(np.True_, (n, n_act))  # every row kept, no (n, n_act) mask stored
     return predecessors_of_rows(n, indptr, indices, data, np.arange(n_act), np.arange(n), keep,
                                 off_dtype)
@@ -492,8 +519,8 @@ def _stable_sort_by_key(keys, items, lo, hi):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def delta_worklist(n, n_act, pred_start, pred_len, pred_off, pred_val, init_labels, n_init, width,
-                   max_pops):  # pragma: no cover - compiled
+def delta_worklist(n, n_act, pred_start, pred_len, pred_off, pred_val, pred_ring, init_labels,
+                   n_init, width, max_pops):  # pragma: no cover - compiled
     """delta-refinement to a fixpoint with a splitter worklist (eq. 4.6, DESIGN.md's split rule).
 
     The shape of :func:`lump`, with the greedy delta cut instead of exact equality: popping a
@@ -523,8 +550,8 @@ def delta_worklist(n, n_act, pred_start, pred_len, pred_off, pred_val, init_labe
 
     Args:
         n, n_act: states and stacked options.
-        pred_start, pred_len, pred_off, pred_val: predecessor lists from
-            :func:`predecessor_fill`.
+        pred_start, pred_len, pred_off, pred_val, pred_ring: predecessor lists from
+            :func:`predecessors_of_rows`.
         init_labels: ``(n,)`` initial blocks ``0..n_init-1`` (int32 or int64: the int type of
             the state and block arrays).
         width: ``delta + atol``.
@@ -566,8 +593,8 @@ def delta_worklist(n, n_act, pred_start, pred_len, pred_off, pred_val, init_labe
         nc = take_splitter(c, elems, bstart, bend, pred_start, splitter, cursor)
         for a in range(n_act):
             # masses into C under option a, first-touch order
-            nt = splitter_masses(nc, n_act, splitter, cursor, pred_len, pred_off, pred_val, w,
-                                 marked, touched, a)
+            nt = splitter_masses(pred_ring, nc, n_act, splitter, cursor, pred_len, pred_off,
+                                 pred_val, w, marked, touched, a)
             ntb = 0
             for i in range(nt):
                 s = touched[i]

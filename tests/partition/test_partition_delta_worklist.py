@@ -148,7 +148,8 @@ def test_predecessor_lists_are_the_transpose_grouped_by_option(case):
     F = sp.csr_array(model.F)
     S, k = model.n_states, model.n_actions
     lists = predecessors_by_option(S, k, F.indptr, F.indices, F.data)
-    start, length, off, val = lists
+    start, length, off, val, ring = lists
+    assert ring in (0, S)
     # offsets from the target fit 16 bits, list lengths a byte
     assert start.dtype == np.int32 and length.dtype == np.uint8 and off.dtype == np.int16
     # large models come with int64 indices; far predecessors need wider offsets
@@ -163,7 +164,8 @@ def test_predecessor_lists_are_the_transpose_grouped_by_option(case):
         for a in range(k):
             hi = lo + length[t * k + a]
             expect = np.flatnonzero(Fd[a * S:(a + 1) * S, t])
-            assert np.array_equal(t + off[lo:hi], expect)
+            assert np.array_equal((t + off[lo:hi]) % S, expect)
+            assert np.all(np.abs(off[lo:hi]) <= S // 2)  # the shorter way round
             assert np.array_equal(val[lo:hi], Fd[a * S + expect, t])
             lo = hi
         assert lo == start[t + 1]
@@ -177,18 +179,24 @@ def test_offsets_and_lengths_widen_with_the_farthest_predecessor_and_the_longest
     assert offset_dtype(2**31) == np.int64
     assert length_dtype(0) == np.uint8 and length_dtype(255) == np.uint8
     assert length_dtype(256) == np.uint16 and length_dtype(2**16) == np.int64
-    # a chain whose last state steps back to the first: offsets -(S-1) .. 1
+    # a ring: each state steps to the next, the last to the first: offsets -1 the short way
     S = 2**15 + 2
-    F = sp.csr_array((np.full(S, 0.9), (np.arange(S), (np.arange(S) + 1) % S)), shape=(S, S))
-    off = predecessors_by_option(S, 1, F.indptr, F.indices, F.data)[2]
-    assert off.dtype == np.int32
-    assert np.array_equal(np.arange(S) + off, (np.arange(S) - 1) % S)
+    ring = sp.csr_array((np.full(S, 0.9), (np.arange(S), (np.arange(S) + 1) % S)), shape=(S, S))
+    lists = predecessors_by_option(S, 1, ring.indptr, ring.indices, ring.data)
+    assert lists[2].dtype == np.int16 and np.all(lists[2] == -1) and lists[4] == S
+    # each state steps half way round: offsets of S / 2 > 2^15 - 1
+    S = 2**16 + 4
+    half = sp.csr_array((np.full(S, 0.9), (np.arange(S), (np.arange(S) + S // 2) % S)),
+                        shape=(S, S))
+    _, _, off, _, wrap = predecessors_by_option(S, 1, half.indptr, half.indices, half.data)
+    assert off.dtype == np.int32 and wrap == 0  # S / 2 is as short one way as the other
+    assert np.array_equal((np.arange(S) + off) % S, (np.arange(S) - S // 2) % S)
     # a star: every state steps into state 0, whose one list is S long
     S = 300
     F = sp.csr_array((np.full(S, 0.9), (np.arange(S), np.zeros(S, dtype=np.int64))), shape=(S, S))
-    start, length, off, _ = predecessors_by_option(S, 1, F.indptr, F.indices, F.data)
-    assert length.dtype == np.uint16 and length[0] == S and start[1] == S
-    assert np.array_equal(off, np.arange(S))
+    start, length, off, _, ring = predecessors_by_option(S, 1, F.indptr, F.indices, F.data)
+    assert length.dtype == np.uint16 and length[0] == S and start[1] == S and ring == S
+    assert np.array_equal(off % S, np.arange(S))
 
 
 @settings(max_examples=30, deadline=None)
