@@ -158,7 +158,11 @@ def storm_bisimulation(mdp: FiniteMDP) -> dict[str, float]:
 
 
 def macro_options(mdp: FiniteMDP, k_max: int = 5) -> SMDPModel:
-    """20 options: repeat move ``a`` open-loop ``k`` times (``F = (gamma P_a)^k``, k = 1..5)."""
+    """20 options: repeat move ``a`` open-loop ``k`` times (``F = (gamma P_a)^k``, k = 1..5).
+
+    Every product is sparse (no dense intermediate); the option blocks are stacked by
+    :func:`stack_rows`, so the build holds the blocks and one block's copy at a time.
+    """
     S, g = mdp.n_states, mdp.gamma
     F_blocks, R_cols = [], []
     for a in range(mdp.n_actions):
@@ -170,8 +174,34 @@ def macro_options(mdp: FiniteMDP, k_max: int = 5) -> SMDPModel:
             Fk = sp.csr_array(g * (Fk @ Pa))
             F_blocks.append(Fk)
             R_cols.append(Rk.copy())
-    F = sp.csr_array(sp.vstack(F_blocks, format="csr"))
+    del Fk
+    F = stack_rows(F_blocks, S)
     return SMDPModel(R=np.column_stack(R_cols), F=F, admissible=np.ones((S, len(R_cols)), bool))
+
+
+def stack_rows(blocks: list[sp.csr_array], n_cols: int) -> sp.csr_array:
+    """``sp.vstack(blocks, format="csr")`` (the same arrays), emptying ``blocks``: each block is
+    copied into arrays allocated once and dropped at once, and the result's pages are committed
+    as they are written, so stacking costs one block beyond the blocks where ``vstack`` holds a
+    second copy of them all (5.8 GiB at the peak of the 10^6-state rooms build, 2.5 GiB model)."""
+    nnz = sum(b.nnz for b in blocks)
+    rows = sum(b.shape[0] for b in blocks)
+    idx = np.int32 if max(nnz, rows, n_cols) < 2**31 else np.int64
+    data = np.empty(nnz, dtype=np.result_type(*(b.dtype for b in blocks)))
+    indices = np.empty(nnz, dtype=idx)
+    indptr = np.empty(rows + 1, dtype=idx)
+    indptr[0] = 0
+    at = row = 0
+    blocks.reverse()
+    while blocks:
+        b = blocks.pop()
+        data[at:at + b.nnz] = b.data
+        indices[at:at + b.nnz] = b.indices
+        indptr[row + 1:row + 1 + b.shape[0]] = b.indptr[1:] + at
+        at += b.nnz
+        row += b.shape[0]
+        del b
+    return sp.csr_array((data, indices, indptr), shape=(rows, n_cols))
 
 
 def _best(fn, repeats: int) -> tuple[float, object]:
@@ -284,23 +314,57 @@ def _reset_peak() -> bool:
         return False
 
 
-def _peak_since_reset_gb() -> float:
-    """``VmHWM`` of ``/proc/self/status``: the peak resident set since the last reset (GiB)."""
-    with open("/proc/self/status") as f:
-        for line in f:
-            if line.startswith("VmHWM:"):
-                return int(line.split()[1]) / 2**20
+def _status_gb(field: str) -> float:
+    """A size field of ``/proc/self/status`` (``VmHWM``, ``VmRSS``) in GiB (NaN elsewhere)."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith(f"{field}:"):
+                    return int(line.split()[1]) / 2**20
+    except OSError:
+        pass
     return math.nan
 
 
-def _timed(fn, repeats: int) -> tuple[float, float, float, object]:
-    """Best wall and best CPU seconds over ``repeats`` calls, the peak memory, the last result.
+def _peak_since_reset_gb() -> float:
+    """``VmHWM`` of ``/proc/self/status``: the peak resident set since the last reset (GiB)."""
+    return _status_gb("VmHWM")
+
+
+def _trim_heap() -> None:
+    """Hand the C heap's free pages back to the kernel (glibc's ``malloc_trim``; a no-op where
+    there is none).
+
+    Building the 20-option model leaves freed small arrays in the heap (0.64 GiB of the 3.51 GiB
+    resident after the 10^6-state rooms model is built; 2.87 GiB after a trim). They would count
+    in a call's resident peak though neither the model nor the call holds them, and how much is
+    left depends on the order of the build's allocations, not on the code measured.
+    """
+    import ctypes
+    import ctypes.util
+
+    name = ctypes.util.find_library("c")
+    try:
+        libc = ctypes.CDLL(name) if name else None
+        if libc is not None and hasattr(libc, "malloc_trim"):
+            libc.malloc_trim(0)
+    except OSError:
+        pass
+
+
+def _timed(fn, repeats: int) -> tuple[float, float, float, object, float]:
+    """Best wall and best CPU seconds over ``repeats`` calls, the peak memory, the last result,
+    and the resident GiB before the first call.
 
     The peak (GiB) is the process's resident high-water mark during the first call: the model,
-    already resident, plus the call's working memory. Where the mark cannot be reset it is the
-    process's peak so far (``ru_maxrss``).
+    already resident, plus the call's working memory. Free heap pages are returned first
+    (:func:`_trim_heap`). Where the mark cannot be reset it is the process's peak so far
+    (``ru_maxrss``).
     """
     wall, cpu, out = math.inf, math.inf, None
+    gc.collect()
+    _trim_heap()
+    base = _status_gb("VmRSS")
     reset = _reset_peak()
     peak = math.nan
     for i in range(repeats):
@@ -310,7 +374,7 @@ def _timed(fn, repeats: int) -> tuple[float, float, float, object]:
         cpu = min(cpu, time.process_time() - c0)
         if i == 0:
             peak = _peak_since_reset_gb() if reset else _peak_rss_gb()
-    return wall, cpu, peak, out
+    return wall, cpu, peak, out, base
 
 
 def fitted_exponent(states: list[int], seconds: list[float]) -> float:
@@ -325,10 +389,13 @@ def delta_table(workload: str, sizes: tuple[int, ...], *, rounds_max: int = 10_0
     Per size: the best wall (and CPU) seconds of ``refine(start, model, delta=0.3)`` and of
     ``exact_lumping(model, initial=start, use_rewards=False)`` over ``repeats`` calls each, one
     after the other on the same model; their ratio; both block counts; the model's transition
-    entries (and the GiB of its arrays) and the peak resident memory of the process during one
-    call of each (the model included); the independent delta-stability
-    checker up to ``check_max`` states and the earlier round-based refiner up to ``rounds_max``.
-    Last, the exponents fitted over all sizes.
+    entries (and the GiB of its ``F`` arrays: data, indices, indptr) and the peak resident memory
+    of the process during one call of each (the model included), with the resident size before
+    the calls (``base GB``: the model, its rewards, the interpreter and libraries) and each peak
+    over the model's GiB; the seconds and the peak resident GiB of building the 20 options
+    (:func:`macro_options`); the independent delta-stability checker up to ``check_max`` states
+    and the earlier round-based refiner up to ``rounds_max``. Last, the exponents fitted over all
+    sizes.
     """
     # compile the kernels outside the timings
     mdp, lab = delta_workload(workload, 400)
@@ -340,15 +407,20 @@ def delta_table(workload: str, sizes: tuple[int, ...], *, rounds_max: int = 10_0
           f"{workload} grid; reference: exact lumping of the same 20-option model, same run")
     print(f"{'states':>9} {'entries':>11} {'model GB':>8} {'blocks':>7} {'delta s':>8} "
           f"{'cpu s':>7} {'peak GB':>7} {'exact s':>8} {'cpu s':>7} {'peak GB':>7} "
-          f"{'ex blocks':>9} {'ratio':>6} {'cpu ratio':>9} {'rounds s':>8} {'stable':>6}",
-          flush=True)
+          f"{'ex blocks':>9} {'ratio':>6} {'cpu ratio':>9} {'rounds s':>8} {'stable':>6} "
+          f"{'base GB':>7} {'peak/model':>10} {'build s':>7} {'build GB':>8}", flush=True)
     rows = []
     for n in sizes:
         mdp, lab = delta_workload(workload, n)
+        gc.collect()
+        _trim_heap()
+        reset = _reset_peak()
+        t0 = time.perf_counter()
         model = macro_options(mdp)
+        build_s = time.perf_counter() - t0
+        build_gb = _peak_since_reset_gb() if reset else _peak_rss_gb()
         start = Partition.from_labels(lab, model.admissible)
         del mdp
-        gc.collect()
         F = model.F
         model_gb = (F.data.nbytes + F.indices.nbytes + F.indptr.nbytes) / 2**30
 
@@ -358,13 +430,14 @@ def delta_table(workload: str, sizes: tuple[int, ...], *, rounds_max: int = 10_0
         def run_exact(model=model, start=start):
             return exact_lumping(model, initial=start, use_rewards=False)
 
-        t, c, peak, part = _timed(run_delta, repeats)
-        t_ex, c_ex, peak_ex, ex = _timed(run_exact, repeats)
+        t, c, peak, part, base_gb = _timed(run_delta, repeats)
+        t_ex, c_ex, peak_ex, ex, _ = _timed(run_exact, repeats)
         row = {"workload": workload, "states": model.n_states, "entries": F.nnz,
                "model_gb": model_gb, "blocks": part.n_blocks, "seconds": t, "cpu_s": c,
                "exact_s": t_ex, "exact_cpu_s": c_ex, "exact_blocks": ex.n_blocks,
                "ratio_exact": t / t_ex, "cpu_ratio": c / c_ex, "peak_gb": peak,
-               "exact_peak_gb": peak_ex}
+               "exact_peak_gb": peak_ex, "base_gb": base_gb, "build_s": build_s,
+               "build_gb": build_gb}
         if model.n_states <= rounds_max:
             labels, F, k = _stacked(model, start)
             t_r, (old, _) = _best(
@@ -376,11 +449,12 @@ def delta_table(workload: str, sizes: tuple[int, ...], *, rounds_max: int = 10_0
             row["stable"] = str(bool(check_stability(part, model, delta=0.3)))
         rows.append(row)
         r_s = f"{row['rounds_s']:>8.2f}" if "rounds_s" in row else f"{'-':>8}"
+        ratios = f"{peak / model_gb:.2f}/{peak_ex / model_gb:.2f}"
         print(f"{row['states']:>9} {row['entries']:>11} {model_gb:>8.2f} {part.n_blocks:>7} "
               f"{t:>8.3f} {c:>7.3f} {peak:>7.2f} {t_ex:>8.3f} {c_ex:>7.3f} {peak_ex:>7.2f} "
-              f"{ex.n_blocks:>9} {t / t_ex:>6.2f} {c / c_ex:>9.2f} {r_s} {row['stable']:>6}",
-              flush=True)
-        del model, part, ex
+              f"{ex.n_blocks:>9} {t / t_ex:>6.2f} {c / c_ex:>9.2f} {r_s} {row['stable']:>6} "
+              f"{base_gb:>7.2f} {ratios:>10} {build_s:>7.2f} {build_gb:>8.2f}", flush=True)
+        del model, part, ex, start, F, run_delta, run_exact
     if len(rows) >= 2:
         st = [r["states"] for r in rows]
         x = fitted_exponent(st, [r["seconds"] for r in rows])

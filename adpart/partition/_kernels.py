@@ -1,5 +1,5 @@
 """numba kernels of the partition refiners: greedy interval cuts, the exact-lumping worklist, the
-delta worklist and the predecessor lists it reads.
+delta worklist and the predecessor lists both read (with the two plain functions that size them).
 
 They are sequential by nature (a greedy cut depends on where the previous group started; a worklist
 pops one splitter at a time; a transpose scatters), so they are compiled rather than vectorised.
@@ -31,18 +31,67 @@ def first_seen_labels(flat, n_labels):  # pragma: no cover - compiled
 
 
 @njit(cache=True, inline="always")
-def add_masses(ptr, idx, val, row, w, marked, touched, nt):  # pragma: no cover - compiled
-    """``w[idx[k]] += val[k]`` over the entries ``k`` of CSR row ``row``; a column touched for
-    the first time is marked and appended to ``touched`` (first-touch order). Returns the new
-    number of touched columns. The splitter step of both worklists (exact lumping and delta):
-    the mass every state sends into the popped block."""
-    for k in range(ptr[row], ptr[row + 1]):
-        s = idx[k]
+def short_way(d, n):  # pragma: no cover - compiled
+    """``d = s - t`` taken the shorter way round the ``n`` state indices: ``d`` or ``d -+ n``,
+    whichever lies in ``[-(n // 2), n // 2]`` (a predecessor across a grid's wrapped edge - a
+    cylinder's or a torus's - is then as near as one inside it)."""
+    half = n // 2
+    if d > half:
+        return d - n
+    if d < -half:
+        return d + n
+    return d
+
+
+@njit(cache=True, inline="always")
+def add_masses(lo, hi, off, val, t, ring, w, marked, touched, nt):  # pragma: no cover - compiled
+    """``w[s] += val[k]`` over the entries ``lo <= k < hi`` of one predecessor list of target
+    ``t``, where ``s = t + off[k]``, taken mod ``ring`` when the lists wrap round (``ring = n``,
+    else 0: :func:`predecessor_fill`); a state touched for the first time is marked and appended
+    to ``touched`` (first-touch order). Returns the new number of touched states."""
+    for k in range(lo, hi):
+        s = t + off[k]
+        if ring:  # the same every entry: compiled as two loops, one without the test
+            if s < 0:
+                s += ring
+            elif s >= ring:
+                s -= ring
         if not marked[s]:
             marked[s] = True
             touched[nt] = s
             nt += 1
         w[s] += val[k]
+    return nt
+
+
+@njit(cache=True, inline="always")
+def take_splitter(c, elems, bstart, bend, pred_start, splitter, cursor
+                  ):  # pragma: no cover - compiled
+    """Copy block ``c``'s members into ``splitter`` (every option then sees the block that was
+    popped, though an earlier option's cut may split it) and point each member's ``cursor`` at
+    its first predecessor entry (option 0's list). Returns the number of members."""
+    nc = bend[c] - bstart[c]
+    for i in range(nc):
+        t = elems[bstart[c] + i]
+        splitter[i] = t
+        cursor[i] = pred_start[t]
+    return nc
+
+
+@njit(cache=True, inline="always")
+def splitter_masses(ring, nc, n_act, splitter, cursor, pred_len, pred_off, pred_val, w, marked,
+                    touched, a):  # pragma: no cover - compiled
+    """The splitter step of both worklists: ``w(s) = sum_{t in C} F(t | s, a)`` for option ``a``
+    over the predecessors of the popped block ``C`` (its ``nc`` members in ``splitter``), member
+    after member; the options are taken in increasing order, each member's ``cursor`` advancing
+    over its lists. Returns the number of touched states (first-touch order in ``touched``)."""
+    nt = 0
+    for i in range(nc):
+        t = splitter[i]
+        lo = cursor[i]
+        hi = lo + pred_len[t * n_act + a]
+        cursor[i] = hi
+        nt = add_masses(lo, hi, pred_off, pred_val, t, ring, w, marked, touched, nt)
     return nt
 
 
@@ -78,11 +127,12 @@ def refinable_partition(n, init_labels, n_init):  # pragma: no cover - compiled
     ``elems[bstart[b]:bend[b]]`` (arrays sized ``n + 1``: blocks never outnumber states).
     ``elems`` is the stable order of ``init_labels`` (a stable argsort's), built by one counting
     sort: the labels are ``0..n_init-1``, and numba's merge sort took most of a one-block
-    refinement's time.
+    refinement's time. Every array has the int type of ``init_labels`` (int32 below 2^31 states
+    halves them).
     """
     blk = init_labels.copy()
-    bstart = np.zeros(n + 1, dtype=np.int64)
-    bend = np.zeros(n + 1, dtype=np.int64)
+    bstart = np.zeros(n + 1, dtype=init_labels.dtype)
+    bend = np.zeros(n + 1, dtype=init_labels.dtype)
     for i in range(n):
         bend[init_labels[i]] += 1
     acc = 0
@@ -90,8 +140,8 @@ def refinable_partition(n, init_labels, n_init):  # pragma: no cover - compiled
         bstart[b] = acc
         acc += bend[b]
         bend[b] = bstart[b]  # the fill cursor until every state is placed
-    elems = np.empty(n, dtype=np.int64)
-    pos = np.empty(n, dtype=np.int64)
+    elems = np.empty(n, dtype=init_labels.dtype)
+    pos = np.empty(n, dtype=init_labels.dtype)
     for i in range(n):
         q = bend[init_labels[i]]
         elems[q] = i
@@ -112,23 +162,31 @@ def move_to(elems, pos, s, q):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def lump(n, n_act, pred_ptr, pred_row, pred_val, init_labels, n_init, tol):
+def lump(n, n_act, pred_start, pred_len, pred_off, pred_val, pred_ring, init_labels, n_init,
+         tol):
     """Coarsest exact lumping of ``n`` states under ``n_act`` matched actions (worklist refinement).
 
     A Valmari-Franceschinis style splitter worklist for weighted transition systems with action
-    labels: popping a splitter block ``C``, the mass ``w(s, a) = sum_{t in C} F(t | s, a)`` is
-    accumulated over the *predecessors* of ``C`` only, and every block holding a touched state is
-    split by ``w(., a)`` (untouched states have mass 0), action after action. New blocks join the
-    worklist; when a block that was not waiting is split, its largest part is left out, because
-    stability with respect to it follows from the parent and the other parts
-    (``w(s, largest) = w(s, parent) - sum of the others``). Each state is thus re-scanned
+    labels: popping a splitter block ``C``, then action after action, the mass
+    ``w(s) = sum_{t in C} F(t | s, a)`` is accumulated over the *predecessors* of ``C`` under
+    ``a`` only, and every block holding a touched state is split by ``w`` (untouched states have
+    mass 0). New blocks join the worklist; when a block that was not waiting is split, its largest
+    part is left out, because stability with respect to it follows from the parent and the other
+    parts (``w(s, largest) = w(s, parent) - sum of the others``). Each state is thus re-scanned
     ``O(log n)`` times and the whole run costs ``O(m log n)`` for ``m`` transitions.
+
+    ``C``'s members are copied when it is popped, so every action sees the ``C`` that was popped
+    (an earlier action's cut may split it); each state's mass sums the same terms in the same
+    order (``C``'s members in turn) as one pass over all actions at once would, and the touched
+    states of one action come in the same first-touch order, so the cuts are those of that pass,
+    with one mass slot per state instead of one per (state, action).
 
     Args:
         n, n_act: number of states and of actions.
-        pred_ptr, pred_row, pred_val: CSR of the transposed model: for a target ``t``, entries
-            ``pred_ptr[t]:pred_ptr[t+1]`` hold rows ``a*n + s`` and masses ``F(t | s, a) > 0``.
-        init_labels: ``(n,)`` int64 initial blocks ``0..n_init-1``.
+        pred_start, pred_len, pred_off, pred_val, pred_ring: predecessor lists from
+            :func:`predecessors_of_rows`.
+        init_labels: ``(n,)`` initial blocks ``0..n_init-1`` (int32 or int64: the int type of
+            the state and block arrays).
         tol: masses within ``tol`` of a group's first (sorted) mass are equal; masses ``<= tol``
             count as zero.
 
@@ -139,36 +197,37 @@ def lump(n, n_act, pred_ptr, pred_row, pred_val, init_labels, n_init, tol):
     elems, pos, blk, bstart, bend = refinable_partition(n, init_labels, n_init)
     nb = n_init
 
+    idx = init_labels.dtype
     inwl = np.zeros(n + 1, dtype=np.bool_)
-    wl = np.empty(n + 1, dtype=np.int64)
+    wl = np.empty(n + 1, dtype=idx)
     top = 0
     for b in range(n_init):
         wl[top] = b
         top += 1
         inwl[b] = True
 
-    w = np.zeros(n_act * n, dtype=np.float64)
-    marked = np.zeros(n_act * n, dtype=np.bool_)
-    touched = np.empty(n_act * n, dtype=np.int64)
-    bmark = np.zeros(n + 1, dtype=np.int64)
-    tblocks = np.empty(n + 1, dtype=np.int64)
-    gstart = np.empty(n + 1, dtype=np.int64)
+    w = np.zeros(n, dtype=np.float64)
+    marked = np.zeros(n, dtype=np.bool_)
+    touched = np.empty(n, dtype=idx)
+    splitter = np.empty(n, dtype=idx)
+    cursor = np.empty(n, dtype=pred_start.dtype)
+    bmark = np.zeros(n + 1, dtype=idx)
+    tblocks = np.empty(n + 1, dtype=idx)
+    gstart = np.empty(n + 1, dtype=idx)
 
     while top > 0:
         top -= 1
         c = wl[top]
         inwl[c] = False
-        nt = 0
-        for i in range(bstart[c], bend[c]):
-            nt = add_masses(pred_ptr, pred_row, pred_val, elems[i], w, marked, touched, nt)
+        nc = take_splitter(c, elems, bstart, bend, pred_start, splitter, cursor)
         for a in range(n_act):
-            base = a * n
+            nt = splitter_masses(pred_ring, nc, n_act, splitter, cursor, pred_len, pred_off,
+                                 pred_val, w, marked, touched, a)
             ntb = 0
             for i in range(nt):
-                r = touched[i]
-                if r < base or r >= base + n or w[r] <= tol:
+                s = touched[i]
+                if w[s] <= tol:
                     continue
-                s = r - base
                 b = blk[s]
                 if bmark[b] == 0:
                     tblocks[ntb] = b
@@ -183,7 +242,7 @@ def lump(n, n_act, pred_ptr, pred_row, pred_val, init_labels, n_init, tol):
                 size = bend[b] - lo
                 keys = np.empty(m, dtype=np.float64)
                 for i in range(m):
-                    keys[i] = w[base + elems[lo + i]]
+                    keys[i] = w[elems[lo + i]]
                 if m == size and keys.max() - keys.min() <= tol:
                     continue
                 order = np.argsort(keys)
@@ -192,7 +251,7 @@ def lump(n, n_act, pred_ptr, pred_row, pred_val, init_labels, n_init, tol):
                     s = moved[order[i]]
                     elems[lo + i] = s
                     pos[s] = lo + i
-                    keys[i] = w[base + s]
+                    keys[i] = w[s]
                 # greedy groups over the sorted touched region
                 ng = 1
                 gstart[0] = lo
@@ -235,10 +294,10 @@ def lump(n, n_act, pred_ptr, pred_row, pred_val, init_labels, n_init, tol):
                     wl[top] = b
                     top += 1
                     inwl[b] = True
-        for i in range(nt):
-            r = touched[i]
-            w[r] = 0.0
-            marked[r] = False
+            for i in range(nt):
+                s = touched[i]
+                w[s] = 0.0
+                marked[s] = False
     return blk, nb
 
 
@@ -284,55 +343,78 @@ def _heap_pop(hkey, hval, size):
 
 
 @njit(cache=True)
-def predecessors_by_option(n, n_act, indptr, indices, data):  # pragma: no cover - compiled
-    """Predecessor lists of the stacked rows ``F`` (``(n_act*n, n)`` CSR), one per (target, option).
+def predecessor_counts(n, indptr, indices, data, options, states, keep
+                       ):  # pragma: no cover - compiled
+    """Pass 1 of the predecessor lists (:func:`predecessor_fill`): where each target's entries
+    start, how far a predecessor lies from its target, and the longest list.
 
-    Entries ``ptr[t*n_act + a]:ptr[t*n_act + a + 1]`` of ``src`` / ``val`` are the states ``s``
-    with ``F(t | s, a) > 0`` in increasing ``s``, and those masses (exact zeros are dropped, as
-    ``eliminate_zeros`` would). This is the transpose of ``F`` (column ``t``'s entries in row
-    order, which groups them by option), built by one counting pass and one scatter pass over
-    ``F``; the option boundaries are recorded while the rows of each option are scattered.
-    ``src`` holds states (not rows), in the dtype of ``indices``.
+    The rows read are those :func:`predecessor_fill` scatters: option ``options[j]``'s row of the
+    ``i``-th of ``states`` where ``keep[i, j]``, exact zeros skipped.
+
+    Returns:
+        ``(start, far, longest, wraps)``: ``(n + 1,)`` int64 ``start``, ``start[t]`` the first
+        entry of target ``t`` and ``start[n]`` the number of entries; ``far`` the largest
+        ``|short_way(s - t, n)|`` over the entries, ``longest`` the most entries of one
+        (target, option) list (0 if none), and whether some offset is the way round
+        (``short_way(s - t, n) != s - t``).
     """
-    return predecessors_of_rows(n, indptr, indices, data, np.arange(n_act, dtype=np.int64),
-                                np.arange(n, dtype=np.int64), np.ones((n, n_act), dtype=np.bool_))
+    k = options.size
+    start = np.zeros(n + 1, dtype=np.int64)
+    count = np.zeros(n, dtype=np.int64)
+    far = 0
+    longest = 0
+    wraps = False
+    for j in range(k):
+        base = options[j] * n
+        for i in range(states.size):
+            if keep[i, j]:
+                s = states[i]
+                r = base + s
+                for q in range(indptr[r], indptr[r + 1]):
+                    if data[q] != 0.0:
+                        t = indices[q]
+                        count[t] += 1
+                        d = short_way(s - t, n)
+                        far = max(far, d if d >= 0 else -d)
+                        wraps |= d != s - t
+        for t in range(n):
+            start[t + 1] += count[t]
+            longest = max(longest, count[t])
+            count[t] = 0
+    for t in range(n):
+        start[t + 1] += start[t]
+    return start, far, longest, wraps
 
 
 @njit(cache=True)
-def predecessors_of_rows(n, indptr, indices, data, options, states, keep
-                         ):  # pragma: no cover - compiled
-    """:func:`predecessors_by_option` of the rows of ``states`` alone, read from the model.
+def predecessor_fill(n, indptr, indices, data, options, states, keep, start, length, off, val
+                     ):  # pragma: no cover - compiled
+    """Pass 2: the predecessor lists of the selected rows, one per (target, option), in place.
 
     The stacked matrix is ``F`` (``(O*n, n)`` CSR of every option); the ``j``-th option of the
-    result is column ``options[j]``, and its row for the ``i``-th of ``states`` (sorted, distinct)
-    is ``F[options[j]*n + states[i]]`` where ``keep[i, j]``, empty elsewhere. The lists are the
-    ones :func:`predecessors_by_option` builds from that masked matrix (same order: by option,
-    then increasing state), without forming it: the work is the selected rows' entries plus the
-    ``n * k`` list heads.
+    lists is ``options[j]``, and its row for the ``i``-th of ``states`` (sorted, distinct) is
+    ``F[options[j]*n + states[i]]`` where ``keep[i, j]``, empty elsewhere - the masked rows
+    (zero where an option is not admissible: eq. 4.6 compares admissible options only), read
+    straight from the model without forming them.
+
+    Target ``t``'s entries are ``start[t]:start[t + 1]`` of ``off`` / ``val``, option after
+    option, ``length[t*k + j]`` of them for the ``j``-th: the states ``s`` with
+    ``F(t | s, options[j]) > 0`` in increasing ``s``, stored as ``off = short_way(s - t, n)``
+    (``s = (t + off) mod n``), and those masses (exact zeros are dropped, as ``eliminate_zeros``
+    would). This is the transpose of the masked rows (column ``t``'s entries in row order, which
+    groups them by option), scattered in one pass over the rows; ``start`` is
+    :func:`predecessor_counts`'s. ``length`` (``(n*k,)``), ``off`` and ``val`` (``(start[n],)``)
+    are allocated by the caller, which picks their dtypes: a list's length fits a byte or two
+    where a head pointer per list would take four or eight, an offset needs fewer bytes than a
+    state when predecessors lie near their targets, the shorter way round (a grid's do, a
+    cylinder's too), and ``val`` holds the masses in the order the worklists read them.
     """
     k = options.size
-    m_states = states.size
-    count = np.zeros(n + 1, dtype=np.int64)
+    fill = start[:n].copy()
+    begun = start[:n].copy()
     for j in range(k):
         base = options[j] * n
-        for i in range(m_states):
-            if keep[i, j]:
-                r = base + states[i]
-                for q in range(indptr[r], indptr[r + 1]):
-                    if data[q] != 0.0:
-                        count[indices[q] + 1] += 1
-    for t in range(n):
-        count[t + 1] += count[t]
-    m = count[n]
-    fill = count[:n].copy()
-    ptr = np.empty(n * k + 1, dtype=np.int64)
-    src = np.empty(m, dtype=indices.dtype)
-    val = np.empty(m, dtype=np.float64)
-    for j in range(k):
-        for t in range(n):
-            ptr[t * k + j] = fill[t]
-        base = options[j] * n
-        for i in range(m_states):
+        for i in range(states.size):
             if keep[i, j]:
                 s = states[i]
                 r = base + s
@@ -341,11 +423,72 @@ def predecessors_of_rows(n, indptr, indices, data, options, states, keep
                     if x != 0.0:
                         t = indices[q]
                         f = fill[t]
-                        src[f] = s
+                        off[f] = short_way(s - t, n)
                         val[f] = x
                         fill[t] = f + 1
-    ptr[n * k] = m
-    return ptr, src, val
+        for t in range(n):
+            length[t * k + j] = fill[t] - begun[t]
+            begun[t] = fill[t]
+
+
+def index_labels(labels: np.ndarray) -> np.ndarray:
+    """A copy of ``labels`` in the int type the worklists index states and blocks with: int32
+    below 2^31 - 1 states (their arrays then take half the bytes), int64 beyond."""
+    return labels.astype(np.int32 if labels.size < 2**31 - 1 else np.int64)
+
+
+def offset_dtype(far: int) -> type:
+    """The narrowest signed int of 16, 32 or 64 bits holding every offset ``|off| <= far``."""
+    for dtype in (np.int16, np.int32):
+        if far <= np.iinfo(dtype).max:
+            return dtype
+    return np.int64
+
+
+def length_dtype(longest: int) -> type:
+    """The narrowest of uint8, uint16 and int64 holding every list length ``<= longest``."""
+    for dtype in (np.uint8, np.uint16):
+        if longest <= np.iinfo(dtype).max:
+            return dtype
+    return np.int64
+
+
+def predecessors_of_rows(n, indptr, indices, data, options, states, keep, off_dtype=None):
+    """The predecessor lists ``(start, length, off, val, ring)`` of :func:`predecessor_fill` (two
+    compiled passes): ``ring = n`` when some offset is the way round (a state is then
+    ``(t + off) mod n``), else 0 (``t + off``, and the worklists skip the test).
+
+    ``start`` is int32 when the entries number fewer than 2^31 (int64 otherwise), ``length``
+    has :func:`length_dtype` of the longest list and ``off`` :func:`offset_dtype` of the farthest
+    predecessor unless ``off_dtype`` is given (wide enough); ``val`` is float64.
+    Beside them only pass 1's ``(n + 1,)`` starts remain: on the 10^6-state rooms grid with 20
+    options the lists take 10 bytes per entry (an int16 offset and the mass) and one byte per
+    (target, option), against the model's 12 per entry (an int32 column and the mass) and four
+    per row.
+    """
+    options = np.ascontiguousarray(options, dtype=np.int64)
+    states = np.ascontiguousarray(states, dtype=np.int64)
+    data = np.asarray(data, dtype=np.float64)
+    start, far, longest, wraps = predecessor_counts(n, indptr, indices, data, options, states,
+                                                    keep)
+    m = int(start[n])
+    if m < 2**31:
+        start = start.astype(np.int32)
+    length = np.empty(n * options.size, dtype=length_dtype(int(longest)))
+    off = np.empty(m, dtype=offset_dtype(int(far)) if off_dtype is None else off_dtype)
+    val = np.empty(m, dtype=np.float64)
+    predecessor_fill(n, indptr, indices, data, options, states, keep, start, length, off, val)
+    return start, length, off, val, n if wraps else 0
+
+
+def predecessors_by_option(n, n_act, indptr, indices, data, off_dtype=None):
+    """:func:`predecessors_of_rows` of every row of the stacked ``(n_act*n, n)`` CSR ``F``:
+    target ``t``'s entries from ``start[t]`` on are its lists for options ``0, 1, ...``,
+    ``length[t*n_act + a]`` entries for option ``a``: the states ``(t + off) mod n`` with
+    ``F(t | s, a) > 0``, increasing, and those masses; last ``ring``."""
+    keep = np.broadcast_to(np.True_, (n, n_act))  # every row kept, no (n, n_act) mask stored
+    return predecessors_of_rows(n, indptr, indices, data, np.arange(n_act), np.arange(n), keep,
+                                off_dtype)
 
 
 @njit(cache=True)
@@ -376,8 +519,8 @@ def _stable_sort_by_key(keys, items, lo, hi):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def delta_worklist(n, n_act, pred_ptr, pred_src, pred_val, init_labels, n_init, width,
-                   max_pops):  # pragma: no cover - compiled
+def delta_worklist(n, n_act, pred_start, pred_len, pred_off, pred_val, pred_ring, init_labels,
+                   n_init, width, max_pops):  # pragma: no cover - compiled
     """delta-refinement to a fixpoint with a splitter worklist (eq. 4.6, DESIGN.md's split rule).
 
     The shape of :func:`lump`, with the greedy delta cut instead of exact equality: popping a
@@ -407,8 +550,10 @@ def delta_worklist(n, n_act, pred_ptr, pred_src, pred_val, init_labels, n_init, 
 
     Args:
         n, n_act: states and stacked options.
-        pred_ptr, pred_src, pred_val: predecessor lists from :func:`predecessors_by_option`.
-        init_labels: ``(n,)`` int64 initial blocks ``0..n_init-1``.
+        pred_start, pred_len, pred_off, pred_val, pred_ring: predecessor lists from
+            :func:`predecessors_of_rows`.
+        init_labels: ``(n,)`` initial blocks ``0..n_init-1`` (int32 or int64: the int type of
+            the state and block arrays).
         width: ``delta + atol``.
         max_pops: give up after this many splitters (returns ``pops = -1``); ``<= 0``: no cap.
 
@@ -419,9 +564,10 @@ def delta_worklist(n, n_act, pred_ptr, pred_src, pred_val, init_labels, n_init, 
     nb = n_init
 
     # the worklist: a min-heap on block size (a block is in it at most once: <= n entries)
+    idx = init_labels.dtype
     inwl = np.zeros(n + 1, dtype=np.bool_)
-    hkey = np.empty(n + 1, dtype=np.int64)
-    hval = np.empty(n + 1, dtype=np.int64)
+    hkey = np.empty(n + 1, dtype=idx)
+    hval = np.empty(n + 1, dtype=idx)
     hsize = 0
     for b in range(n_init):
         hsize = _heap_push(hkey, hval, hsize, bend[b] - bstart[b], b)
@@ -429,12 +575,13 @@ def delta_worklist(n, n_act, pred_ptr, pred_src, pred_val, init_labels, n_init, 
 
     w = np.zeros(n, dtype=np.float64)
     marked = np.zeros(n, dtype=np.bool_)
-    touched = np.empty(n, dtype=np.int64)
-    splitter = np.empty(n, dtype=np.int64)
+    touched = np.empty(n, dtype=idx)
+    splitter = np.empty(n, dtype=idx)
+    cursor = np.empty(n, dtype=pred_start.dtype)
     keys = np.empty(n, dtype=np.float64)
-    bmark = np.zeros(n + 1, dtype=np.int64)
-    tblocks = np.empty(n + 1, dtype=np.int64)
-    gstart = np.empty(n + 2, dtype=np.int64)
+    bmark = np.zeros(n + 1, dtype=idx)
+    tblocks = np.empty(n + 1, dtype=idx)
+    gstart = np.empty(n + 2, dtype=idx)
     pops = 0
 
     while hsize > 0:
@@ -443,15 +590,11 @@ def delta_worklist(n, n_act, pred_ptr, pred_src, pred_val, init_labels, n_init, 
         c, hsize = _heap_pop(hkey, hval, hsize)  # the smallest waiting splitter first
         inwl[c] = False
         pops += 1
-        nc = bend[c] - bstart[c]
-        for i in range(nc):
-            splitter[i] = elems[bstart[c] + i]
+        nc = take_splitter(c, elems, bstart, bend, pred_start, splitter, cursor)
         for a in range(n_act):
             # masses into C under option a, first-touch order
-            nt = 0
-            for i in range(nc):
-                nt = add_masses(pred_ptr, pred_src, pred_val, splitter[i] * n_act + a, w, marked,
-                                touched, nt)
+            nt = splitter_masses(pred_ring, nc, n_act, splitter, cursor, pred_len, pred_off,
+                                 pred_val, w, marked, touched, a)
             ntb = 0
             for i in range(nt):
                 s = touched[i]

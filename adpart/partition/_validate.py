@@ -107,7 +107,13 @@ def select_options(model: SMDPModel, options: Sequence[int] | np.ndarray | None)
 
 
 def selected_admissible(model: SMDPModel, options: np.ndarray) -> np.ndarray:
-    """``(S, O)`` the model's initiation sets with unselected options switched off."""
+    """``(S, O)`` the model's initiation sets with unselected options switched off.
+
+    ``options`` are :func:`select_options`'s (sorted, distinct); when they are all the model's,
+    this is the model's own table, not a copy: read it only.
+    """
+    if options.size == model.n_actions:
+        return model.admissible
     adm = np.zeros_like(model.admissible)
     adm[:, options] = model.admissible[:, options]
     return adm

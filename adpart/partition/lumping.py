@@ -26,14 +26,13 @@ import scipy.sparse as sp
 
 from adpart.errors import ModelError
 from adpart.mdp.model import SMDPModel
-from adpart.partition._kernels import lump
+from adpart.partition._kernels import index_labels, lump, predecessors_by_option
 from adpart.partition._validate import (
     DEFAULT_ATOL,
     as_model,
     check_atol,
     check_partition_fits,
     check_rewards,
-    masked_rows,
     require_cover,
     select_options,
     selected_admissible,
@@ -45,7 +44,7 @@ from adpart.partition.partition import (
     combine_labels,
     row_codes,
 )
-from adpart.partition.refine import reward_split
+from adpart.partition.refine import model_predecessors, reward_split
 
 
 def exact_lumping(
@@ -87,13 +86,14 @@ def exact_lumping(
         start = initial.labels
     else:
         raise ModelError(f"initial must be a Partition or None, got {type(initial).__name__}")
-    pattern = row_codes(adm[:, sel])
-    labels = combine_labels(start, pattern)
+    labels = combine_labels(start, row_codes(adm[:, sel]))
     if use_rewards:
         R = check_rewards(smdp.R if rewards is None else rewards, smdp)
         labels = canonical_labels(reward_split(labels, R, adm, sel, tol))
-    F = masked_rows(smdp, sel, adm)
-    labels = lump_labels(labels, F, sel.size, tol)
+    # the masked rows' predecessor lists straight from the model (no masked copy of F)
+    keep = adm[:, sel]
+    keep = None if keep.all() else keep
+    labels = lump_lists(labels, model_predecessors(smdp, sel, None, keep), sel.size, tol)
     n_blocks = int(labels.max()) + 1
     return Partition(labels, block_all(labels, n_blocks, adm))
 
@@ -103,17 +103,15 @@ def lump_labels(labels: np.ndarray, F: sp.csr_array, k: int, atol: float) -> np.
 
     The result refines ``labels``.
     """
-    S = labels.size
-    FT = sp.csr_array(F.T)
-    FT.eliminate_zeros()
-    out, _ = lump(
-        S,
-        k,
-        FT.indptr.astype(np.int64),
-        FT.indices.astype(np.int64),
-        FT.data.astype(np.float64),
-        np.ascontiguousarray(labels, dtype=np.int64),
-        int(labels.max()) + 1,
-        float(atol),
-    )
+    F = sp.csr_array(F)
+    return lump_lists(labels, predecessors_by_option(labels.size, k, F.indptr, F.indices, F.data),
+                      k, atol)
+
+
+def lump_lists(labels: np.ndarray, preds: tuple[np.ndarray, ...], k: int,
+               atol: float) -> np.ndarray:
+    """Canonical labels of the coarsest lumping of the ``k`` options whose predecessor lists
+    (:func:`adpart.partition._kernels.predecessor_fill`) are ``preds``; it refines ``labels``."""
+    out, _ = lump(labels.size, k, *preds, index_labels(labels), int(labels.max()) + 1,
+                  float(atol))
     return canonical_labels(out)

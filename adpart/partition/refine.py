@@ -43,19 +43,18 @@ from adpart.mdp.model import SMDPModel
 from adpart.partition._kernels import (
     delta_worklist,
     greedy_groups,
+    index_labels,
     predecessors_by_option,
     predecessors_of_rows,
 )
 from adpart.partition._validate import (
     DEFAULT_ATOL,
     as_model,
-    block_rows,
     check_atol,
     check_delta,
     check_epsilon,
     check_partition_fits,
     check_rewards,
-    masked_rows,
     require_cover,
     select_options,
     selected_admissible,
@@ -182,46 +181,65 @@ def delta_refine(
     F = sp.csr_array(F)
     # the model's arrays as they are (no int64 / float64 copies: at 10^6 states and 20 options
     # each copy of the entries is ~2 GB); the kernels compile for the index dtype given
-    preds = predecessors_by_option(
-        labels.size, k, F.indptr, F.indices, np.asarray(F.data, dtype=np.float64)
-    )
+    preds = predecessors_by_option(labels.size, k, F.indptr, F.indices, F.data)
     return _worklist(labels, preds, k, delta, atol, max_rounds)
 
 
-def delta_refine_rows(
-    labels: np.ndarray, model: SMDPModel, options: np.ndarray, states: np.ndarray,
-    keep: np.ndarray, delta: float, atol: float,
-) -> tuple[np.ndarray, int]:
-    """:func:`delta_refine` with only the rows of ``states`` filled: the matrix
-    :func:`adpart.partition._validate.block_rows` builds (option ``options[j]``'s row of the
-    ``i``-th state where ``keep[i, j]``), read straight from ``model.F``.
+def model_predecessors(
+    model: SMDPModel, options: np.ndarray, states: np.ndarray | None, keep: np.ndarray | None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The predecessor lists of the masked rows (eq. 4.6 compares admissible options only), read
+    straight from ``model.F``: the ``j``-th option is ``options[j]``, its row for the ``i``-th of
+    ``states`` (sorted, distinct; None: every state) is kept where ``keep[i, j]`` (None: every
+    row), every other row is empty (:func:`adpart.partition._kernels.predecessor_fill`).
 
-    Only blocks holding ``states`` can be split (every other row is empty), so this refines one
-    block of a layer against all its blocks (section 4.3.3) at the cost of the block's rows.
+    No masked or stacked copy of ``F`` is formed (:func:`adpart.partition._validate.masked_rows`
+    builds one): only the lists, 10 bytes per kept entry and one per (state, option) on a grid.
+    """
+    F = model.F if isinstance(model.F, sp.csr_array) else sp.csr_array(model.F)
+    S = model.n_states
+    options = np.ascontiguousarray(options, dtype=np.int64)
+    states = np.arange(S, dtype=np.int64) if states is None else states
+    if keep is None or keep.all():
+        keep = np.broadcast_to(np.True_, (states.size, options.size))
+    return predecessors_of_rows(S, F.indptr, F.indices, F.data, options, states,
+                                np.asarray(keep, dtype=bool))
+
+
+def delta_refine_rows(
+    labels: np.ndarray, model: SMDPModel, options: np.ndarray, states: np.ndarray | None,
+    keep: np.ndarray | None, delta: float, atol: float, max_rounds: int | None = None,
+) -> tuple[np.ndarray, int]:
+    """:func:`delta_refine` of the masked rows of :func:`model_predecessors`: option
+    ``options[j]``'s row of the ``i``-th state of ``states`` where ``keep[i, j]``, read straight
+    from ``model.F`` (the matrix :func:`adpart.partition._validate.block_rows` would build).
+
+    With every state and ``keep`` the selected admissibility this is :func:`refine`'s delta stage.
+    With some states only blocks holding them can be split (every other row is empty), so this
+    refines one block of a layer against all its blocks (section 4.3.3) at the cost of the block's
+    rows. ``delta = 0`` gives the exact lumping (:func:`adpart.partition.lumping.lump_lists`).
     """
     labels = np.ascontiguousarray(labels, dtype=np.int64)
-    options = np.ascontiguousarray(options, dtype=np.int64)
-    states = np.ascontiguousarray(states, dtype=np.int64)
-    keep = np.ascontiguousarray(keep, dtype=bool)
+    if states is not None:
+        states = np.ascontiguousarray(states, dtype=np.int64)
+    preds = model_predecessors(model, options, states, keep)
+    k = np.size(options)
     if delta == 0.0:
-        return delta_refine(labels, block_rows(model, options, states, keep), options.size,
-                            delta, atol)
-    F = model.F if isinstance(model.F, sp.csr_array) else sp.csr_array(model.F)
-    preds = predecessors_of_rows(model.n_states, F.indptr, F.indices,
-                                 np.asarray(F.data, dtype=np.float64), options, states, keep)
-    return _worklist(labels, preds, options.size, delta, atol, None)
+        from adpart.partition.lumping import lump_lists  # lumping imports this module
+
+        return lump_lists(labels, preds, k, atol), 0
+    return _worklist(labels, preds, k, delta, atol, max_rounds)
 
 
-def _worklist(labels: np.ndarray, preds: tuple[np.ndarray, np.ndarray, np.ndarray], k: int,
-              delta: float, atol: float, max_rounds: int | None) -> tuple[np.ndarray, int]:
-    ptr, src, val = preds
+def _worklist(labels: np.ndarray, preds: tuple[np.ndarray, ...], k: int, delta: float,
+              atol: float, max_rounds: int | None) -> tuple[np.ndarray, int]:
     out, _, pops = delta_worklist(
-        labels.size, k, ptr, src, val, labels.copy(), int(labels.max()) + 1,
+        labels.size, k, *preds, index_labels(labels), int(labels.max()) + 1,
         float(delta + atol), 0 if max_rounds is None else int(max_rounds),
     )
     if pops < 0:
         raise ModelError(f"delta refinement did not reach a fixpoint in {max_rounds} splitters")
-    return out, int(pops)
+    return out.astype(np.int64), int(pops)
 
 
 def delta_refine_rounds(
@@ -331,13 +349,14 @@ def refine(
     adm = selected_admissible(smdp, sel)
     if require_admissible:
         require_cover(adm, sel)
-    pattern = row_codes(adm[:, sel])
-    labels = combine_labels(partition.labels, pattern)
+    labels = combine_labels(partition.labels, row_codes(adm[:, sel]))
     if e is not None:
         R = check_rewards(smdp.R if rewards is None else rewards, smdp)
         labels = canonical_labels(reward_split(labels, R, adm, sel, e + tol))
-    F = masked_rows(smdp, sel, adm)
-    labels, _ = delta_refine(labels, F, sel.size, d, tol, max_rounds)
+    # the masked rows' predecessor lists straight from the model (no masked copy of F)
+    keep = adm[:, sel]
+    keep = None if keep.all() else keep
+    labels, _ = delta_refine_rows(labels, smdp, sel, None, keep, d, tol, max_rounds)
     labels = canonical_labels(labels)
     n_blocks = int(labels.max()) + 1
     return Partition(labels, block_all(labels, n_blocks, adm))

@@ -133,9 +133,9 @@ def test_kernel_at_zero_width_is_the_unique_exact_lumping(case):
     model, rng = case
     initial = _initial(model, rng)
     labels, F, k = _stacked(model, initial)
-    ptr, src, val = predecessors_by_option(labels.size, k, F.indptr, F.indices, F.data)
-    out, _, _ = delta_worklist(labels.size, k, ptr, src, val, labels.copy(),
-                               int(labels.max()) + 1, ATOL, 0)
+    lists = predecessors_by_option(labels.size, k, F.indptr, F.indices, F.data)
+    out, _, _ = delta_worklist(labels.size, k, *lists, labels.copy(), int(labels.max()) + 1,
+                               ATOL, 0)
     oracle = brute_force_bisimulation(model, initial.labels, rewards=False)
     assert np.array_equal(canonical_labels(out), oracle)
     assert np.array_equal(brute_force_delta(labels, F, k, ATOL), oracle)
@@ -147,18 +147,80 @@ def test_predecessor_lists_are_the_transpose_grouped_by_option(case):
     model, _ = case
     F = sp.csr_array(model.F)
     S, k = model.n_states, model.n_actions
-    ptr, src, val = predecessors_by_option(S, k, F.indptr, F.indices, F.data)
-    wide = predecessors_by_option(S, k, F.indptr.astype(np.int64), F.indices.astype(np.int64),
-                                  F.data)  # large models come with int64 indices
-    for x, y in zip((ptr, src, val), wide, strict=True):
-        assert np.array_equal(x, y)
+    lists = predecessors_by_option(S, k, F.indptr, F.indices, F.data)
+    start, length, off, val, ring = lists
+    assert ring in (0, S)
+    # offsets from the target fit 16 bits, list lengths a byte
+    assert start.dtype == np.int32 and length.dtype == np.uint8 and off.dtype == np.int16
+    # large models come with int64 indices; far predecessors need wider offsets
+    for wide in (predecessors_by_option(S, k, F.indptr.astype(np.int64),
+                                        F.indices.astype(np.int64), F.data),
+                 predecessors_by_option(S, k, F.indptr, F.indices, F.data, off_dtype=np.int64)):
+        for x, y in zip(lists, wide, strict=True):
+            assert np.array_equal(x, y)
     Fd = F.toarray()
     for t in range(S):
+        lo = start[t]
         for a in range(k):
-            lo, hi = ptr[t * k + a], ptr[t * k + a + 1]
+            hi = lo + length[t * k + a]
             expect = np.flatnonzero(Fd[a * S:(a + 1) * S, t])
-            assert np.array_equal(src[lo:hi], expect)
+            assert np.array_equal((t + off[lo:hi]) % S, expect)
+            assert np.all(np.abs(off[lo:hi]) <= S // 2)  # the shorter way round
             assert np.array_equal(val[lo:hi], Fd[a * S + expect, t])
+            lo = hi
+        assert lo == start[t + 1]
+
+
+def test_offsets_and_lengths_widen_with_the_farthest_predecessor_and_the_longest_list():
+    from adpart.partition._kernels import length_dtype, offset_dtype
+
+    assert offset_dtype(0) == np.int16 and offset_dtype(2**15 - 1) == np.int16
+    assert offset_dtype(2**15) == np.int32 and offset_dtype(2**31 - 1) == np.int32
+    assert offset_dtype(2**31) == np.int64
+    assert length_dtype(0) == np.uint8 and length_dtype(255) == np.uint8
+    assert length_dtype(256) == np.uint16 and length_dtype(2**16) == np.int64
+    # a ring: each state steps to the next, the last to the first: offsets -1 the short way
+    S = 2**15 + 2
+    ring = sp.csr_array((np.full(S, 0.9), (np.arange(S), (np.arange(S) + 1) % S)), shape=(S, S))
+    lists = predecessors_by_option(S, 1, ring.indptr, ring.indices, ring.data)
+    assert lists[2].dtype == np.int16 and np.all(lists[2] == -1) and lists[4] == S
+    # each state steps half way round: offsets of S / 2 > 2^15 - 1
+    S = 2**16 + 4
+    half = sp.csr_array((np.full(S, 0.9), (np.arange(S), (np.arange(S) + S // 2) % S)),
+                        shape=(S, S))
+    _, _, off, _, wrap = predecessors_by_option(S, 1, half.indptr, half.indices, half.data)
+    assert off.dtype == np.int32 and wrap == 0  # S / 2 is as short one way as the other
+    assert np.array_equal((np.arange(S) + off) % S, (np.arange(S) - S // 2) % S)
+    # a star: every state steps into state 0, whose one list is S long
+    S = 300
+    F = sp.csr_array((np.full(S, 0.9), (np.arange(S), np.zeros(S, dtype=np.int64))), shape=(S, S))
+    start, length, off, _, ring = predecessors_by_option(S, 1, F.indptr, F.indices, F.data)
+    assert length.dtype == np.uint16 and length[0] == S and start[1] == S and ring == S
+    assert np.array_equal(off % S, np.arange(S))
+
+
+@settings(max_examples=30, deadline=None)
+@given(random_smdps(), st.sampled_from([0.0, 0.3]))
+def test_the_worklists_do_not_depend_on_the_widths_of_their_arrays(case, delta):
+    # int16 / int32 / int64 offsets and int32 / int64 state arrays: one partition, one trajectory
+    from adpart.partition._kernels import lump
+
+    model, rng = case
+    labels, F, k = _stacked(model, _initial(model, rng))
+    runs = set()
+    for off_dtype in (None, np.int32, np.int64):
+        lists = predecessors_by_option(labels.size, k, F.indptr, F.indices, F.data, off_dtype)
+        for idx in (np.int32, np.int64):
+            init = labels.astype(idx)
+            if delta:
+                out, nb, pops = delta_worklist(labels.size, k, *lists, init,
+                                               int(labels.max()) + 1, delta + ATOL, 0)
+            else:
+                (out, nb), pops = lump(labels.size, k, *lists, init, int(labels.max()) + 1,
+                                       ATOL), 0
+            assert out.dtype == idx
+            runs.add((out.astype(np.int64).tobytes(), int(nb), int(pops)))
+    assert len(runs) == 1
 
 
 @settings(max_examples=40, deadline=None)
