@@ -157,6 +157,7 @@ from adpart.learning.hierarchical_settings import (
     HierarchicalSettings,
 )
 from adpart.learning.knowledge import Knowledge, world
+from adpart.learning.online_phase3 import OnlinePhase3
 from adpart.learning.result import LearnResult
 from adpart.learning.settings import Run, fresh_seed, require_mdp
 from adpart.learning.smdp_q import (
@@ -238,12 +239,15 @@ class HierarchicalResult(LearnResult):
 
 
 def child_values(Q_old: np.ndarray, n_old: np.ndarray, old: Partition, new: Partition,
-                 block: int, Q_low: np.ndarray, tried: np.ndarray, lower_bound: float,
-                 parent: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Starting values and counts of the blocks of ``new``, ``old`` refined at ``block`` (4.3.3).
+                 block: int | np.ndarray, Q_low: np.ndarray, tried: np.ndarray,
+                 lower_bound: float, parent: np.ndarray | None = None
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Starting values and counts of the blocks of ``new``, ``old`` refined at ``block`` (4.3.3;
+    an array of blocks when several were split at once, as phase 3 online does).
 
     Every block keeps its parent's values and counts, except the primitive columns ``0..A-1``
-    (``A = Q_low.shape[1]``) of ``block``'s children, which start *grounded*, with a count of 0:
+    (``A = Q_low.shape[1]``) of the split blocks' children, which start *grounded*, with a count
+    of 0:
     at the mean of ``Q_low(s, a)`` over the child's states where ``a`` was ``tried``, and at
     ``lower_bound`` where it was tried in none of them - new to the child or inherited alike:
     a child's primitive values come from its own states' evidence only. Columns the child does
@@ -264,7 +268,9 @@ def child_values(Q_old: np.ndarray, n_old: np.ndarray, old: Partition, new: Part
     Qn = Q_old[parent]
     n_new = n_old[parent]
     B = new.n_blocks
-    members = np.flatnonzero(old.labels == block)  # only the split block's children are read
+    split = np.atleast_1d(np.asarray(block, dtype=np.int64))
+    members = np.flatnonzero(np.isin(old.labels, split))  # only the split blocks' children
+    # are read
     kid = new.labels[members]
     hit = tried[members]
     cell = (kid[:, None] * A + np.arange(A)).ravel()  # (child, action) of every member entry
@@ -272,7 +278,7 @@ def child_values(Q_old: np.ndarray, n_old: np.ndarray, old: Partition, new: Part
                        minlength=B * A).reshape(B, A)
     counts = np.bincount(cell, weights=hit.ravel(), minlength=B * A).reshape(B, A)
     grounded = sums / np.maximum(counts, 1.0)
-    fresh = new.admissible[:, :A] & (parent == block)[:, None]
+    fresh = new.admissible[:, :A] & np.isin(parent, split)[:, None]
     Qn[:, :A][fresh] = np.where(counts[fresh] > 0, grounded[fresh], lower_bound)
     n_new[:, :A][fresh] = 0
     Qn[~new.admissible] = -np.inf
@@ -427,6 +433,9 @@ def hierarchical_knowledge(settings: HierarchicalSettings, *, belief: bool = Fal
     if belief:
         uses = ["option models on the estimated dynamics for refinement",
                 "the earlier tasks' step reward as the reward floor"]
+        if settings.refinement.online_phase3:
+            uses.append("phase 3 online: the rewards of the pairs tried and the terminal states "
+                        "entered, as observed")
         if settings.directed:
             uses.append("R-max on the counts, unknown pairs at the given value ceiling")
         return Knowledge("estimated", "observed", tuple(uses))
@@ -527,6 +536,12 @@ def hierarchical_learning(
     K, N, S, H = run.runs, run.episodes, mdp.n_states, run.max_steps_per_episode
     seed = fresh_seed(run.seed)
     kernel_name, step_kernel = kernel_function(run.kernel)
+    if refinement.online_phase3 and (belief is None or not settings.directed):
+        raise TaskError("phase 3 online (online_phase3, --hier-opt online-phase3=true) splits a "
+                        "belief's layer as the task's rewards are observed: it needs the "
+                        "learned-model regime (--regime learned-model; the true-model layer was "
+                        "built with the task's rewards) and R-max exploration (--explore r-max), "
+                        "whose counts tell which states ended an episode")
     known = mdp if belief is None else _checked_belief(belief, mdp, settings)
     part0, full, smdp, extra = starting_layer(known, options, partition, settings,
                                               models if belief is None else None)
@@ -574,6 +589,31 @@ def hierarchical_learning(
         parts[k], event = refine.apply(st, k, parts[k], reference)
         events.append(event)
 
+    phase3 = (OnlinePhase3(known, full[mdp.n_actions:], refine.model, refinement.delta,
+                           refinement.partition_epsilon) if refinement.online_phase3 else None)
+    phase3_events: list[dict[str, int]] = []
+
+    def on_episode() -> None:  # phase 3 online: each run's layer split by what it observed
+        assert phase3 is not None
+        for k in range(K):
+            tried = st.nf[k] > 0
+            with world():  # what run k saw: the rewards it was paid, the episodes' ends
+                paid = np.where(tried, mdp.R, 0.0)
+                ended = np.zeros(S, dtype=bool)  # successors R-max counted, terminal ones
+                ended[st.indices[st.xc[k] > 0]] = True
+                ended &= mdp.terminal
+            found = phase3.observe(k, parts[k], tried, paid, ended)
+            if found is None:
+                continue
+            new, split = found
+            refine.run_models[k] = phase3.models[k]
+            if new.n_blocks != parts[k].n_blocks:
+                refine.install(st, k, parts[k], new, split, reference)
+            phase3_events.append({"run": k, "episode": int(st.episode[k]),
+                                  "blocks_before": parts[k].n_blocks,
+                                  "blocks_after": new.n_blocks})
+            parts[k] = new
+
     def score() -> np.ndarray:
         Qs = lifted_values(settings.layer_values, st, parts, smdp, known, lower)
         policies = greedy_policy(Qs.reshape(K * S, -1)).reshape(K, S)
@@ -581,7 +621,8 @@ def hierarchical_learning(
             return scorer(policies, every_run.copy())
 
     eval_value = drive(st, step_kernel, seed, episodes=N, eval_every=run.eval_every,
-                       score=score, progress=run.progress, on_fire=on_fire if check else None)
+                       score=score, progress=run.progress, on_fire=on_fire if check else None,
+                       on_episode=on_episode if phase3 is not None else None)
     with world():  # an audit of the firings against the task's exact Q*: scoring, not learning
         audit = firing_audit(events, world_smdp, mdp, K,
                              first_actions(full[mdp.n_actions:], S, mdp.n_actions))
@@ -608,6 +649,7 @@ def hierarchical_learning(
         "reference": "given" if run.reference_values is not None else "solved",
         "knowledge": hierarchical_knowledge(settings, belief=belief is not None).to_dict(),
         "belief": None if belief is None else belief.name,
+        "online_phase3": refinement.online_phase3, "phase3_events": phase3_events,
     }
     curve = LearningCurve.from_matrices(
         steps=st.out_steps, decisions=st.out_dec, returns=st.out_ret,
@@ -616,6 +658,10 @@ def hierarchical_learning(
                   "gamma": mdp.gamma, "v_star_start": v_star, **parameters,
                   "final_blocks": st.out_blocks[:, -1].tolist(),
                   "firings": np.bincount([e["run"] for e in events], minlength=K).tolist(),
+                  "phase3_blocks": np.bincount(
+                      [e["run"] for e in phase3_events], minlength=K,
+                      weights=[e["blocks_after"] - e["blocks_before"] for e in phase3_events]
+                  ).astype(int).tolist(),
                   "real_firings": audit.real.tolist(), "tied_firings": audit.ties.tolist(),
                   "own_step_ties": audit.own_step.tolist()},
     )

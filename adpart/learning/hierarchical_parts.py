@@ -20,7 +20,7 @@ step.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -112,6 +112,13 @@ class LayerRefiner:
     model: SMDPModel
     floor: float
     child_values: Callable[..., tuple[np.ndarray, np.ndarray]]
+    #: a run's own refinement model where phase 3 online has rebuilt it on what the run
+    #: observed (:mod:`adpart.learning.online_phase3`); the others refine on :attr:`model`
+    run_models: dict[int, SMDPModel] = field(default_factory=dict)
+
+    def model_of(self, k: int) -> SMDPModel:
+        """The model run ``k``'s refinements split by."""
+        return self.run_models.get(k, self.model)
 
     def apply(self, st: SMDPLockStepState, k: int, old: Partition,
               reference: ReferenceValues) -> tuple[Partition, dict[str, int]]:
@@ -121,13 +128,23 @@ class LayerRefiner:
         """
         s, b, a = (int(x) for x in st.fired[k])
         offered = bool(old.admissible[b, a])  # primitive a is column a; split_offered
-        new = refine_block(old, b, [a], self.model, delta=self.delta, epsilon=self.epsilon,
-                           at=s if self.rule == "state" or offered else None)
+        new = refine_block(old, b, [a], self.model_of(k), delta=self.delta,
+                           epsilon=self.epsilon, at=s if self.rule == "state" or offered else None)
+        self.install(st, k, old, new, b, reference)
+        return new, {"run": k, "episode": int(st.episode[k]), "state": s, "block": b,
+                     "action": a, "offered": offered, "blocks_before": old.n_blocks,
+                     "blocks_after": new.n_blocks,
+                     "offers": np.flatnonzero(old.admissible[b]).tolist()}
+
+    def install(self, st: SMDPLockStepState, k: int, old: Partition, new: Partition,
+                split: int | np.ndarray, reference: ReferenceValues) -> None:
+        """Make ``new`` (``old`` with the blocks ``split`` refined) run ``k``'s layer in the
+        kernel's arrays: the children's values and counts, admissibility, labels, reference."""
         B_old, B_new = old.n_blocks, new.n_blocks
         _grow(st, B_new, reference.per_block)
         parent = new.parent_map(old)
-        Qn, n_on = self.child_values(st.Q[k, :B_old], st.n_o[k, :B_old], old, new, b, st.Ql[k],
-                                     st.nf[k] > 0, self.floor, parent)
+        Qn, n_on = self.child_values(st.Q[k, :B_old], st.n_o[k, :B_old], old, new, split,
+                                     st.Ql[k], st.nf[k] > 0, self.floor, parent)
         st.Q[k, :B_new], st.Q[k, B_new:] = Qn, -np.inf
         st.n_o[k, :B_new], st.n_o[k, B_new:] = n_on, 0
         st.n_d[k, :B_new] = st.n_d[k, :B_old][parent]
@@ -137,10 +154,6 @@ class LayerRefiner:
         st.n_blocks[k] = B_new
         st.vr_on[k] = False  # virtual executions started in the old blocks are dropped
         reference.refresh(st, k, new)
-        return new, {"run": k, "episode": int(st.episode[k]), "state": s, "block": b,
-                     "action": a, "offered": offered, "blocks_before": B_old,
-                     "blocks_after": B_new,
-                     "offers": np.flatnonzero(old.admissible[b]).tolist()}
 
 
 def _grow(st: SMDPLockStepState, needed: int, per_block_reference: bool) -> None:

@@ -131,6 +131,12 @@ class Refinement:
     """epsilon of eq. 4.7 (the reward split) for building the layer and refining a block; none:
     no reward split."""
 
+    online_phase3: bool = setting(False)
+    """phase 3 online, on a belief model (the learned-model regime): after every episode a run's
+    belief takes the rewards of the pairs it tried and the terminal states it entered, and the
+    blocks where that changes its option models are split by eq. 4.7 and to delta-stability
+    (adpart.learning.online_phase3); the true-model layer was built with phase 3 already."""
+
 
 @settings
 class HierarchicalSettings:

@@ -365,12 +365,15 @@ def drive(
     score: Callable[[], np.ndarray],
     progress: Callable[[int, int], object] | None = None,
     on_fire: Callable[[int], None] | None = None,
+    on_episode: Callable[[], None] | None = None,
 ) -> np.ndarray:
     """Run the kernel through all evaluation blocks; returns ``eval_value`` (K, N), NaN between.
 
     Run ``k`` draws its first start state and its main uniforms from
     ``default_rng(seed).spawn(K)[k]`` and its auxiliary uniforms from that generator's child. On
-    an inconsistency (kernel code 2) ``on_fire(k)`` is called for each run that fired.
+    an inconsistency (kernel code 2) ``on_fire(k)`` is called for each run that fired. With
+    ``on_episode`` the runs stop after every episode, and it is called before any scoring (the
+    kernel resumes where it stopped, so stopping more often changes nothing else).
     """
     K, N = st.out_steps.shape
     rngs = np.random.default_rng(seed).spawn(K)
@@ -378,7 +381,9 @@ def drive(
     st.state[:] = [st.start_state(r.random()) for r in rngs]
     B = st.U.shape[1]
     eval_value = np.full((K, N), np.nan)
-    for boundary in sorted({*range(eval_every, episodes + 1, eval_every), episodes}):
+    scored = {*range(eval_every, episodes + 1, eval_every), episodes}
+    stops = range(1, episodes + 1) if on_episode is not None else sorted(scored)
+    for boundary in stops:
         st.target[:] = boundary
         while True:
             code = step_kernel(st)
@@ -395,6 +400,10 @@ def drive(
             for k in np.flatnonzero(st.fired[:, 0] >= 0):
                 on_fire(int(k))
                 st.fired[k] = -1
+        if on_episode is not None:
+            on_episode()
+            if boundary not in scored:
+                continue
         eval_value[:, boundary - 1] = score()
         if progress is not None:
             progress(boundary, episodes)

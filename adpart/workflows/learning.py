@@ -375,7 +375,8 @@ def load_decision_layer(kb: KnowledgeStore, env: str, *, options: str | None = N
 
 #: Curve metadata with one entry per run (concatenated across batches, stored in the run's
 #: metrics): a layer learner's blocks after refinement, its firings and the real ones among them.
-PER_RUN_METADATA = ("final_blocks", "firings", "real_firings", "tied_firings", "own_step_ties")
+PER_RUN_METADATA = ("final_blocks", "firings", "real_firings", "tied_firings", "own_step_ties",
+                    "phase3_blocks")
 
 
 def _merge_curves(parts: list[dict[str, np.ndarray]], metadatas: list[dict[str, Any]]
