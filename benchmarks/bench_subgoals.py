@@ -8,7 +8,8 @@ empty answer); and grids of rooms joined by doorways, ``rooms_grid_mdp(n, room, 
 10^4-10^6 cells, goal in the south-east corner, the shortest-path policy of
 :func:`~benchmarks._models.distance_policy`, where the count metric finds subgoals in front of
 the doorways (:func:`rooms`: the sets, their agreement and the exhaustive set's own agreement
-across seeds are printed beside the speed). Each detector runs with
+across seeds are printed beside the speed; :func:`samples_needed`: Monte Carlo stopped at a
+fixed number of trajectories, to show how many agreement takes). Each detector runs with
 seed 0, once with its defaults and once with the opt-in every-path ratios and predicted-agreement
 stop (:data:`CHOICES`); printed: wall time (best of ``repeats``), the number of subgoals of
 each and their overlap, the ratio exhaustive / Monte Carlo, and the MC samples and stop rule.
@@ -178,8 +179,53 @@ def rooms(workloads: tuple[tuple[int, int], ...] = ROOM_WORKLOADS,
     return rows
 
 
+#: Monte Carlo sample counts of :func:`samples_needed`, up to about one path per start state.
+SAMPLE_COUNTS = (1_000, 3_000, 10_000, 30_000, 100_000)
+
+
+def samples_needed(workloads: tuple[tuple[int, int], ...] = ROOM_WORKLOADS[1:],
+                   counts: tuple[int, ...] = SAMPLE_COUNTS) -> list[dict]:
+    """How many trajectories Monte Carlo needs to agree with the exhaustive count.
+
+    On the rooms grids, seed 0, each :data:`CHOICES` ratio rule: Monte Carlo stopped at exactly
+    ``H`` samples (``stop = "max"``), its time over the exhaustive count's and ``J`` against the
+    exhaustive set of the same seed. The count of eq. 4.1 sums over paths from every start
+    state, and a subgoal is decided by differences of counts along a path (the gradient ratio),
+    so ``J`` climbs to 0.9 only as ``H`` nears the number of start states.
+    """
+    print("Monte Carlo stopped at H samples against the exhaustive count, seed 0")
+    print(f"{'workload':<22} {'ratios':<7} {'H':>8} {'exh s':>7} {'MC s':>8} {'MC/exh':>8} "
+          f"{'#exh':>5} {'#MC':>5} {'J':>5}")
+    rows = []
+    for n, room in workloads:
+        mdp = rooms_grid_mdp(n, room=room, slip=0.0)
+        policy = distance_policy(mdp)
+        label = f"rooms {mdp.n_states:,} ({room})"
+        for ratios in ("paths", "all"):
+            count = CountSettings(ratios=ratios)
+            discover_exhaustive(mdp, policy, np.random.default_rng(0), count)  # warm
+            te, ex = best(lambda m=mdp, p=policy, c=count: discover_exhaustive(
+                m, p, np.random.default_rng(0), c), 2)
+            for h in counts:
+                mc_set = build_settings(MonteCarloSettings,
+                                        {"ratios": ratios, "stop": "max", "max_samples": h})
+                tm, mc = best(lambda m=mdp, p=policy, c=mc_set: discover_monte_carlo(
+                    m, p, np.random.default_rng(0), c), 1)
+                row = {"n_states": mdp.n_states, "room": room, "ratios": ratios, "samples": h,
+                       "time_exhaustive": te, "time_mc": tm, "ratio_time": tm / te,
+                       "n_exhaustive": int(ex.subgoals.size), "n_mc": int(mc.subgoals.size),
+                       "jaccard": _jaccard(ex.subgoals, mc.subgoals)}
+                rows.append(row)
+                print(f"{label:<22} {ratios:<7} {h:>8,} {te:>7.3f} {tm:>8.3f} {tm / te:>8.3f} "
+                      f"{row['n_exhaustive']:>5} {row['n_mc']:>5} {row['jaccard']:>5.2f}",
+                      flush=True)
+    print()
+    return rows
+
+
 def main() -> None:
     rooms()
+    samples_needed()
     for choice in CHOICES:
         agreement(choice=choice)
     arm = get_domain("three-floor-arm").mdp("deliver")
