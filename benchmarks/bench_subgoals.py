@@ -22,7 +22,7 @@ from the default :func:`~adpart.mdp.solvers.solve`.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 
 import numpy as np
 
@@ -141,6 +141,14 @@ def _jaccard(a: np.ndarray, b: np.ndarray) -> float:
 ROOM_WORKLOADS = ((10**4, 20), (10**5, 30), (10**6, 100))
 
 
+def _room_grids(workloads: tuple[tuple[int, int], ...]
+                ) -> Iterator[tuple[FiniteMDP, np.ndarray, int, str]]:
+    """``(mdp, shortest-path policy, room side, label)`` of each rooms grid (deterministic)."""
+    for n, room in workloads:
+        mdp = rooms_grid_mdp(n, room=room, slip=0.0)
+        yield mdp, distance_policy(mdp), room, f"rooms {mdp.n_states:,} ({room})"
+
+
 def rooms(workloads: tuple[tuple[int, int], ...] = ROOM_WORKLOADS,
           seeds: tuple[int, ...] = (0, 1, 2)) -> list[dict]:
     """Both detectors on the rooms grids with doorways (deterministic moves, the shortest-path
@@ -151,10 +159,7 @@ def rooms(workloads: tuple[tuple[int, int], ...] = ROOM_WORKLOADS,
     print(f"{'workload':<22} {'choice':<26} {'seed':>4} {'exh s':>7} {'MC s':>7} {'MC/exh':>7} "
           f"{'#exh':>5} {'#MC':>5} {'J':>5} {'exh~0':>5} {'samples':>7} stop")
     rows = []
-    for n, room in workloads:
-        mdp = rooms_grid_mdp(n, room=room, slip=0.0)
-        policy = distance_policy(mdp)
-        label = f"rooms {mdp.n_states:,} ({room})"
+    for mdp, policy, room, label in _room_grids(workloads):
         for choice, (ex_set, mc_set) in CHOICES.items():
             discover_exhaustive(mdp, policy, np.random.default_rng(0), ex_set)  # warm
             first = None
@@ -197,10 +202,7 @@ def samples_needed(workloads: tuple[tuple[int, int], ...] = ROOM_WORKLOADS[1:],
     print(f"{'workload':<22} {'ratios':<7} {'H':>8} {'exh s':>7} {'MC s':>8} {'MC/exh':>8} "
           f"{'#exh':>5} {'#MC':>5} {'J':>5}")
     rows = []
-    for n, room in workloads:
-        mdp = rooms_grid_mdp(n, room=room, slip=0.0)
-        policy = distance_policy(mdp)
-        label = f"rooms {mdp.n_states:,} ({room})"
+    for mdp, policy, room, label in _room_grids(workloads):
         for ratios in ("paths", "all"):
             count = CountSettings(ratios=ratios)
             discover_exhaustive(mdp, policy, np.random.default_rng(0), count)  # warm

@@ -126,6 +126,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
@@ -148,7 +149,12 @@ from adpart.learning.decision_layer import (
     reward_states,
 )
 from adpart.learning.firing_audit import firing_audit, first_actions
-from adpart.learning.hierarchical_parts import LayerRefiner, ReferenceValues, lifted_values
+from adpart.learning.hierarchical_parts import (
+    LayerRefiner,
+    OnlineSplits,
+    ReferenceValues,
+    lifted_values,
+)
 from adpart.learning.hierarchical_settings import (
     MODES,
     PRIMITIVE_EXPLORATION,
@@ -269,8 +275,7 @@ def child_values(Q_old: np.ndarray, n_old: np.ndarray, old: Partition, new: Part
     n_new = n_old[parent]
     B = new.n_blocks
     split = np.atleast_1d(np.asarray(block, dtype=np.int64))
-    members = np.flatnonzero(np.isin(old.labels, split))  # only the split blocks' children
-    # are read
+    members = np.flatnonzero(np.isin(old.labels, split))  # only split blocks' children are read
     kid = new.labels[members]
     hit = tried[members]
     cell = (kid[:, None] * A + np.arange(A)).ravel()  # (child, action) of every member entry
@@ -589,30 +594,9 @@ def hierarchical_learning(
         parts[k], event = refine.apply(st, k, parts[k], reference)
         events.append(event)
 
-    phase3 = (OnlinePhase3(known, full[mdp.n_actions:], refine.model, refinement.delta,
-                           refinement.partition_epsilon) if refinement.online_phase3 else None)
-    phase3_events: list[dict[str, int]] = []
-
-    def on_episode() -> None:  # phase 3 online: each run's layer split by what it observed
-        assert phase3 is not None
-        for k in range(K):
-            tried = st.nf[k] > 0
-            with world():  # what run k saw: the rewards it was paid, the episodes' ends
-                paid = np.where(tried, mdp.R, 0.0)
-                ended = np.zeros(S, dtype=bool)  # successors R-max counted, terminal ones
-                ended[st.indices[st.xc[k] > 0]] = True
-                ended &= mdp.terminal
-            found = phase3.observe(k, parts[k], tried, paid, ended)
-            if found is None:
-                continue
-            new, split = found
-            refine.run_models[k] = phase3.models[k]
-            if new.n_blocks != parts[k].n_blocks:
-                refine.install(st, k, parts[k], new, split, reference)
-            phase3_events.append({"run": k, "episode": int(st.episode[k]),
-                                  "blocks_before": parts[k].n_blocks,
-                                  "blocks_after": new.n_blocks})
-            parts[k] = new
+    online = (OnlineSplits(OnlinePhase3(known, full[mdp.n_actions:], refine.model,
+                                        refinement.delta, refinement.partition_epsilon),
+                           refine, mdp) if refinement.online_phase3 else None)
 
     def score() -> np.ndarray:
         Qs = lifted_values(settings.layer_values, st, parts, smdp, known, lower)
@@ -622,7 +606,8 @@ def hierarchical_learning(
 
     eval_value = drive(st, step_kernel, seed, episodes=N, eval_every=run.eval_every,
                        score=score, progress=run.progress, on_fire=on_fire if check else None,
-                       on_episode=on_episode if phase3 is not None else None)
+                       on_episode=None if online is None else  # phase 3 online
+                       partial(online.after_episode, st, parts, reference))
     with world():  # an audit of the firings against the task's exact Q*: scoring, not learning
         audit = firing_audit(events, world_smdp, mdp, K,
                              first_actions(full[mdp.n_actions:], S, mdp.n_actions))
@@ -649,7 +634,8 @@ def hierarchical_learning(
         "reference": "given" if run.reference_values is not None else "solved",
         "knowledge": hierarchical_knowledge(settings, belief=belief is not None).to_dict(),
         "belief": None if belief is None else belief.name,
-        "online_phase3": refinement.online_phase3, "phase3_events": phase3_events,
+        "online_phase3": refinement.online_phase3,
+        "phase3_events": [] if online is None else online.events,
     }
     curve = LearningCurve.from_matrices(
         steps=st.out_steps, decisions=st.out_dec, returns=st.out_ret,
@@ -658,10 +644,7 @@ def hierarchical_learning(
                   "gamma": mdp.gamma, "v_star_start": v_star, **parameters,
                   "final_blocks": st.out_blocks[:, -1].tolist(),
                   "firings": np.bincount([e["run"] for e in events], minlength=K).tolist(),
-                  "phase3_blocks": np.bincount(
-                      [e["run"] for e in phase3_events], minlength=K,
-                      weights=[e["blocks_after"] - e["blocks_before"] for e in phase3_events]
-                  ).astype(int).tolist(),
+                  "phase3_blocks": [0] * K if online is None else online.blocks_added(K),
                   "real_firings": audit.real.tolist(), "tied_firings": audit.ties.tolist(),
                   "own_step_ties": audit.own_step.tolist()},
     )

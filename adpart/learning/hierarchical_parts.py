@@ -10,6 +10,9 @@ built from its part of :class:`~adpart.learning.hierarchical_settings.Hierarchic
 * a :class:`LayerRefiner` - what a firing does to run ``k``'s layer (``refine_block`` with the
   settings' rule and thresholds) and to the kernel's per-block arrays (children's values from
   :func:`~adpart.learning.hierarchical.child_values`);
+* an :class:`OnlineSplits` - phase 3 online (:mod:`adpart.learning.online_phase3`): after every
+  episode each run's observations read from the world, its layer split where they change its
+  option models, and the kernel's arrays updated as after a firing;
 * :func:`lifted_values` - what the greedy policy is greedy on (the layer's learned values, or
   its point model planned on each run's counts).
 
@@ -27,13 +30,15 @@ import numpy as np
 from adpart.learning._rmax import counted_smdp
 from adpart.learning._smdp_kernels import SMDPLockStepState
 from adpart.learning.decision_layer import offered_values, refine_block
+from adpart.learning.knowledge import world
+from adpart.learning.online_phase3 import OnlinePhase3
 from adpart.mdp.evaluation import policy_evaluation
 from adpart.mdp.model import FiniteMDP, SMDPModel
 from adpart.mdp.solvers import q_from_v, solve
 from adpart.partition.bpsmdp import point_model, point_policy
 from adpart.partition.partition import Partition
 
-__all__ = ["LayerRefiner", "ReferenceValues", "lifted_values", "point_optima"]
+__all__ = ["LayerRefiner", "OnlineSplits", "ReferenceValues", "lifted_values", "point_optima"]
 
 
 def point_optima(partition: Partition, smdp: SMDPModel) -> np.ndarray:
@@ -154,6 +159,50 @@ class LayerRefiner:
         st.n_blocks[k] = B_new
         st.vr_on[k] = False  # virtual executions started in the old blocks are dropped
         reference.refresh(st, k, new)
+
+
+@dataclass
+class OnlineSplits:
+    """Phase 3 online in the driver: what each run saw is read from the world after every
+    episode (the rewards of the pairs it tried, the terminal successors R-max counted), given to
+    :class:`~adpart.learning.online_phase3.OnlinePhase3`, and a refined layer installed in the
+    kernel by the :class:`LayerRefiner`, which splits the run's later firings by its updated
+    model."""
+
+    phase3: OnlinePhase3
+    refiner: LayerRefiner
+    task: FiniteMDP
+    #: one record per run whose belief changed: run, episode, blocks before and after
+    events: list[dict[str, int]] = field(default_factory=list)
+
+    def after_episode(self, st: SMDPLockStepState, parts: list[Partition],
+                      reference: ReferenceValues) -> None:
+        """Update every run's belief and layer (``parts`` in place) from what it saw."""
+        S = self.task.n_states
+        for k, old in enumerate(parts):
+            tried = st.nf[k] > 0
+            with world():  # what run k saw: the rewards it was paid, the episodes' ends
+                paid = np.where(tried, self.task.R, 0.0)
+                ended = np.zeros(S, dtype=bool)
+                ended[st.indices[st.xc[k] > 0]] = True
+                ended &= self.task.terminal
+            found = self.phase3.observe(k, old, tried, paid, ended)
+            if found is None:
+                continue
+            new, split = found
+            self.refiner.run_models[k] = self.phase3.models[k]
+            if new.n_blocks != old.n_blocks:
+                self.refiner.install(st, k, old, new, split, reference)
+            self.events.append({"run": k, "episode": int(st.episode[k]),
+                                "blocks_before": old.n_blocks, "blocks_after": new.n_blocks})
+            parts[k] = new
+
+    def blocks_added(self, runs: int) -> list[int]:
+        """The blocks phase 3 added to each run's layer."""
+        added = np.zeros(runs, dtype=np.int64)
+        for event in self.events:
+            added[event["run"]] += event["blocks_after"] - event["blocks_before"]
+        return added.tolist()
 
 
 def _grow(st: SMDPLockStepState, needed: int, per_block_reference: bool) -> None:

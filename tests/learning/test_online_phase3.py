@@ -118,6 +118,8 @@ def test_online_phase3_learns_on_the_belief_reading_only_what_it_saw(world):
     events = meta["phase3_events"]
     assert events and all(e["blocks_after"] >= e["blocks_before"] for e in events)
     assert {e["run"] for e in events} == {0, 1}
+    assert meta["phase3_blocks"] == [sum(e["blocks_after"] - e["blocks_before"]
+                                         for e in events if e["run"] == k) for k in (0, 1)]
     assert any("phase 3 online" in use for use in meta["knowledge"]["uses"])
     assert all(p.n_blocks >= layer.n_blocks for p in result.partitions)
 
