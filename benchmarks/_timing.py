@@ -18,17 +18,23 @@ def interleaved_best(fns: dict[str, Callable[[], object]], repeats: int) -> dict
     return best
 
 
-def interleaved_best_both(fns: dict[str, Callable[[], object]], repeats: int
-                          ) -> dict[str, tuple[float, float]]:
-    """Best (wall, CPU) time of each function, run in turn ``repeats`` times as
+def interleaved_times(fns: dict[str, Callable[[], object]], repeats: int
+                      ) -> dict[str, list[tuple[float, float]]]:
+    """Every (wall, CPU) time of each function, run in turn ``repeats`` times as
     :func:`interleaved_best` does. The CPU time (``time.process_time``: this process only) is the
     steadier measure of single-threaded work on a machine shared with other jobs, whose load
     adds waiting to the wall time of one contender and not the other."""
-    best = {name: (float("inf"), float("inf")) for name in fns}
+    times: dict[str, list[tuple[float, float]]] = {name: [] for name in fns}
     for _ in range(repeats):
         for name, fn in fns.items():
             wall, cpu = time.perf_counter(), time.process_time()
             fn()
-            wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
-            best[name] = (min(best[name][0], wall), min(best[name][1], cpu))
-    return best
+            times[name].append((time.perf_counter() - wall, time.process_time() - cpu))
+    return times
+
+
+def interleaved_best_both(fns: dict[str, Callable[[], object]], repeats: int
+                          ) -> dict[str, tuple[float, float]]:
+    """Best (wall, CPU) time of each function over :func:`interleaved_times`."""
+    return {name: (min(w for w, _ in got), min(c for _, c in got))
+            for name, got in interleaved_times(fns, repeats).items()}

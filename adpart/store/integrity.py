@@ -1,21 +1,19 @@
 """Content hashes of metadata rows: a flipped bit in any row is named by ``adpart kb check``.
 
 Artifacts carry their own hashes; this module gives every metadata row one too. Each table of
-the schema has a ``row_sha`` column holding the SHA-256 of a canonical encoding of the row's other
-columns *as the database returns them*: the compact, sorted-key JSON of the values in the
-model's column order (floats by ``repr``, times as whole microseconds since the epoch, UTC),
-made by the json module's C encoder in one call per row. That is schema 4's encoding; schemas
-2-3 wrapped each value in Python first, at about twice the cost per row, and the 3 -> 4
-migration checks every row against its old hash before re-stamping it, so an upgrade never
-turns a damaged row into a valid one. Hashing the read-back values rather than the Python
-values handed to the ORM makes the hash independent of driver conversions: the audit re-reads
-the row the same way and must get the same bytes.
+the schema has a ``row_sha`` column holding the SHA-256 of the table's name and hashed column
+names followed by the text the *database* renders of the row's stored values, :class:`RowText`
+(schema 5: SQLite's ``json_array``, PostgreSQL's ``json_build_array``, both exact and
+independent of session settings). A verifying read selects that text with the row and hashes
+one string, where schema 4 encoded every value in Python (:func:`row_digest_v4`, kept with
+schema 3's :func:`row_digest_v3` for the migrations, which check every row against its old hash
+before re-stamping it, so an upgrade never turns a damaged row into a valid one).
 
 The hash is set by an ``after_insert``/``after_update`` mapper event inside the writing
 transaction, so no committed row is ever without one; the same event puts the read-back values
-into the written object, so what a writer holds is what a reader will get. A partition's hash also
-covers its parent links (the ``partition_parents`` association, which has no row hash of its own):
-a changed link is named as a change of the child partition.
+and their text into the written object, so what a writer holds is what a reader will get. A
+partition's hash also covers its parent links (the ``partition_parents`` association, which has
+no row hash of its own): a changed link is named as a change of the child partition.
 
 Every read compares the hash too (:func:`row_problem`, called by the knowledge base's readers on
 each row they return, its subgoal and option-set rows included), so a changed value is refused on
@@ -33,8 +31,13 @@ from datetime import datetime, timedelta, timezone
 from json.encoder import c_make_encoder, encode_basestring_ascii  # type: ignore[attr-defined]
 from typing import Any
 
-from sqlalchemy import Connection, DateTime, Table, event, inspect, select, update
-from sqlalchemy.orm import Mapper
+from sqlalchemy import Connection, DateTime, Float, String, Table, event, inspect, select, update
+from sqlalchemy.ext.compiler import compiles
+from sqlalchemy.orm import Mapper, column_property
+from sqlalchemy.sql.compiler import SQLCompiler
+from sqlalchemy.sql.functions import FunctionElement
+
+from adpart.store.errors import StoreError
 
 ROW_SHA = "row_sha"
 
@@ -135,6 +138,14 @@ class _Layout:
             row.append(sorted(int(p) for p in parents))
         return hashlib.sha256(self.head + _encode(row).encode()).hexdigest()
 
+    def text_digest(self, text: str, parents: Iterable[int] | None = None) -> str:
+        """The row hash (schema 5) of a row whose :class:`RowText` the database rendered as
+        ``text``; a partition's sorted parent ids follow it as a JSON list."""
+        data = self.head + text.encode()
+        if parents is not None:
+            data += _encode(sorted(int(p) for p in parents)).encode()
+        return hashlib.sha256(data).hexdigest()
+
 
 _LAYOUTS: dict[str, _Layout] = {}
 
@@ -146,8 +157,79 @@ def _layout(table: Table) -> _Layout:
     return found
 
 
-def row_digest(table: Table, row: Mapping[str, Any], parents: Iterable[int] | None = None) -> str:
-    """SHA-256 of ``row`` (column name -> value as read back), all columns but ``row_sha``.
+class RowText(FunctionElement):  # type: ignore[type-arg]
+    """SQL: the text of a row's hashed columns as the database itself renders it (schema 5).
+
+    One JSON array per row, made by the database engine in C while it reads the row, so a
+    verifying read hashes one string per row instead of encoding its values in Python:
+
+    - SQLite: ``json_array(c1, c2, ...)`` of the stored values; text (JSON columns and times
+      included) is embedded as the string stored, a REAL column as its ``quote()`` text, which
+      round-trips exactly (``json_array`` itself prints 15 digits). A value SQLite cannot put in
+      JSON (a BLOB, which no adpart column holds) fails the read, and the row is named
+      unreadable.
+    - PostgreSQL: ``json_build_array(...)::text``; JSON columns nest as stored, times are taken
+      in UTC (``AT TIME ZONE 'UTC'``, ISO text independent of the session's time zone), a double
+      as the hex of its eight bytes (``float8send``, independent of ``extra_float_digits``).
+
+    The text is a function of the stored values alone, so a writer and every later reader of
+    the same row on the same database make the same bytes.
+    """
+
+    type = String()
+    name = "adpart_row_text"
+    inherit_cache = True
+
+
+def _row_text_parts(element: RowText, compiler: SQLCompiler, wrap: Any, **kw: Any) -> str:
+    return ", ".join(wrap(column, compiler.process(column, **kw))
+                     for column in element.clauses.clauses)
+
+
+@compiles(RowText, "sqlite")
+def _sqlite_row_text(element: RowText, compiler: SQLCompiler, **kw: Any) -> str:
+    def wrap(column: Any, sql: str) -> str:
+        return f"quote({sql})" if isinstance(column.type, Float) else sql
+
+    return f"json_array({_row_text_parts(element, compiler, wrap, **kw)})"
+
+
+@compiles(RowText, "postgresql")
+def _postgresql_row_text(element: RowText, compiler: SQLCompiler, **kw: Any) -> str:
+    def wrap(column: Any, sql: str) -> str:
+        if isinstance(column.type, Float):
+            return f"encode(float8send({sql}), 'hex')"
+        if isinstance(column.type, DateTime):
+            return f"({sql} AT TIME ZONE 'UTC')"
+        return sql
+
+    return f"json_build_array({_row_text_parts(element, compiler, wrap, **kw)})::text"
+
+
+@compiles(RowText)
+def _unsupported_row_text(element: RowText, compiler: SQLCompiler, **kw: Any) -> str:
+    raise StoreError(f"row hashes are made on SQLite and PostgreSQL only, not on "
+                     f"{compiler.dialect.name}")
+
+
+#: the attribute (and result label) every hashed model's :class:`RowText` is read under
+ROW_TEXT = "row_text"
+
+
+def row_text(table: Table) -> Any:
+    """The :class:`RowText` of ``table``'s hashed columns, labelled :data:`ROW_TEXT`."""
+    return RowText(*(table.c[n] for n in _layout(table).names)).label(ROW_TEXT)
+
+
+def text_digest(table: Table, text: str, parents: Iterable[int] | None = None) -> str:
+    """The row hash of a row of ``table`` whose :func:`row_text` the database returned."""
+    return _layout(table).text_digest(text, parents)
+
+
+def row_digest_v4(table: Table, row: Mapping[str, Any],
+                  parents: Iterable[int] | None = None) -> str:
+    """The row hash schema 4 wrote: SHA-256 of ``row`` (column name -> value as read back),
+    all columns but ``row_sha``; read only by the 4 -> 5 migration.
 
     The bytes hashed: the compact JSON of ``[table, [column names]]``, then that of the list of
     the row's values in the same order, times as whole microseconds since the epoch (UTC), a
@@ -161,12 +243,6 @@ def row_digest(table: Table, row: Mapping[str, Any], parents: Iterable[int] | No
 def hashed_columns(table: Table) -> list[str]:
     """The names of the columns a row hash of ``table`` covers, in the order it takes them."""
     return list(_layout(table).names)
-
-
-def values_digest(table: Table, values: tuple[Any, ...]) -> str:
-    """:func:`row_digest` of a row given as the tuple of its :func:`hashed_columns` values (a
-    plain ``select`` of those columns: no mapping built per row)."""
-    return _layout(table).digest(values)
 
 
 def row_digest_v3(table: Table, row: Mapping[str, Any],
@@ -215,7 +291,8 @@ def _attribute_keys(table: Table, obj: Any) -> list[tuple[str, str]]:
     keys = _KEYS.get(table.name)
     if keys is None:
         mapper = inspect(type(obj))
-        keys = [(col.name, key) for key, col in mapper.columns.items() if col.table is table]
+        keys = [(col.name, key) for key, col in mapper.columns.items()
+                if getattr(col, "table", None) is table]
         _KEYS[table.name] = keys
         _SAME_NAMES[table.name] = all(name == key for name, key in keys)
     return keys
@@ -228,27 +305,47 @@ _SAME_NAMES: dict[str, bool] = {}
 def row_problem(obj: Any) -> str | None:
     """What is wrong with a loaded ORM row (its hash differs, or it has none), or None.
 
-    The row's values are taken as the ORM loaded them (the same column types the audit reads
-    with); a partition's parent links come from its loaded ``parents``.
+    The row's :class:`RowText` is the one read with it (verifying readers undefer it); where
+    it was not, reading the attribute loads it. A partition's parent links come from its
+    loaded ``parents``. A row read with its text and found whole takes one SHA-256 and a
+    few dictionary lookups (a listing verifies every row it reads).
     """
+    state = obj.__dict__
+    head = _HEADS.get(type(obj))
+    if head is not None:
+        stored, text = state.get(ROW_SHA), state.get(ROW_TEXT)
+        if text is not None and stored is not None and _sha256(head + text.encode()
+                                                               ).hexdigest() == stored:
+            return None
+    return _row_problem(obj)
+
+
+def _row_problem(obj: Any) -> str | None:
+    """:func:`row_problem` of any row: no hash, no text read yet, a partition, a mismatch."""
     table = type(obj).__table__
     state = obj.__dict__
-    keys = _attribute_keys(table, obj)
-    if _SAME_NAMES.get(table.name):
-        values = state  # attributes named as their columns (every adpart table): no copy
-    else:
-        values = {name: state.get(key) for name, key in keys}
-    stored = values.get(ROW_SHA)
+    if table.name != "partitions":  # a partition's digest adds its parent links
+        _HEADS[type(obj)] = _layout(table).head
+    stored = state.get(ROW_SHA)
     if stored is None:
-        return unhashed_message(row_name(table, values), table.name)
+        keys = _attribute_keys(table, obj)
+        return unhashed_message(row_name(table, {name: state.get(key) for name, key in keys}),
+                                table.name)
+    text = state.get(ROW_TEXT)
+    if text is None:
+        text = getattr(obj, ROW_TEXT)
     parents = [p.id for p in obj.parents] if table.name == "partitions" else None
-    try:
-        digest = row_digest(table, values, parents)
-    except KeyError:  # an attribute not loaded: read as the columns map it
-        digest = row_digest(table, {name: state.get(key) for name, key in keys}, parents)
-    if digest != stored:
-        return changed_message(row_name(table, values), table.name)
+    if _layout(table).text_digest(text, parents) != stored:
+        keys = _attribute_keys(table, obj)
+        return changed_message(row_name(table, {name: state.get(key) for name, key in keys}),
+                               table.name)
     return None
+
+
+#: model class -> its digest's first bytes (:attr:`_Layout.head`), for :func:`row_problem`'s
+#: one-hash path; partitions are left out (their digest adds the parent links)
+_HEADS: dict[type, bytes] = {}
+_sha256 = hashlib.sha256
 
 
 def _key_clause(table: Table, mapper: Mapper, target: Any) -> Any:
@@ -265,21 +362,30 @@ def _stamp(mapper: Mapper, connection: Connection, target: Any) -> None:
     if ROW_SHA not in table.c:
         return
     where = _key_clause(table, mapper, target)
-    row = connection.execute(select(table).where(where)).mappings().one()
+    row = connection.execute(select(table, row_text(table)).where(where)).mappings().one()
     parents = None
     if table.name == "partitions":
         parents = [p.id for p in target.parents]
-    digest = row_digest(table, row, parents)
+    digest = text_digest(table, row[ROW_TEXT], parents)
     connection.execute(update(table).where(where).values({ROW_SHA: digest}))
     # keep the identity map in step without another flush: the object holds the values as read
-    # back (a tuple given becomes the list stored), so a later read in the same transaction
-    # verifies against the same bytes the hash was made of
+    # back (a tuple given becomes the list stored) and their text, so a later read in the same
+    # transaction verifies against the same bytes the hash was made of
     for name, key in _attribute_keys(table, target):
         target.__dict__[key] = row[name]
+    target.__dict__[ROW_TEXT] = row[ROW_TEXT]
     target.__dict__[ROW_SHA] = digest
 
 
 def install(base: type) -> None:
-    """Stamp every row of ``base``'s mapped classes with its hash as it is inserted or updated."""
+    """Give every hashed model of ``base`` its :class:`RowText` (a deferred attribute
+    :data:`ROW_TEXT`, read by verifying readers), and stamp every row with its hash as it is
+    inserted or updated."""
+    for mapper in list(base.registry.mappers):  # type: ignore[attr-defined]
+        table = mapper.local_table
+        if ROW_SHA in table.c and ROW_TEXT not in mapper.attrs:
+            setattr(mapper.class_, ROW_TEXT,
+                    column_property(RowText(*(table.c[n] for n in _layout(table).names)),
+                                    deferred=True))
     event.listen(base, "after_insert", _stamp, propagate=True)
     event.listen(base, "after_update", _stamp, propagate=True)

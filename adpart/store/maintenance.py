@@ -25,9 +25,11 @@ from adpart.store.errors import StoreError
 from adpart.store.integrity import (
     KIND_OF_TABLE,
     ROW_SHA,
+    ROW_TEXT,
     changed_message,
-    row_digest,
     row_name,
+    row_text,
+    text_digest,
     unhashed_message,
 )
 from adpart.store.models import (
@@ -235,9 +237,11 @@ class Maintenance:
                 + "; restore kb.sqlite from a backup"]
 
     def _read_rows(self, conn: Any, table: Table) -> tuple[list[Any], list[str]]:
-        """Every row of ``table``; a row that cannot be read is named instead of returned."""
+        """Every row of ``table`` with its :func:`~adpart.store.integrity.row_text`; a row that
+        cannot be read is named instead of returned."""
+        whole_table = select(table, row_text(table))
         try:
-            return list(conn.execute(select(table)).mappings().all()), []
+            return list(conn.execute(whole_table).mappings().all()), []
         except UNREADABLE as exc:
             recover(conn, exc, keep=False)
             whole = exc
@@ -252,7 +256,7 @@ class Maintenance:
         key = table.primary_key.columns[0]
         for rid in ids:
             try:
-                rows.extend(conn.execute(select(table).where(key == rid)).mappings().all())
+                rows.extend(conn.execute(whole_table.where(key == rid)).mappings().all())
             except UNREADABLE as exc:
                 recover(conn, exc, keep=False)
                 if "id" in table.c:
@@ -293,7 +297,7 @@ class Maintenance:
                     stored = row[ROW_SHA]
                     if stored is None:
                         problems.append(unhashed_message(row_name(table, row), table.name))
-                    elif row_digest(table, row, parents) != stored:
+                    elif text_digest(table, row[ROW_TEXT], parents) != stored:
                         problems.append(changed_message(row_name(table, row), table.name))
         return checked, problems
 

@@ -22,9 +22,9 @@ from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
-from sqlalchemy import Table, select
+from sqlalchemy import Table, bindparam, select
 from sqlalchemy.exc import SQLAlchemyError
-from sqlalchemy.orm import Session, selectinload
+from sqlalchemy.orm import Session, selectinload, undefer
 
 from adpart.store import entities as E
 from adpart.store.artifacts import ARRAY_FORMAT
@@ -45,11 +45,46 @@ from adpart.store.models import (
     partition_parents,
 )
 
+
+def _one_statement(model: type[Base], verify: bool) -> Any:
+    """``select(model)`` of the row with id ``:record_id``, made once per model (a statement
+    built per read costs SQLAlchemy more than the read of its row)."""
+    return select(model).where(model.id == bindparam("record_id")).options(
+        *_LOADERS[model, verify])
+
+
+def _loader_options(model: type[Base], verify: bool) -> tuple[Any, ...]:
+    if model is SqlSubgoalSet:
+        parts = selectinload(SqlSubgoalSet.subgoals)
+        loaders = [parts.undefer(SqlSubgoal.row_text) if verify else parts]
+    elif model is SqlPartition:
+        parts = selectinload(SqlPartition.options)
+        loaders = [parts.undefer(SqlPartitionOption.row_text) if verify else parts,
+                   selectinload(SqlPartition.parents)]
+    else:
+        loaders = []
+    if verify:  # last: the option a verifying read of any query of the model adds
+        loaders.append(undefer(model.row_text))
+    return tuple(loaders)
+
+
 _SQL_OF: dict[str, type[Base]] = {
     "environment": SqlEnvironment, "task": SqlTask, "policy": SqlPolicy,
     "subgoal-set": SqlSubgoalSet, "option": SqlOption, "partition": SqlPartition, "run": SqlRun,
     "artifact": SqlArtifact,
 }
+
+#: (model, verifying) -> the loader options of its reads, made once (an option made per read
+#: costs SQLAlchemy about as much again as the read of one row)
+_LOADERS: dict[tuple[type[Base], bool], tuple[Any, ...]] = {
+    (model, verify): _loader_options(model, verify)
+    for model in _SQL_OF.values() for verify in (False, True)}
+_ONE: dict[tuple[type[Base], bool], Any] = {
+    key: _one_statement(*key) for key in _LOADERS}
+#: an artifact's row by its hash ``:sha`` (verifying or not), and its id
+_ARTIFACT_BY_SHA = {verify: select(SqlArtifact).where(SqlArtifact.sha256 == bindparam("sha"))
+                    .options(*_LOADERS[SqlArtifact, verify]) for verify in (False, True)}
+_ARTIFACT_ID_BY_SHA = select(SqlArtifact.id).where(SqlArtifact.sha256 == bindparam("sha"))
 
 
 #: what a driver raises when a stored value cannot be decoded (bad JSON, bad time, bad text)
@@ -234,15 +269,16 @@ class Queries:
                              f"({_first_line(exc)}); {_fix(ref)}") from exc
 
     def _read_records(self, session: Session, model: type[Base], query: Any, ids: Any, *,
-              strict: bool = False) -> list[Any]:
+                      strict: bool = False, params: dict[str, Any] | None = None) -> list[Any]:
         """:meth:`_read_verified` with the garbage collector paused (:func:`gc_paused`)."""
         with gc_paused():
-            return self._read_verified(session, model, query, ids, strict=strict)
+            return self._read_verified(session, model, query, ids, strict=strict, params=params)
 
     def _read_verified(self, session: Session, model: type[Base], query: Any, ids: Any, *,
-                   strict: bool = False) -> list[Any]:
-        """The verified records of ``query`` (ORM rows of ``model``); ``ids`` selects the same
-        rows' ids, read when the whole result cannot be decoded, to read row by row.
+                       strict: bool = False, params: dict[str, Any] | None = None) -> list[Any]:
+        """The verified records of ``query`` (ORM rows of ``model``, read with
+        :meth:`_loaders`' options); ``ids`` selects the same rows' ids, read when the whole result
+        cannot be decoded, to read row by row; both take ``params``.
 
         A damaged row raises :class:`StoreError`, or inside :meth:`tolerating_damage` is noted
         and left out; ``strict`` (a lookup of one record) always raises.
@@ -250,7 +286,7 @@ class Queries:
         damaged = self._damaged if not strict else _raise
         keep = session is self._tx
         try:
-            rows = list(session.scalars(query).all())
+            rows = list(session.scalars(query, params).all())
         except UNREADABLE as exc:
             recover(session, exc, keep=keep)
             rows = None
@@ -262,7 +298,7 @@ class Queries:
                 except StoreError as exc:
                     damaged(str(exc))
             return out
-        for (record_id,) in session.execute(ids).all():
+        for (record_id,) in session.execute(ids, params).all():
             try:
                 row = session.scalars(select(model).where(model.id == record_id)
                                       .options(*self._loaders(model))
@@ -277,13 +313,10 @@ class Queries:
                 damaged(str(exc))
         return out
 
-    @staticmethod
-    def _loaders(model: type[Base]) -> list[Any]:
-        if model is SqlSubgoalSet:
-            return [selectinload(SqlSubgoalSet.subgoals)]
-        if model is SqlPartition:
-            return [selectinload(SqlPartition.options), selectinload(SqlPartition.parents)]
-        return []
+    def _loaders(self, model: type[Base]) -> tuple[Any, ...]:
+        """The loader options of a read of ``model``: its parts loaded with it, and when rows
+        are verified, each row's :class:`~adpart.store.integrity.RowText` read with it."""
+        return _LOADERS[model, self._verify_rows]
 
     # ------------------------------------------------------------------ gets and queries
     def get(self, kind: str, record_id: int) -> Any:
@@ -292,8 +325,8 @@ class Queries:
         record_id = int(record_id)
         with self._session() as s:
             try:
-                row = s.scalars(select(model).where(model.id == record_id)
-                                .options(*self._loaders(model))).first()
+                row = s.scalars(_ONE[model, self._verify_rows],
+                                {"record_id": record_id}).first()
             except UNREADABLE as exc:
                 recover(s, exc, keep=s is self._tx)
                 raise StoreError(unreadable_message(s, model.__table__, record_id, exc)) from exc
@@ -308,8 +341,9 @@ class Queries:
             raise StoreError(f"{sha_prefix!r} is not a hexadecimal artifact hash prefix")
         where = SqlArtifact.sha256.startswith(sha_prefix, autoescape=True)
         with self._session() as s:
-            rows = self._read_records(s, SqlArtifact, select(SqlArtifact).where(where).limit(2),
-                              select(SqlArtifact.id).where(where).limit(2), strict=True)
+            rows = self._read_records(s, SqlArtifact, select(SqlArtifact).where(where).limit(2)
+                                      .options(*self._loaders(SqlArtifact)),
+                                      select(SqlArtifact.id).where(where).limit(2), strict=True)
         if not rows:
             raise StoreError(f"no artifact with hash {sha_prefix}...; list them with "
                              "`adpart kb ls artifact`")
@@ -354,7 +388,8 @@ class Queries:
                  | (SqlEnvironment.model_hash == name_or_hash))
         with self._session() as s:
             rows = self._read_records(s, SqlEnvironment, select(SqlEnvironment).where(where)
-                              .order_by(SqlEnvironment.id.desc()).limit(1),
+                              .order_by(SqlEnvironment.id.desc()).limit(1)
+                              .options(*self._loaders(SqlEnvironment)),
                               select(SqlEnvironment.id).where(where)
                               .order_by(SqlEnvironment.id.desc()).limit(1), strict=True)
             if not rows:
@@ -389,8 +424,9 @@ class Queries:
         """Every run of a task, oldest first."""
         where = SqlRun.task_id == _id(task)
         with self._session() as s:
-            return self._read_records(s, SqlRun, select(SqlRun).where(where).order_by(SqlRun.id),
-                              select(SqlRun.id).where(where).order_by(SqlRun.id))
+            return self._read_records(s, SqlRun, select(SqlRun).where(where).order_by(SqlRun.id)
+                                      .options(*self._loaders(SqlRun)),
+                                      select(SqlRun.id).where(where).order_by(SqlRun.id))
 
     def learned_tasks(self, environment: E.Environment | int | None = None,
                       ) -> list[tuple[E.Task, list[E.Run]]]:
@@ -459,10 +495,9 @@ class Queries:
         return read(art.sha256, art.uri, context=context, file_sha256=art.file_sha256)
 
     def _artifact_row(self, sha: str) -> E.Artifact:
-        where = SqlArtifact.sha256 == sha
         with self._session() as s:
-            rows = self._read_records(s, SqlArtifact, select(SqlArtifact).where(where),
-                              select(SqlArtifact.id).where(where), strict=True)
+            rows = self._read_records(s, SqlArtifact, _ARTIFACT_BY_SHA[self._verify_rows],
+                                      _ARTIFACT_ID_BY_SHA, strict=True, params={"sha": sha})
             if not rows:
                 raise StoreError(f"artifact {sha[:12]} has no row in {self.label}; run "
                                  "`adpart kb check`")

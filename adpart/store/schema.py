@@ -17,15 +17,25 @@ from sqlalchemy import Connection, func, inspect, select, text, update
 
 from adpart import __version__
 from adpart.store.errors import StoreError
-from adpart.store.integrity import ROW_SHA, row_digest, row_digest_v3, row_name
+from adpart.store.integrity import (
+    ROW_SHA,
+    ROW_TEXT,
+    row_digest_v3,
+    row_digest_v4,
+    row_name,
+    row_text,
+    text_digest,
+)
 from adpart.store.models import HASHED_TABLES, Base, SqlIdentity, SqlSchema, partition_parents
 
 #: the schema version this adpart reads and writes
 #: (2: every metadata row carries ``row_sha``, its content hash, checked by ``adpart kb check``;
 #: 3: a run may reference its experience, the transitions its runs took: ``runs.experience_sha``;
 #: 4: row hashes in the encoding the json module's C encoder makes in one call per row, about a
-#: third of the cost of schema 3's per-value one: :func:`adpart.store.integrity.row_digest`)
-SCHEMA_VERSION = 4
+#: third of the cost of schema 3's per-value one: :func:`adpart.store.integrity.row_digest_v4`;
+#: 5: row hashes over the text the database renders of the row, :class:`adpart.store.integrity.
+#: RowText`, so that a verifying read hashes one string per row)
+SCHEMA_VERSION = 5
 
 
 def stamp_all_rows(conn: Connection, *, check: Callable[..., str] | None = None) -> list[str]:
@@ -42,7 +52,7 @@ def stamp_all_rows(conn: Connection, *, check: Callable[..., str] | None = None)
         links.setdefault(int(child), []).append(int(parent))
     for table in HASHED_TABLES:
         key = [c for c in table.primary_key.columns]
-        for row in conn.execute(select(table)).mappings().all():
+        for row in conn.execute(select(table, row_text(table))).mappings().all():
             parents = links.get(int(row["id"]), []) if table.name == "partitions" else None
             if check is not None and check(table, row, parents) != row[ROW_SHA]:
                 kept.append(row_name(table, row))
@@ -52,7 +62,7 @@ def stamp_all_rows(conn: Connection, *, check: Callable[..., str] | None = None)
                 term = column == row[column.name]
                 where = term if where is None else where & term
             conn.execute(update(table).where(where).values(
-                {ROW_SHA: row_digest(table, row, parents)}))
+                {ROW_SHA: text_digest(table, row[ROW_TEXT], parents)}))
     return kept
 
 
@@ -70,19 +80,21 @@ def _add_run_experience(conn: Connection) -> None:
 
 
 def _reencode_row_hashes(conn: Connection) -> None:
-    """Schema 3 -> 4: the row hashes' encoding changed; no column did. Every row is re-stamped
-    once the last step has run, after its schema-3 hash was checked (:data:`CHECKED_BY`)."""
+    """Schema 3 -> 4 and 4 -> 5: the row hashes' encoding changed; no column did. Every row is
+    re-stamped once the last step has run, after its hash of the version it was written with
+    was checked (:data:`CHECKED_BY`)."""
 
 
 #: MIGRATIONS[v] upgrades a version-v database to version v + 1 inside one transaction
 MIGRATIONS: dict[int, Callable[[Connection], None]] = {1: _add_row_hashes,
                                                        2: _add_run_experience,
-                                                       3: _reencode_row_hashes}
+                                                       3: _reencode_row_hashes,
+                                                       4: _reencode_row_hashes}
 
 #: the row hash a database of version v was written with, over the current columns, checked
 #: before its rows are re-stamped (versions 1-2 lack a column the hashes now cover: their rows
 #: are re-stamped unchecked, as those upgrades always did)
-CHECKED_BY: dict[int, Callable[..., str]] = {3: row_digest_v3}
+CHECKED_BY: dict[int, Callable[..., str]] = {3: row_digest_v3, 4: row_digest_v4}
 
 
 def read_version(conn: Connection, location: str) -> tuple[int, str] | None:

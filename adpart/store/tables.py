@@ -31,9 +31,9 @@ from adpart.store.errors import StoreError
 from adpart.store.integrity import (
     ROW_SHA,
     changed_message,
-    hashed_columns,
-    row_name,
-    values_digest,
+    row_text,
+    text_digest,
+    unhashed_message,
 )
 from adpart.store.models import SqlArtifact
 from adpart.store.queries import UNREADABLE, gc_paused
@@ -540,14 +540,15 @@ class Tables:
     def _artifact_sizes(self) -> dict[str, int]:
         """sha256 -> bytes of every artifact row whose row hash holds (the ``size`` column).
 
-        Read as plain tuples of the hashed columns and the hash (no ORM objects or mappings: a
-        listing touches every artifact row) and verified in one pass; a damaged row is reported
-        like any other and its size left out.
+        Read as plain tuples (no ORM objects or mappings: a listing touches every artifact
+        row), each with its :func:`~adpart.store.integrity.row_text` when rows are verified,
+        and verified in one pass; a damaged row is reported like any other and its size left
+        out.
         """
         table = SqlArtifact.__table__
-        names = hashed_columns(table)
-        sha_at, bytes_at = names.index("sha256"), names.index("bytes")
-        query = select(*(table.c[n] for n in names), table.c[ROW_SHA])
+        verify = self._verify_rows
+        checked = (row_text(table), table.c[ROW_SHA]) if verify else ()
+        query = select(table.c.sha256, table.c.bytes, *checked)
         try:
             with self._session() as s:
                 rows = s.execute(query).all()
@@ -555,15 +556,15 @@ class Tables:
             with self.tolerating_damage(self._damage if self._damage is not None else []):
                 return {a.sha256: a.bytes for a in self.records("artifact")}
         sizes: dict[str, int] = {}
-        verify = self._verify_rows
-        for row in rows:
-            values = tuple(row)
-            if verify and values_digest(table, values[:-1]) != values[-1]:
-                self._damaged(changed_message(row_name(table, dict(zip(names, values[:-1],
-                                                                       strict=True))),
-                                              table.name))
+        if not verify:
+            return {sha: size for sha, size in rows}
+        for sha, size, text, stored in rows:
+            if text_digest(table, text) != stored:
+                self._damaged(changed_message(f"artifact:{str(sha)[:16]}", table.name)
+                              if stored is not None else
+                              unhashed_message(f"artifact:{str(sha)[:16]}", table.name))
                 continue
-            sizes[values[sha_at]] = values[bytes_at]
+            sizes[sha] = size
         return sizes
 
     def curves_table(self, runs: Any = None, *, env: Any = None, task: Any = None,

@@ -9,7 +9,7 @@ import sqlite3
 import subprocess
 import sys
 import textwrap
-from datetime import datetime, timezone
+from datetime import datetime, timedelta, timezone
 from pathlib import Path
 
 import numpy as np
@@ -161,7 +161,7 @@ def test_check_runs_the_engines_integrity_check(where, populated, table):
 
 #: What each schema added, newest first: undone to make an older knowledge base again (4
 #: changed only the row hashes' encoding: the rows are stamped as schema 3 did, below).
-ADDED = {4: [], 3: ["ALTER TABLE runs DROP COLUMN experience_sha"],
+ADDED = {5: [], 4: [], 3: ["ALTER TABLE runs DROP COLUMN experience_sha"],
          2: [f"ALTER TABLE {table} DROP COLUMN row_sha" for table in (
              "artifacts", "environments", "tasks", "policies", "subgoal_sets", "subgoals",
              "options", "partition_options", "partitions", "runs")]}
@@ -200,6 +200,37 @@ def _stamp_as_schema_3(conn) -> None:
             conn.execute(update(table).where(*key).values(row_sha=digest))
 
 
+def _stamp_as_schema_4(conn) -> None:
+    """Every row's hash as schema 4 wrote it: compact sorted-key JSON of ``[table, [column
+    names]]`` followed by that of the list of the row's values, times as whole microseconds
+    since the epoch (UTC), a partition's sorted parent ids appended (written out here, not
+    taken from adpart)."""
+    parents: dict[int, list[int]] = {}
+    for child, parent in conn.execute(select(partition_parents.c.child_id,
+                                             partition_parents.c.parent_id)):
+        parents.setdefault(child, []).append(parent)
+    epoch = datetime(1970, 1, 1, tzinfo=timezone.utc)
+
+    def plain(value):
+        if isinstance(value, datetime):
+            utc = value.replace(tzinfo=timezone.utc) if value.tzinfo is None else value
+            return (utc - epoch) // timedelta(microseconds=1)
+        return value
+
+    def encode(value) -> bytes:
+        return json.dumps(value, sort_keys=True, separators=(",", ":")).encode()
+
+    for table in HASHED_TABLES:
+        names = [c.name for c in table.columns if c.name != "row_sha"]
+        for row in conn.execute(select(table)).mappings().all():
+            values = [plain(row[n]) for n in names]
+            if table.name == "partitions":
+                values.append(sorted(parents.get(row["id"], [])))
+            digest = hashlib.sha256(encode([table.name, names]) + encode(values)).hexdigest()
+            key = [table.c[c.name] == row[c.name] for c in table.primary_key.columns]
+            conn.execute(update(table).where(*key).values(row_sha=digest))
+
+
 def _upgraded_from(where, kb, version: int, damage: str | None = None) -> str:
     """Make ``kb`` a schema-``version`` knowledge base again (``damage``: an SQL statement
     run on it then), see it refused, upgrade it; return what ``kb upgrade`` printed."""
@@ -211,6 +242,8 @@ def _upgraded_from(where, kb, version: int, damage: str | None = None) -> str:
                 conn.execute(text(statement))
         if version == 3:
             _stamp_as_schema_3(conn)
+        if version == 4:
+            _stamp_as_schema_4(conn)
         conn.execute(text(f"UPDATE adpart_schema SET version = {version}"))
         if damage is not None:
             conn.execute(text(damage))
@@ -247,9 +280,11 @@ def test_a_schema_2_knowledge_base_is_upgraded_with_run_experience(where, popula
         assert kb.load(again, "experience").column("count").to_pylist() == [5, 1]
         assert kb.check().ok
 
-def test_a_schema_3_knowledge_base_is_upgraded_to_the_new_row_hashes(where, populated):
+@pytest.mark.parametrize("version", [3, 4])
+def test_a_schema_3_or_4_knowledge_base_is_upgraded_to_the_new_row_hashes(where, populated,
+                                                                          version):
     kb, rec = populated
-    _upgraded_from(where, kb, 3)
+    _upgraded_from(where, kb, version)
     with where.open() as kb:
         report = kb.check()
         assert report.ok, report.problems
@@ -259,13 +294,14 @@ def test_a_schema_3_knowledge_base_is_upgraded_to_the_new_row_hashes(where, popu
             assert kb.get(kind, record.id) == record
 
 
-def test_a_row_damaged_before_the_upgrade_stays_damaged_after_it(where, populated):
+@pytest.mark.parametrize("version", [3, 4])
+def test_a_row_damaged_before_the_upgrade_stays_damaged_after_it(where, populated, version):
     kb, rec = populated
     run = rec["run"]
-    # a value changed under schema 3: its schema-3 hash no longer holds; the upgrade must not
+    # a value changed under the old schema: its old hash no longer holds; the upgrade must not
     # stamp the changed row valid
-    output = _upgraded_from(where, kb, 3, damage="UPDATE runs SET seed = 7 WHERE id = "
-                                                 f"{run.id}")
+    output = _upgraded_from(where, kb, version, damage="UPDATE runs SET seed = 7 WHERE id = "
+                                                       f"{run.id}")
     assert f"run:{run.id}" in output and "stay named as damaged" in output
     with where.open() as kb:
         with pytest.raises(StoreError, match=rf"run:{run.id} is damaged.*row hash mismatch"):
@@ -324,11 +360,45 @@ def test_the_row_encoding_is_compact_sorted_json_and_one_instant_one_hash():
     row = {c: None for c in integrity.hashed_columns(table)}
     row.update(id=3, task_id=1, learner="q", metrics={"gap": 0.25}, parameters={},
                created_at=naive, schema_version=4)
-    digest = integrity.row_digest(table, row)
+    digest = integrity.row_digest_v4(table, row)
     for same in (naive.replace(tzinfo=timezone.utc),  # PostgreSQL, any session time zone
                  naive.replace(tzinfo=timezone.utc).astimezone(ZoneInfo("America/Lima"))):
-        assert integrity.row_digest(table, {**row, "created_at": same}) == digest
+        assert integrity.row_digest_v4(table, {**row, "created_at": same}) == digest
     for column, other in (("created_at", naive.replace(microsecond=123457)), ("id", 4),
                           ("metrics", {"gap": 0.35}), ("learner", "Q"), ("seed", 0),
                           ("schema_version", 4.0), ("parameters", {"a": True})):
-        assert integrity.row_digest(table, {**row, column: other}) != digest, column
+        assert integrity.row_digest_v4(table, {**row, column: other}) != digest, column
+
+
+def test_the_row_text_depends_on_the_stored_values_alone(where):
+    """Schema 5 hashes the text the database renders of a row: the same under any session
+    time zone and float-output setting (PostgreSQL), and a double one ulp away is named as
+    damaged (SQLite's ``json_array`` alone prints 15 digits: ``quote()`` keeps all 17)."""
+    from adpart.store.integrity import row_text, text_digest
+    from adpart.store.models import SqlTask
+
+    with where.open() as kb:
+        env = kb.put_environment("five", model_hash="e" * 64, n_states=5, n_actions=2)
+        task = kb.put_task(env, "goal-4", spec={"goal": [4]}, gamma=0.1)
+    table = SqlTask.__table__
+    sessions: list[list[str]] = [[]]
+    if where.backend == "postgresql":
+        sessions += [["SET TIME ZONE 'America/Lima'", "SET extra_float_digits = 0"],
+                     ["SET TIME ZONE 'Asia/Kathmandu'", "SET extra_float_digits = 3"]]
+    engine = create_engine(where.db_url)
+    texts = set()
+    for statements in sessions:
+        with engine.connect() as conn:
+            for statement in statements:
+                conn.execute(text(statement))
+            (rendered, stored), = conn.execute(
+                select(row_text(table), table.c.row_sha).where(table.c.id == task.id)).all()
+        assert text_digest(table, rendered) == stored, statements
+        texts.add(rendered)
+    assert len(texts) == 1
+    with engine.begin() as conn:  # the last bit of gamma flipped
+        conn.execute(update(table).where(table.c.id == task.id)
+                     .values(gamma=math.nextafter(0.1, 1.0)))
+    engine.dispose()
+    with where.open() as kb, pytest.raises(StoreError, match=rf"task:{task.id} is damaged"):
+        kb.get("task", task.id)
