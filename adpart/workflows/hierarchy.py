@@ -37,9 +37,12 @@ from adpart.workflows.store import KnowledgeStore
 # --------------------------------------------------------------------------- reading
 
 
-def _task_mdp(kb: KnowledgeStore, domain: Any, task: Any) -> FiniteMDP:
-    """The task's MDP, rebuilt from its name or the request of one of its runs, hash-checked."""
-    wanted = task.spec.get("model_hash")
+def _task_mdp(kb: KnowledgeStore, domain: Any, task: Any, *, same_model: bool = True
+              ) -> FiniteMDP:
+    """The task's MDP, rebuilt from its name or the request of one of its runs on ``domain``;
+    hash-checked when ``same_model`` (the task was recorded on this domain's dynamics; on a
+    model the agent estimated, the recorded hash is the true model's and the name decides)."""
+    wanted = task.spec.get("model_hash") if same_model else None
     candidates = [task.spec.get("task"), task.name]
     for run in kb.runs_for(task):
         request = run.provenance.parameters.get("request") or {}
@@ -102,11 +105,16 @@ def load_inputs(
     options: Sequence[int] | None = None,
     weights: Mapping[str, float] | Sequence[float] | None = None,
     estimate: EstimateSettings | None = None,
+    learned_in: str | None = None,
 ) -> HierarchyInputs:
     """Read the learned tasks and candidate options of ``environment_name`` (module docstring).
 
     Args:
         tasks: task names, ``task:N`` refs or ids (default: every task with a stored policy).
+        learned_in: the environment the tasks were learned in, when it is not
+            ``environment_name``: the learned-model regime builds the layer on the model the
+            agent estimated (``ENV@experience:...``, where its options are) from the Q tables
+            the tasks learned in ``ENV``; each task's MDP is that task on the estimate.
         options: option record ids (default: every option stored for the environment).
         weights: importance ``U(T_i)`` by task name/ref, or one per selected task (default 1).
         estimate: the threshold ``L`` of every task (default ``EstimateSettings()``:
@@ -123,7 +131,12 @@ def load_inputs(
             f"environment {env.name!r} in the knowledge base was recorded with other dynamics "
             "than the installed one; use the adpart version that recorded it"
         )
-    chosen = _select_tasks(kb, env, tasks)
+    source = env if learned_in is None else kb.find_environment(learned_in)
+    if (source.n_states, source.n_actions) != (env.n_states, env.n_actions):
+        raise TaskError(f"the tasks of {source.name!r} ({source.n_states} states, "
+                        f"{source.n_actions} actions) cannot be read on {env.name!r} "
+                        f"({env.n_states} states, {env.n_actions} actions)")
+    chosen = _select_tasks(kb, source, tasks)
     if options is None:
         option_records = kb.options_for(env)
     else:
@@ -142,7 +155,7 @@ def load_inputs(
         w = [1.0] * len(chosen)
     learned, mdp = [], None
     for (task_rec, policy), wi in zip(chosen, w, strict=True):
-        mdp = _task_mdp(kb, domain, task_rec)
+        mdp = _task_mdp(kb, domain, task_rec, same_model=source.id == env.id)
         learned.append(task_from_model(mdp, kb.load(policy, "q"), opts, threshold=0.0,
                                        name=task_rec.name, weight=wi))
     task_ids = {t.id for t, _ in chosen}
@@ -189,6 +202,7 @@ def build_hierarchy(
     tasks: Sequence[str | int] | None = None,
     params: Mapping[str, Any] | None = None,
     store: bool = True,
+    learned_in: str | None = None,
 ) -> HierarchyResult:
     """Build the decision layer for the next task of ``environment_name`` with an estimator plugin.
 
@@ -202,6 +216,7 @@ def build_hierarchy(
         tasks: learned tasks to use (names, ``task:N`` or ids; default all).
         params: the plugin's parameters (validated against its declaration).
         store: store the layer as a ``hierarchy`` partition.
+        learned_in: the environment the tasks were learned in (:func:`load_inputs`).
     """
     spec = get_registry().get("hierarchy-estimator", estimator)
     plugin = spec.create(dict(params or {}))
@@ -214,7 +229,7 @@ def build_hierarchy(
             "function of the loaded inputs (docs/plugins.md)"
         ) from exc
     t0 = time.perf_counter()
-    inputs = load_inputs(kb, environment_name, tasks=tasks)
+    inputs = load_inputs(kb, environment_name, tasks=tasks, learned_in=learned_in)
     t1 = time.perf_counter()
     result = plugin.build(inputs)
     if not isinstance(result, HierarchyResult):
@@ -255,11 +270,13 @@ class Layer:
 
 
 def _stored_hierarchy(
-    kb: KnowledgeStore, env: Any, estimator: str, params: dict[str, Any], task_ids: list[int]
+    kb: KnowledgeStore, env: Any, estimator: str, params: dict[str, Any], task_ids: list[int],
+    source: Any = None,
 ) -> Any:
-    """A ``hierarchy`` partition built by ``estimator`` with ``params`` from exactly these
-    tasks' current policies, or None - so a pipeline run again does not build it again."""
-    newest = _newest_policies(kb, env)
+    """A ``hierarchy`` partition of ``env`` built by ``estimator`` with ``params`` from exactly
+    these tasks' current policies (in ``source``, default ``env``), or None - so a pipeline run
+    again does not build it again."""
+    newest = _newest_policies(kb, env if source is None else source)
     policies = [newest[t].id for t in task_ids if t in newest]
     wanted = {k.replace("-", "_"): v for k, v in params.items()}
     for rec in reversed(kb.records("partition", environment=env)):
@@ -306,21 +323,23 @@ def _with_options(kb: KnowledgeStore, env: Any, rec: Any, option_ids: list[int]
 
 def hierarchy_layer(
     kb: KnowledgeStore, env_name: str, estimator: str, params: dict[str, Any], task_ids: list[int],
-    option_ids: list[int],
+    option_ids: list[int], learned_in: str | None = None,
 ) -> Layer:
     """The layer ``estimator`` builds from the learned tasks ``task_ids`` (reused when stored).
 
     ``option_ids`` are the options the learner may fall back on when the layer offers none
-    (:func:`_with_options`).
+    (:func:`_with_options`); ``learned_in``: the environment the tasks were learned in, when the
+    layer is built on a model the agent estimated (:func:`load_inputs`).
     """
     resolved = get_registry().get("hierarchy-estimator", estimator).resolve_params(params)
     env = kb.find_environment(env_name)
-    rec = _stored_hierarchy(kb, env, estimator, resolved, task_ids)
+    source = None if learned_in is None else kb.find_environment(learned_in)
+    rec = _stored_hierarchy(kb, env, estimator, resolved, task_ids, source)
     detail: dict[str, Any] = {}
     reused = rec is not None
     if rec is None:
         result = build_hierarchy(kb, env_name, estimator=estimator, tasks=task_ids,
-                                 params=params)
+                                 params=params, learned_in=learned_in)
         rec = kb.get("partition", int(result.partition_id))
         detail = result.summary()
     else:

@@ -109,7 +109,9 @@ class PipelineConfig:
             this fraction of ``|V*|`` at the start distribution (reported as episodes-to-bound).
         hierarchy: a ``hierarchy-estimator`` plugin (``expected-learning-time``,
             ``all-subgoals``); when set, each later task starts from the layer that estimator
-            builds from the earlier tasks of the sequence instead of the multi-phase partition.
+            builds from the earlier tasks of the sequence instead of the multi-phase partition
+            (in the learned-model regime on the estimated model, from the Q tables the earlier
+            tasks learned).
         hierarchy_params: that estimator's parameters.
         flat_learner: the learner plugin of the first task, the baseline and the fallback.
         fallback: ask the knowledge base before each later task whether abstraction pays
@@ -149,9 +151,6 @@ class PipelineConfig:
     def __post_init__(self) -> None:
         if self.regime not in REGIMES:
             raise TaskError(f"--regime {self.regime!r} is not one of {', '.join(REGIMES)}")
-        if self.regime == "learned-model" and self.hierarchy is not None:
-            raise TaskError("--hierarchy builds its layers on the true model (Algorithm 3 over "
-                            "the option models); give --regime true-model with it")
         Run(runs=self.runs, episodes=self.episodes, seed=self.seed, eval_every=self.eval_every)
         Run(episodes=self.first_episodes)  # the same checks, before any work
         if len(self.tasks) < 2:
@@ -287,9 +286,10 @@ def _task_layer(kb: KnowledgeStore, config: PipelineConfig, subgoal_ref: str, ta
                 say: Callable[[str], object], model_env: str | None = None) -> Layer:
     """The layer ``task`` starts from: the multi-phase partition, or with ``config.hierarchy``
     the layer that estimator builds from the tasks ``learned`` before it (stage ``hierarchy``).
-    With ``model_env`` (the learned-model regime) phases 1-2 on that estimated model, without
-    the task (no phase 3)."""
-    if model_env is not None:
+    With ``model_env`` (the learned-model regime) either is built on that estimated model,
+    without the task: phases 1-2 (no phase 3), or Algorithm 3 over the options and the earlier
+    tasks' learned Q tables, each task's MDP that task on the estimate."""
+    if model_env is not None and config.hierarchy is None:
         say(f"partitioning {model_env} over the options, phases 1-2 (delta "
             f"{config.partition.delta}, criterion {config.criterion}): {task}'s rewards are "
             "not read")
@@ -298,10 +298,12 @@ def _task_layer(kb: KnowledgeStore, config: PipelineConfig, subgoal_ref: str, ta
         say(f"partitioning for {task} (delta {config.partition.delta}, epsilon "
             f"{config.partition.reward_epsilon}, criterion {config.criterion})")
         return _partition_layer(kb, config, subgoal_ref, task, report)
-    say(f"building the {config.hierarchy} layer for {task} from {len(learned)} tasks")
+    say(f"building the {config.hierarchy} layer for {task} from {len(learned)} tasks"
+        + (f" on {model_env}: {task}'s model and rewards are not read" if model_env else ""))
     start = time.perf_counter()
-    layer = hierarchy_layer(kb, config.env, config.hierarchy, dict(config.hierarchy_params),
-                            list(learned), option_ids)
+    layer = hierarchy_layer(kb, model_env or config.env, config.hierarchy,
+                            dict(config.hierarchy_params), list(learned), option_ids,
+                            learned_in=config.env if model_env else None)
     report.stages.append(
         Stage("hierarchy", task, layer.ref, layer.reused, time.perf_counter() - start,
               {**layer.detail, "built": layer.built, "final_blocks": layer.blocks})
@@ -445,6 +447,17 @@ def _rehearse(kb: KnowledgeStore, config: PipelineConfig, model_env: str, first:
                        eval_every=max(config.eval_every, REHEARSAL_EVAL_EVERY),
                        seed=config.seed, fraction=config.gap_fraction)
     return verdict, time.perf_counter() - start
+
+
+def _learned_flat(flat_run: Learned, report: PipelineReport, learned: list[int],
+                  evidence: list[int]) -> None:
+    """Count a task learned flat in place of its layer among the tasks learned so far (which
+    ``--hierarchy`` builds the next layers from), and as evidence when a run reached the bound."""
+    tid = parse_ref(flat_run.ids["task"], "task")
+    if tid not in learned:
+        learned.append(tid)
+    if report.rows[-1]["runs_within_bound"] > 0 and tid not in evidence:
+        evidence.append(tid)
 
 
 def check_tasks(env: str, tasks: tuple[str, ...]) -> None:
@@ -610,12 +623,8 @@ def run_pipeline(
                                        time.perf_counter() - start, verdict))
             if falls:
                 say(verdict["reason"])
-                flat_run = learn_instead(task, verdict["reason"], "flat (fallback)")
-                tid = parse_ref(flat_run.ids["task"], "task")
-                if tid not in learned:
-                    learned.append(tid)
-                if report.rows[-1]["runs_within_bound"] > 0 and tid not in evidence:
-                    evidence.append(tid)
+                _learned_flat(learn_instead(task, verdict["reason"], "flat (fallback)"),
+                              report, learned, evidence)
                 continue
         # own_layer without subgoals learns on the layer of the reward-state options alone
         layer = None if no_subgoals else _task_layer(kb, config, layer_options, task, learned,
@@ -629,7 +638,8 @@ def run_pipeline(
                                        "layer", False, seconds, verdict))
             if verdict["fallback"]:
                 say(verdict["reason"])
-                learn_instead(task, verdict["reason"], "flat (fallback)")
+                _learned_flat(learn_instead(task, verdict["reason"], "flat (fallback)"),
+                              report, learned, evidence)
                 continue
         say(f"learning {task} on the layer of the options and {task}'s reward states "
             f"({hierarchical['mode']})" if own_layer or layer is None else

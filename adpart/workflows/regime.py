@@ -139,8 +139,9 @@ def agent_verdict(first_curve: LearningCurve, first: str, task: str) -> dict[str
     """The learned-model regime's fallback, decided from what the agent saw: a first task none
     of whose episodes ever ended in a terminal state (every one ran to the step limit) gave the
     agent no goal, so nothing it learned is evidence for a layer and ``task`` is learned flat.
-    (The expected-learning-time estimate of section 4.4 reads the true option models and the
-    runs' scores against V*; this regime does not use it.)"""
+    (The true-model regime's fallback compares section 4.4's expected-learning-time estimate
+    over the tasks its runs learned to the bound, scored against V*; this regime does not use
+    it.)"""
     cap = int(first_curve.metadata.get("max_steps_per_episode") or 0)
     steps = np.asarray(first_curve["steps"])
     ended = int(np.count_nonzero(steps < cap)) if cap else int(steps.size)
@@ -151,9 +152,9 @@ def agent_verdict(first_curve: LearningCurve, first: str, task: str) -> dict[str
                           "learned flat"}
     return {"fallback": False, "episodes_ending_in_a_terminal": ended,
             "reason": f"{ended} episodes of {first} ended in a terminal state: {task} is learned "
-                      "on the layer built from that experience (the expected-learning-time "
-                      "estimate of 4.4 reads the true option models; this regime does not use "
-                      "it)"}
+                      "on the layer built from that experience (the true-model regime's "
+                      "fallback, 4.4's estimate over tasks scored against V*, is not used "
+                      "here)"}
 
 
 def check_regime(config: PipelineConfig) -> None:

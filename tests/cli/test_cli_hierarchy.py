@@ -154,3 +154,33 @@ def test_pipeline_falls_back_to_flat_where_the_abstraction_cannot_pay(tmp_path):
     rows = {r["learner"]: r for r in summary["tasks"] if r["task"] == "goal:x=9,y=5"}
     assert rows["flat-fallback"]["episodes_to_bound_median"] == (
         rows["flat"]["episodes_to_bound_median"])
+
+
+def _learned_model_layers(root, later: str) -> tuple[list[dict], list[tuple[str, np.ndarray]]]:
+    """The hierarchy stages and stored layers of a learned-model pipeline whose later tasks are
+    ``later`` (two runs, short)."""
+    args = [*PIPELINE[:3], f"reach-goal,{later}", *PIPELINE[4:-1], "learned-model",
+            "--no-model-baseline", "--kb", str(root / "kb"), "--out", str(root / "o"), "--json"]
+    res = CliRunner().invoke(cli, args)
+    assert res.exit_code == 0, res.output
+    layers = [s for s in json.loads(res.output)["stages"] if s["stage"] == "hierarchy"]
+    kb = KnowledgeBase.open(str(root / "kb"))
+    try:
+        envs = {e.id: e.name for e in kb.records("environment")}
+        parts = [kb.get("partition", int(s["result"].split(":")[1])) for s in layers]
+        return layers, [(envs[p.environment_id], kb.load(p, "labels")) for p in parts]
+    finally:
+        kb.close()
+
+
+def test_in_the_learned_model_regime_algorithm_3_builds_on_the_estimate_and_reads_no_new_task(
+        tmp_path):
+    """Each later task's layer is Algorithm 3 over the options and the earlier tasks' learned Q
+    tables on the model the first task's runs estimated; so the first later task's layer is the
+    same whichever task it is (nothing of it is read), and the next one is built from two."""
+    layers_a, built_a = _learned_model_layers(tmp_path / "a", "goal:x=9,y=5,goal:x=2,y=2")
+    _, built_b = _learned_model_layers(tmp_path / "b", "goal:x=3,y=3")
+    assert [len(s["detail"]["tasks"]) for s in layers_a] == [1, 2]
+    for env_name, _ in built_a + built_b:
+        assert env_name.startswith("two-rooms@experience:run:")  # built on the estimate
+    assert np.array_equal(built_a[0][1], built_b[0][1])  # another new task: the same layer
