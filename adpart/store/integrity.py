@@ -216,9 +216,13 @@ def _unsupported_row_text(element: RowText, compiler: SQLCompiler, **kw: Any) ->
 ROW_TEXT = "row_text"
 
 
+def _row_text_of(table: Table) -> RowText:
+    return RowText(*(table.c[n] for n in _layout(table).names))
+
+
 def row_text(table: Table) -> Any:
     """The :class:`RowText` of ``table``'s hashed columns, labelled :data:`ROW_TEXT`."""
-    return RowText(*(table.c[n] for n in _layout(table).names)).label(ROW_TEXT)
+    return _row_text_of(table).label(ROW_TEXT)
 
 
 def text_digest(table: Table, text: str, parents: Iterable[int] | None = None) -> str:
@@ -294,12 +298,10 @@ def _attribute_keys(table: Table, obj: Any) -> list[tuple[str, str]]:
         keys = [(col.name, key) for key, col in mapper.columns.items()
                 if getattr(col, "table", None) is table]
         _KEYS[table.name] = keys
-        _SAME_NAMES[table.name] = all(name == key for name, key in keys)
     return keys
 
 
 _KEYS: dict[str, list[tuple[str, str]]] = {}
-_SAME_NAMES: dict[str, bool] = {}
 
 
 def row_problem(obj: Any) -> str | None:
@@ -384,8 +386,6 @@ def install(base: type) -> None:
     for mapper in list(base.registry.mappers):  # type: ignore[attr-defined]
         table = mapper.local_table
         if ROW_SHA in table.c and ROW_TEXT not in mapper.attrs:
-            setattr(mapper.class_, ROW_TEXT,
-                    column_property(RowText(*(table.c[n] for n in _layout(table).names)),
-                                    deferred=True))
+            setattr(mapper.class_, ROW_TEXT, column_property(_row_text_of(table), deferred=True))
     event.listen(base, "after_insert", _stamp, propagate=True)
     event.listen(base, "after_update", _stamp, propagate=True)

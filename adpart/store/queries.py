@@ -46,13 +46,6 @@ from adpart.store.models import (
 )
 
 
-def _one_statement(model: type[Base], verify: bool) -> Any:
-    """``select(model)`` of the row with id ``:record_id``, made once per model (a statement
-    built per read costs SQLAlchemy more than the read of its row)."""
-    return select(model).where(model.id == bindparam("record_id")).options(
-        *_LOADERS[model, verify])
-
-
 def _loader_options(model: type[Base], verify: bool) -> tuple[Any, ...]:
     if model is SqlSubgoalSet:
         parts = selectinload(SqlSubgoalSet.subgoals)
@@ -66,6 +59,13 @@ def _loader_options(model: type[Base], verify: bool) -> tuple[Any, ...]:
     if verify:  # last: the option a verifying read of any query of the model adds
         loaders.append(undefer(model.row_text))
     return tuple(loaders)
+
+
+def _one_statement(model: type[Base], verify: bool) -> Any:
+    """``select(model)`` of the row with id ``:record_id``, made once per model (a statement
+    built per read costs SQLAlchemy more than the read of its row)."""
+    return select(model).where(model.id == bindparam("record_id")).options(
+        *_LOADERS[model, verify])
 
 
 _SQL_OF: dict[str, type[Base]] = {
@@ -300,9 +300,9 @@ class Queries:
             return out
         for (record_id,) in session.execute(ids, params).all():
             try:
-                row = session.scalars(select(model).where(model.id == record_id)
-                                      .options(*self._loaders(model))
-                                      .execution_options(populate_existing=True)).one()
+                row = session.scalars(_ONE[model, self._verify_rows]
+                                      .execution_options(populate_existing=True),
+                                      {"record_id": record_id}).one()
             except UNREADABLE as exc:
                 recover(session, exc, keep=keep)
                 damaged(unreadable_message(session, model.__table__, record_id, exc))
